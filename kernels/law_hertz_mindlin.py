@@ -1,0 +1,76 @@
+"""Hertz-Mindlin (no slip) as EDEM defines it, with Tsuji damping from the coefficient of restitution.
+
+Normal:      F_n = 4/3 E* sqrt(R*) d^(3/2) + 2 sqrt(5/6) |beta| sqrt(S_n m*) v_n,   S_n = 2 E* sqrt(R* d)
+Tangential:  F_t = -S_t xi - 2 sqrt(5/6) |beta| sqrt(S_t m*) v_t,                 S_t = 8 G* sqrt(R* d)
+             |F_t| <= mu_s max(F_n, 0); on slip the spring xi is rescaled so the limit holds exactly.
+beta = ln e / sqrt(ln^2 e + pi^2).
+
+End of contact: the contact lasts while the overlap d > 0 and the damped normal force may turn
+attractive near the end (viscous attraction). With that convention the realised restitution of a
+binary collision equals the requested e for any impact speed (verification-ecosystem 1.2); cutting
+the force at zero instead would raise e_out (0.1 -> 0.25).
+"""
+
+import warp as wp
+
+from .params import PairParams
+
+SQRT_5_6 = wp.constant(0.9128709291752769)
+
+
+@wp.func
+def hertz_mindlin(
+    overlap: float,
+    n: wp.vec3,
+    v_rel: wp.vec3,
+    spring: wp.vec3,
+    r_star: float,
+    m_star: float,
+    p: PairParams,
+    dt: float,
+):
+    """One Hertz-Mindlin contact, seen from body a.
+
+    Args:
+        overlap: d > 0 [m].
+        n: unit normal from a towards b.
+        v_rel: velocity of a's contact point relative to b's [m/s].
+        spring: tangential spring displacement xi from the last step [m].
+        r_star, m_star: effective radius [m] and mass [kg].
+        p: pair parameters.
+        dt: time step [s].
+
+    Returns:
+        (force on a [N], normal force F_n [N] (positive = repulsive), tangential force on a [N],
+        updated spring [m], secant normal stiffness F_el/d [N/m]).
+    """
+    sqrt_rd = wp.sqrt(r_star * overlap)
+    s_n = 2.0 * p.e_star * sqrt_rd
+    s_t = 8.0 * p.g_star * sqrt_rd
+    damp = -2.0 * SQRT_5_6 * p.beta
+    c_n = damp * wp.sqrt(s_n * m_star)
+    c_t = damp * wp.sqrt(s_t * m_star)
+
+    v_n = wp.dot(v_rel, n)
+    f_el = (4.0 / 3.0) * p.e_star * sqrt_rd * overlap
+    f_n = f_el + c_n * v_n
+
+    # keep the stored spring in the current tangent plane, preserving its length
+    xi_len = wp.length(spring)
+    xi = spring - wp.dot(spring, n) * n
+    xi_proj = wp.length(xi)
+    if xi_proj > 0.0:
+        xi = xi * (xi_len / xi_proj)
+    v_t = v_rel - v_n * n
+    xi = xi + v_t * dt
+
+    f_t = -s_t * xi - c_t * v_t
+    f_t_len = wp.length(f_t)
+    f_lim = p.mu_s * wp.max(f_n, 0.0)
+    if f_t_len > f_lim:
+        if f_t_len > 0.0:
+            f_t = f_t * (f_lim / f_t_len)
+        else:
+            f_t = wp.vec3(0.0)
+        xi = -(f_t + c_t * v_t) / s_t
+    return -f_n * n + f_t, f_n, f_t, xi, f_el / overlap

@@ -1,0 +1,25 @@
+"""Per-pair contact parameters, derived on the host from materials and the interaction table."""
+
+import warp as wp
+
+
+@wp.struct
+class PairParams:
+    """Contact parameters of one material pair in one world (all SI)."""
+
+    e_star: float
+    """Effective Young's modulus E* = 1 / ((1 - nu_a^2)/E_a + (1 - nu_b^2)/E_b) [Pa]."""
+    g_star: float
+    """Effective shear modulus G* = 1 / ((2 - nu_a)/G_a + (2 - nu_b)/G_b) [Pa]."""
+    beta: float
+    """Damping factor ln(e) / sqrt(ln(e)^2 + pi^2) (<= 0) [-]."""
+    mu_s: float
+    """Static (Coulomb) friction coefficient [-]."""
+    mu_r: float
+    """Rolling friction coefficient [-] (dimensionless, torque = mu_r * R* * F_n)."""
+    rolling_model: int
+    """RollingModel: 0 none, 1 constant torque (type A), 2 EPSD (type C)."""
+    rolling_damping: float
+    """EPSD viscous damping ratio eta_r [-] (Ai et al. 2011 use 0.3)."""
+    law: int
+    """ContactLaw of the pair: 1 Hertz-Mindlin."""

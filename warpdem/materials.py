@@ -1,0 +1,193 @@
+"""Materials and the pairwise interaction table, validated at construction.
+
+A :class:`Material` carries the bulk properties of one solid (Young's or shear modulus, Poisson's
+ratio, density). An :class:`Interaction` carries what belongs to a *pair* of materials, as in EDEM:
+coefficient of restitution, static and rolling friction and the rolling model. The
+:class:`InteractionTable` maps unordered pairs of material names to interactions and is turned into
+dense per-world device arrays by :func:`pair_table`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .types import ContactLaw, RollingModel
+
+
+def _check(cond: bool, where: str, field_name: str, value, allowed: str) -> None:
+    if not cond:
+        raise ValueError(f"{where}: {field_name} = {value!r} is not allowed; expected {allowed}")
+
+
+def _finite(x) -> bool:
+    try:
+        return math.isfinite(float(x))
+    except (TypeError, ValueError):
+        return False
+
+
+@dataclass(frozen=True)
+class Material:
+    """Bulk properties of one solid.
+
+    Give either ``youngs_modulus`` or ``shear_modulus`` (or both, if consistent); the other follows
+    from G = E / (2 (1 + nu)).
+
+    Attributes:
+        name: unique name.
+        density: particle (solid) density [kg/m^3], > 0.
+        poisson_ratio: Poisson's ratio [-], in (-1, 0.5).
+        youngs_modulus: Young's modulus E [Pa], > 0.
+        shear_modulus: shear modulus G [Pa], > 0; for nu >= 0 it cannot exceed E/2.
+    """
+
+    name: str
+    density: float
+    poisson_ratio: float
+    youngs_modulus: float | None = None
+    shear_modulus: float | None = None
+
+    def __post_init__(self):
+        where = f"Material {self.name!r}"
+        _check(isinstance(self.name, str) and self.name != "", where, "name", self.name, "a non-empty string")
+        _check(_finite(self.density) and self.density > 0, where, "density", self.density, "a density > 0 kg/m^3")
+        _check(_finite(self.poisson_ratio) and -1.0 < self.poisson_ratio < 0.5, where, "poisson_ratio",
+               self.poisson_ratio, "a value in (-1, 0.5)")
+        if self.youngs_modulus is None and self.shear_modulus is None:
+            raise ValueError(f"{where}: give youngs_modulus or shear_modulus (neither was given)")
+        nu = float(self.poisson_ratio)
+        if self.youngs_modulus is not None:
+            _check(_finite(self.youngs_modulus) and self.youngs_modulus > 0, where, "youngs_modulus",
+                   self.youngs_modulus, "a modulus > 0 Pa")
+        if self.shear_modulus is not None:
+            _check(_finite(self.shear_modulus) and self.shear_modulus > 0, where, "shear_modulus",
+                   self.shear_modulus, "a modulus > 0 Pa")
+        if self.youngs_modulus is not None and self.shear_modulus is not None:
+            e, g = float(self.youngs_modulus), float(self.shear_modulus)
+            if nu >= 0.0:
+                _check(g <= 0.5 * e * (1 + 1e-9), where, "shear_modulus", g,
+                       f"at most E/2 = {0.5 * e:.6g} Pa for a non-negative Poisson's ratio")
+            implied = 0.5 * e / (1.0 + nu)
+            _check(abs(g - implied) <= 0.01 * implied, where, "shear_modulus", g,
+                   f"E/(2(1+nu)) = {implied:.6g} Pa within 1% (E = {e:.6g} Pa, nu = {nu})")
+        elif self.youngs_modulus is None:
+            object.__setattr__(self, "youngs_modulus", 2.0 * float(self.shear_modulus) * (1.0 + nu))
+        else:
+            object.__setattr__(self, "shear_modulus", float(self.youngs_modulus) / (2.0 * (1.0 + nu)))
+
+    @property
+    def E(self) -> float:  # noqa: N802 - the physics symbol
+        return float(self.youngs_modulus)
+
+    @property
+    def G(self) -> float:  # noqa: N802
+        return float(self.shear_modulus)
+
+    def rayleigh_time(self, radius: float) -> float:
+        """Rayleigh wave time step T_R = pi R sqrt(rho/G) / (0.1631 nu + 0.8766) [s] for a sphere of ``radius`` [m]."""
+        return math.pi * radius * math.sqrt(self.density / self.G) / (0.1631 * self.poisson_ratio + 0.8766)
+
+
+@dataclass(frozen=True)
+class Interaction:
+    """Contact parameters of a pair of materials (EDEM's "interaction").
+
+    Attributes:
+        restitution: coefficient of restitution e [-], in (0, 1].
+        static_friction: Coulomb friction coefficient mu_s [-], >= 0.
+        rolling_friction: rolling friction coefficient mu_r [-], >= 0 (torque = mu_r R* F_n).
+        rolling_model: RollingModel (or its name): NONE, CONSTANT_TORQUE (type A) or EPSD (type C).
+        rolling_damping: EPSD dashpot ratio eta_r [-], >= 0 (0.3 as Ai et al. 2011).
+        law: ContactLaw of the pair.
+    """
+
+    restitution: float = 0.5
+    static_friction: float = 0.5
+    rolling_friction: float = 0.0
+    rolling_model: RollingModel = RollingModel.CONSTANT_TORQUE
+    rolling_damping: float = 0.3
+    law: ContactLaw = ContactLaw.HERTZ_MINDLIN
+
+    def __post_init__(self):
+        where = "Interaction"
+        _check(_finite(self.restitution) and 0.0 < self.restitution <= 1.0, where, "restitution",
+               self.restitution, "a coefficient of restitution in (0, 1]")
+        _check(_finite(self.static_friction) and self.static_friction >= 0.0, where, "static_friction",
+               self.static_friction, "a friction coefficient >= 0")
+        _check(_finite(self.rolling_friction) and self.rolling_friction >= 0.0, where, "rolling_friction",
+               self.rolling_friction, "a rolling friction coefficient >= 0")
+        _check(_finite(self.rolling_damping) and self.rolling_damping >= 0.0, where, "rolling_damping",
+               self.rolling_damping, "a damping ratio >= 0")
+        object.__setattr__(self, "rolling_model", _enum(RollingModel, self.rolling_model, where, "rolling_model"))
+        object.__setattr__(self, "law", _enum(ContactLaw, self.law, where, "law"))
+        _check(self.law != ContactLaw.NONE, where, "law", self.law, "a contact law other than NONE")
+
+    @property
+    def beta(self) -> float:
+        """Damping factor beta = ln e / sqrt(ln^2 e + pi^2) (0 for e = 1)."""
+        le = math.log(self.restitution)
+        return le / math.sqrt(le * le + math.pi * math.pi)
+
+
+def _enum(cls, value, where, name):
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, str):
+        key = value.strip().upper().replace("-", "_").replace(" ", "_")
+        aliases = {"A": "CONSTANT_TORQUE", "TYPE_A": "CONSTANT_TORQUE", "STANDARD": "CONSTANT_TORQUE",
+                   "C": "EPSD", "TYPE_C": "EPSD", "HM": "HERTZ_MINDLIN"}
+        key = aliases.get(key, key)
+        if key in cls.__members__:
+            return cls[key]
+    elif isinstance(value, (int, np.integer)) and int(value) in {m.value for m in cls}:
+        return cls(int(value))
+    raise ValueError(f"{where}: {name} = {value!r} is not allowed; expected one of {', '.join(cls.__members__)}")
+
+
+@dataclass
+class InteractionTable:
+    """Unordered material pair -> Interaction, with a default for pairs not listed."""
+
+    default: Interaction = field(default_factory=Interaction)
+    pairs: dict = field(default_factory=dict)
+
+    def set(self, a: str, b: str, interaction: Interaction | None = None, **kwargs) -> Interaction:
+        """Set the interaction of materials ``a`` and ``b`` (either order); kwargs build one from the default."""
+        if interaction is None:
+            interaction = dataclasses.replace(self.default, **kwargs)
+        elif kwargs:
+            interaction = dataclasses.replace(interaction, **kwargs)
+        self.pairs[frozenset((a, b))] = interaction
+        return interaction
+
+    def get(self, a: str, b: str) -> Interaction:
+        return self.pairs.get(frozenset((a, b)), self.default)
+
+
+def effective_moduli(ma: Material, mb: Material) -> tuple[float, float]:
+    """(E*, G*) of a pair [Pa]: E* = 1/((1-nu_a^2)/E_a + (1-nu_b^2)/E_b), G* = 1/((2-nu_a)/G_a + (2-nu_b)/G_b)."""
+    e_star = 1.0 / ((1 - ma.poisson_ratio**2) / ma.E + (1 - mb.poisson_ratio**2) / mb.E)
+    g_star = 1.0 / ((2 - ma.poisson_ratio) / ma.G + (2 - mb.poisson_ratio) / mb.G)
+    return e_star, g_star
+
+
+def pair_table(materials_per_world: list[list[Material]], tables_per_world: list[InteractionTable]) -> np.ndarray:
+    """Dense PairParams fields, shape (W, M, M), as a NumPy structured array (W = len of the lists, 1 or world_count)."""
+    w_count, m_count = len(materials_per_world), len(materials_per_world[0])
+    dtype = np.dtype([("e_star", np.float32), ("g_star", np.float32), ("beta", np.float32), ("mu_s", np.float32),
+                      ("mu_r", np.float32), ("rolling_model", np.int32), ("rolling_damping", np.float32),
+                      ("law", np.int32)])
+    out = np.zeros((w_count, m_count, m_count), dtype=dtype)
+    for w in range(w_count):
+        mats, table = materials_per_world[w], tables_per_world[w]
+        for a in range(m_count):
+            for b in range(m_count):
+                ia = table.get(mats[a].name, mats[b].name)
+                e_star, g_star = effective_moduli(mats[a], mats[b])
+                out[w, a, b] = (e_star, g_star, ia.beta, ia.static_friction, ia.rolling_friction,
+                                int(ia.rolling_model), ia.rolling_damping, int(ia.law))
+    return out

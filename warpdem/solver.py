@@ -1,0 +1,255 @@
+"""The DEM solver: a step only orders launcher calls; host checks happen once per ``run`` chunk."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .types import Contacts, Control, Model, Overflow, State
+
+from warpdem.kernels import neighbors as _nb
+from warpdem.kernels import step as _st
+
+
+class SimulationError(RuntimeError):
+    """A run stopped: a sphere's velocity became non-finite or exceeded the limit, or a capacity overflowed."""
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Solver settings, validated at construction.
+
+    Attributes:
+        dt: time step [s]; None chooses ``dt_fraction`` of the Rayleigh time.
+        dt_fraction: fraction of the Rayleigh time used for the automatic step, in (0, 1] (EDEM's 20 %).
+        skin: Verlet skin [m]; None uses 0.4 x the smallest radius.
+        neighbor_capacity: candidate slots per sphere; None derives it from the radius ratio.
+        mesh_capacity: candidate triangle slots per sphere.
+        velocity_limit: a sphere faster than this [m/s] stops the run as a blow-up.
+    """
+
+    dt: float | None = None
+    dt_fraction: float = 0.2
+    skin: float | None = None
+    neighbor_capacity: int | None = None
+    mesh_capacity: int = 16
+    velocity_limit: float = 500.0
+
+    def __post_init__(self):
+        def bad(name, value, allowed):
+            raise ValueError(f"SolverOptions: {name} = {value!r} is not allowed; expected {allowed}")
+
+        if self.dt is not None and not (math.isfinite(self.dt) and self.dt > 0):
+            bad("dt", self.dt, "a time step > 0 s or None (automatic)")
+        if not (math.isfinite(self.dt_fraction) and 0 < self.dt_fraction <= 1):
+            bad("dt_fraction", self.dt_fraction, "a fraction of the Rayleigh time in (0, 1]")
+        if self.skin is not None and not (math.isfinite(self.skin) and self.skin > 0):
+            bad("skin", self.skin, "a skin > 0 m or None (automatic)")
+        if self.neighbor_capacity is not None and not (int(self.neighbor_capacity) >= 1):
+            bad("neighbor_capacity", self.neighbor_capacity, "an integer >= 1 or None (automatic)")
+        if int(self.mesh_capacity) < 1:
+            bad("mesh_capacity", self.mesh_capacity, "an integer >= 1")
+        if not (self.velocity_limit > 0):
+            bad("velocity_limit", self.velocity_limit, "a speed > 0 m/s")
+
+
+class Solver:
+    """Hertz-Mindlin DEM on spheres, planes and static triangle meshes (see kernels/step.py).
+
+    Typical use::
+
+        solver = Solver(model, SolverOptions())
+        state = model.state()
+        contacts = solver.contacts()
+        state = solver.run(state, contacts, steps=1000)
+    """
+
+    def __init__(self, model: Model, options: SolverOptions | None = None):
+        self.model = model
+        self.options = options or SolverOptions()
+        auto = self.options.dt_fraction * model.rayleigh_time
+        if self.options.dt is None:
+            self.dt = auto
+        else:
+            self.dt = float(self.options.dt)
+            if self.dt > auto:
+                warnings.warn(
+                    f"time step {self.dt:.3g} s exceeds {self.options.dt_fraction:.0%} of the Rayleigh time "
+                    f"({model.rayleigh_time:.3g} s): contacts may be under-resolved", stacklevel=2)
+        self.skin = self.options.skin if self.options.skin is not None else 0.4 * model.radius_min
+        self._clock = wp.zeros(1, dtype=int, device=model.device)
+        self._blowup = wp.array([2**31 - 1, 2**31 - 1], dtype=int, device=model.device)
+        self._spare: State | None = None
+        self._graph = None
+
+    # contacts -------------------------------------------------------------------------------
+    def default_neighbor_capacity(self) -> int:
+        """Slots for all partners within r_i + r_j + skin: a shell-packing estimate, at least 16."""
+        m = self.model
+        ratio = (m.radius_max + m.radius_min + self.skin) / m.radius_min
+        # spheres of the smallest radius that fit around the largest one, with ~30 % margin
+        return int(max(16, math.ceil(1.3 * 0.74 * (ratio**3 - (m.radius_max / m.radius_min) ** 3))))
+
+    def contacts(self) -> Contacts:
+        """Allocate the contact lists and history for this model (a rebuild is due on the first step)."""
+        m = self.model
+        n, dev = m.sphere_count, m.device
+        cap = int(self.options.neighbor_capacity or self.default_neighbor_capacity())
+        mcap = int(self.options.mesh_capacity) if m.mesh is not None else 1
+        planes = max(m.plane_count, 1)
+
+        def slots(k, dtype):
+            return wp.zeros((k, n), dtype=dtype, device=dev)
+
+        c = Contacts(
+            neighbor_capacity=cap,
+            mesh_capacity=mcap,
+            skin=self.skin,
+            neighbor_count=wp.zeros(n, dtype=int, device=dev),
+            neighbor_index=slots(cap, int),
+            neighbor_spring=slots(cap, wp.vec3),
+            neighbor_roll=slots(cap, wp.vec3),
+            plane_spring=slots(planes, wp.vec3),
+            plane_roll=slots(planes, wp.vec3),
+            mesh_count=wp.zeros(n, dtype=int, device=dev),
+            mesh_face=slots(mcap, int),
+            mesh_spring=slots(mcap, wp.vec3),
+            mesh_roll=slots(mcap, wp.vec3),
+            build_x=wp.zeros(n, dtype=wp.vec3, device=dev),
+            rebuild=wp.ones(1, dtype=int, device=dev),
+            overflow=wp.zeros(1, dtype=int, device=dev),
+        )
+        for name in ("neighbor_count", "neighbor_index", "neighbor_spring", "neighbor_roll",
+                     "mesh_count", "mesh_face", "mesh_spring", "mesh_roll"):
+            c.scratch[name] = wp.zeros_like(getattr(c, name))
+        cells = int(min(128, max(8, round((n / m.world_count) ** (1.0 / 3.0) * 2))))
+        c.grid = wp.HashGrid(cells, cells, cells, device=dev)
+        return c
+
+    # launchers ------------------------------------------------------------------------------
+    def rebuild(self, state: State, contacts: Contacts) -> None:
+        """Rebuild the candidate lists from ``state`` and carry the history over."""
+        m, c = self.model, contacts
+        c.grid.build(points=state.sphere_x, radius=2.0 * m.radius_max + self.skin, groups=m.sphere_world)
+        s = c.scratch
+        wp.launch(
+            _nb.build_contacts,
+            dim=m.sphere_count,
+            inputs=[
+                c.grid.id, m.sphere_radius, m.sphere_world, m.radius_max,
+                m.mesh.id if m.mesh is not None else wp.uint64(0), int(m.mesh is not None),
+                m.triangle_wall, m.wall_world,
+                state.sphere_x, self.skin,
+                c.neighbor_count, c.neighbor_index, c.neighbor_spring, c.neighbor_roll,
+                c.mesh_count, c.mesh_face, c.mesh_spring, c.mesh_roll,
+            ],
+            outputs=[
+                s["neighbor_count"], s["neighbor_index"], s["neighbor_spring"], s["neighbor_roll"],
+                s["mesh_count"], s["mesh_face"], s["mesh_spring"], s["mesh_roll"],
+                c.build_x, c.overflow,
+            ],
+            device=m.device,
+        )
+        for name, buf in s.items():
+            wp.copy(getattr(c, name), buf)
+        c.rebuild.zero_()
+
+    def step(self, state_in: State, state_out: State, control: Control | None, contacts: Contacts,
+             dt: float | None = None) -> None:
+        """Advance ``state_in`` by one step into ``state_out`` (rebuilding the lists first if due)."""
+        m, c = self.model, contacts
+        dt = self.dt if dt is None else float(dt)
+        wp.capture_if(c.rebuild, on_true=lambda: self.rebuild(state_in, c))
+        kick = dt if state_in.half_step else 0.5 * dt
+        wp.launch(_st.begin_step, dim=max(m.plane_count + m.wall_count, 1), inputs=[],
+                  outputs=[state_out.wall_f, self._clock], device=m.device)
+        wp.launch(
+            _st.step_spheres,
+            dim=m.sphere_count,
+            inputs=[
+                m.sphere_radius, m.sphere_material, m.sphere_world, m.material_density, m.pair_params,
+                m.world_gravity, m.plane_point, m.plane_normal, m.plane_material, m.plane_world,
+                m.mesh.id if m.mesh is not None else wp.uint64(0), m.triangle_wall, m.wall_material, m.wall_world,
+                c.neighbor_count, c.neighbor_index, c.neighbor_spring, c.neighbor_roll, c.plane_spring, c.plane_roll,
+                c.mesh_count, c.mesh_face, c.mesh_spring, c.mesh_roll, c.build_x,
+                state_in.sphere_x, state_in.sphere_v, state_in.sphere_w,
+                dt, kick, self.skin, self.options.velocity_limit, self._clock,
+            ],
+            outputs=[
+                state_out.sphere_x, state_out.sphere_v, state_out.sphere_w, state_out.sphere_f, state_out.sphere_t,
+                state_out.wall_f, c.rebuild, self._blowup,
+            ],
+            device=m.device,
+        )
+        state_out.time = state_in.time + dt
+        state_out.step = state_in.step + 1
+        state_out.half_step = True
+
+    # driver ---------------------------------------------------------------------------------
+    def run(self, state: State, contacts: Contacts, steps: int, control: Control | None = None,
+            use_graph: bool | None = None) -> State:
+        """Take ``steps`` steps starting from ``state``; returns the final state (``state`` or its twin).
+
+        On CUDA, pairs of steps are replayed as one CUDA graph (rebuilds included, as conditional
+        nodes), so the host does not synchronise inside the chunk. Blow-ups and overflows are checked
+        once at the end and raise :class:`SimulationError`.
+        """
+        steps = int(steps)
+        if steps <= 0:
+            return state
+        if self._spare is None or self._spare.sphere_x.shape != state.sphere_x.shape:
+            self._spare = self.model.state()
+        a, b = state, self._spare
+        if use_graph is None:
+            use_graph = wp.get_device(self.model.device).is_cuda
+        done = 0
+        # the first step runs eagerly: it applies the half kick and allocates the hash grid before any capture
+        if not a.half_step or (use_graph and self._graph is None):
+            self.step(a, b, control, contacts)
+            a, b = b, a
+            done = 1
+        if use_graph and steps - done >= 2:
+            key = (id(a), id(b), id(contacts))
+            if self._graph is None or self._graph[0] != key:
+                with wp.ScopedCapture(device=self.model.device) as cap:
+                    self.step(a, b, control, contacts)
+                    self.step(b, a, control, contacts)
+                self._graph = (key, cap.graph)
+                b.half_step = a.half_step = True
+            pairs = (steps - done) // 2
+            for _ in range(pairs):
+                wp.capture_launch(self._graph[1])
+            a.time += 2 * pairs * self.dt
+            a.step += 2 * pairs
+            done += 2 * pairs
+        while done < steps:
+            self.step(a, b, control, contacts)
+            a, b = b, a
+            done += 1
+        self._spare = b
+        self.check(contacts)
+        return a
+
+    def check(self, contacts: Contacts) -> None:
+        """Raise SimulationError if a blow-up or a capacity overflow was flagged (one host read)."""
+        blow = self._blowup.numpy()
+        if blow[1] != 2**31 - 1:
+            i = int(blow[0])
+            world = int(self.model.sphere_world.numpy()[i])
+            raise SimulationError(
+                f"blow-up at step {int(blow[1])}: sphere {i} (world {world}) has a non-finite state or a speed "
+                f"above velocity_limit = {self.options.velocity_limit} m/s; reduce dt (now {self.dt:.3g} s, "
+                f"Rayleigh time {self.model.rayleigh_time:.3g} s) or check the inputs")
+        flags = int(contacts.overflow.numpy()[0])
+        if flags:
+            what = []
+            if flags & Overflow.NEIGHBOR:
+                what.append(f"neighbor_capacity = {contacts.neighbor_capacity}")
+            if flags & Overflow.MESH:
+                what.append(f"mesh_capacity = {contacts.mesh_capacity}")
+            raise SimulationError(
+                f"contact capacity exceeded ({', '.join(what)}): contacts were dropped; raise it in SolverOptions")
