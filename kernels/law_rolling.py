@@ -49,6 +49,8 @@ def rolling_resistance(
     Returns:
         (torque on a [N m], updated spring torque [N m]).
     """
+    if model == ROLLING_NONE or mu_r == 0.0:
+        return wp.vec3(0.0), spring * 0.0
     w_r = w_rel - wp.dot(w_rel, n) * n
     m_max = mu_r * r_star * wp.max(f_n, 0.0)
     if model == ROLLING_CONSTANT_TORQUE:

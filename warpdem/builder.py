@@ -94,7 +94,7 @@ class ModelBuilder:
             raise ValueError("add_spheres: positions contain a non-finite value")
         bad = np.flatnonzero(~(np.isfinite(r) & (r > 0)))
         if bad.size:
-            raise ValueError(f"add_spheres: radius = {r[bad[0]]!r} (sphere {bad[0]}) is not allowed; expected a radius > 0 m")
+            raise ValueError(f"add_spheres: radius = {float(r[bad[0]])!r} (sphere {bad[0]}) is not allowed; expected a radius > 0 m")
         v = np.zeros((n, 3)) if velocities is None else np.asarray(velocities, dtype=np.float64).reshape(n, 3)
         w = np.zeros((n, 3)) if angular_velocities is None else np.asarray(angular_velocities, dtype=np.float64).reshape(n, 3)
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(w))):

@@ -194,8 +194,8 @@ class Solver:
             use_graph: bool | None = None) -> State:
         """Take ``steps`` steps starting from ``state``; returns the final state (``state`` or its twin).
 
-        On CUDA, pairs of steps are replayed as one CUDA graph (rebuilds included, as conditional
-        nodes), so the host does not synchronise inside the chunk. Blow-ups and overflows are checked
+        Pairs of steps are replayed as one captured graph (rebuilds included, as conditional nodes;
+        Warp captures on CPU as well), so the host does not synchronise inside the chunk. Blow-ups and overflows are checked
         once at the end and raise :class:`SimulationError`.
         """
         steps = int(steps)
@@ -205,7 +205,8 @@ class Solver:
             self._spare = self.model.state()
         a, b = state, self._spare
         if use_graph is None:
-            use_graph = wp.get_device(self.model.device).is_cuda
+            # CUDA graphs on GPU; Warp's CPU capture removes the Python launch overhead on CPU too
+            use_graph = steps >= 64
         done = 0
         # the first step runs eagerly: it applies the half kick and allocates the hash grid before any capture
         if not a.half_step or (use_graph and self._graph is None):
@@ -215,12 +216,19 @@ class Solver:
         if use_graph and steps - done >= 2:
             key = (id(a), id(b), id(contacts))
             if self._graph is None or self._graph[0] != key:
+                before = int(self._clock.numpy()[0])
+                t_before, step_before = a.time, a.step
                 with wp.ScopedCapture(device=self.model.device) as cap:
                     self.step(a, b, control, contacts)
                     self.step(b, a, control, contacts)
                 self._graph = (key, cap.graph)
-                b.half_step = a.half_step = True
-            pairs = (steps - done) // 2
+                a.time, a.step = t_before, step_before
+                # a CPU capture also executes what it records; a CUDA capture does not
+                if int(self._clock.numpy()[0]) != before:
+                    a.time += 2 * self.dt
+                    a.step += 2
+                    done += 2
+            pairs = max(steps - done, 0) // 2
             for _ in range(pairs):
                 wp.capture_launch(self._graph[1])
             a.time += 2 * pairs * self.dt
