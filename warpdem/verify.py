@@ -44,8 +44,8 @@ class Record:
         return bool(np.isfinite(self.value) and self.error <= self.tolerance)
 
     def as_json(self) -> dict:
-        d = asdict(self)
-        d.update({"name": f"{self.case}: {self.name}", "quantity": self.name, "error": self.error,
+        d = {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in asdict(self).items()}
+        d.update({"name": f"{self.case}: {self.name}", "quantity": self.name, "error": float(self.error),
                   "pass": self.passed})
         return d
 
