@@ -17,6 +17,8 @@ from .params import PairParams
 wp.set_module_options({"enable_backward": False})
 
 BLOWUP_NONE = wp.constant(2147483647)
+WALL_LANES = wp.constant(256)
+"""Partial accumulators per wall: spreads the force atomics of thousands of spheres on one wall."""
 
 
 @wp.func
@@ -105,7 +107,7 @@ def step_spheres(
     w_out: wp.array[wp.vec3],
     f_out: wp.array[wp.vec3],
     t_out: wp.array[wp.vec3],
-    wall_f_out: wp.array[wp.vec3],
+    wall_f_out: wp.array2d[wp.vec3],
     rebuild_out: wp.array[int],
     blowup_out: wp.array[int],
 ):
@@ -189,7 +191,7 @@ def step_spheres(
         plane_roll[p_id, i] = roll
         f += f_a
         t += wp.cross(arm * n, f_t) + m_roll
-        wp.atomic_add(wall_f_out, p_id, -f_a)
+        wp.atomic_add(wall_f_out, p_id, i % WALL_LANES, -f_a)
 
     # static triangle meshes
     plane_total = plane_point.shape[0]
@@ -219,7 +221,7 @@ def step_spheres(
         mesh_roll[k, i] = roll
         f += f_a
         t += wp.cross(arm * n, f_t) + m_roll
-        wp.atomic_add(wall_f_out, plane_total + wall, -f_a)
+        wp.atomic_add(wall_f_out, plane_total + wall, i % WALL_LANES, -f_a)
 
     # leapfrog (velocity Verlet): v(t+dt/2) = v(t-dt/2) + dt a(t); the first step kicks by dt/2
     g = world_gravity[world % world_gravity.shape[0]]
@@ -246,11 +248,26 @@ def step_spheres(
 @wp.kernel
 def begin_step(
     # Out:
-    wall_f_out: wp.array[wp.vec3],
+    wall_f_lanes_out: wp.array2d[wp.vec3],
     clock_out: wp.array[int],
 ):
-    """Zero the wall force accumulators and advance the device step counter (read by step_spheres)."""
-    tid = wp.tid()
-    wall_f_out[tid] = wp.vec3(0.0)
-    if tid == 0:
+    """Zero the partial wall-force accumulators and advance the device step counter (read by step_spheres)."""
+    wall, lane = wp.tid()
+    wall_f_lanes_out[wall, lane] = wp.vec3(0.0)
+    if wall == 0 and lane == 0:
         clock_out[0] = clock_out[0] + 1
+
+
+@wp.kernel
+def sum_wall_forces(
+    # In:
+    wall_f_lanes: wp.array2d[wp.vec3],
+    # Out:
+    wall_f_out: wp.array[wp.vec3],
+):
+    """Sum the partial accumulators of each wall in a fixed order (deterministic)."""
+    wall = wp.tid()
+    f = wp.vec3(0.0)
+    for lane in range(wall_f_lanes.shape[1]):
+        f += wall_f_lanes[wall, lane]
+    wall_f_out[wall] = f

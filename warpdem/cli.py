@@ -1,4 +1,4 @@
-"""Command line: ``warpdem verify | bench | pile``."""
+"""Command line: ``warpdem pile | verify | bench | audit``."""
 
 from __future__ import annotations
 
@@ -77,6 +77,12 @@ def cmd_pile(args) -> int:
     return 0
 
 
+def cmd_audit(args) -> int:
+    from .study.audit import main_audit
+
+    return main_audit(args.json)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="warpdem", description="DEM on NVIDIA Warp")
     sub = p.add_subparsers(dest="command", required=True)
@@ -98,6 +104,9 @@ def main(argv=None) -> int:
     pl.add_argument("--seed", type=int, default=1)
     pl.add_argument("--json")
     pl.set_defaults(fn=cmd_pile)
+    au = sub.add_parser("audit", help="recompute the seed papers' published statistics from their own data")
+    au.add_argument("--json", help="write the records to this file ('-': JSON to stdout instead of the table)")
+    au.set_defaults(fn=cmd_audit)
     args = p.parse_args(argv)
     return args.fn(args)
 

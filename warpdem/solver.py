@@ -82,6 +82,8 @@ class Solver:
                     f"({model.rayleigh_time:.3g} s): contacts may be under-resolved", stacklevel=2)
         self.skin = self.options.skin if self.options.skin is not None else 0.4 * model.radius_min
         self._clock = wp.zeros(1, dtype=int, device=model.device)
+        self._wall_lanes = wp.zeros((max(model.plane_count + model.wall_count, 1), int(_st.WALL_LANES)),
+                                    dtype=wp.vec3, device=model.device)
         self._blowup = wp.array([2**31 - 1, 2**31 - 1], dtype=int, device=model.device)
         self._spare: State | None = None
         self._graph = None
@@ -169,8 +171,8 @@ class Solver:
         m, c = self.model, contacts
         dt = self.dt if dt is None else float(dt)
         kick = dt if state_in.half_step else 0.5 * dt
-        wp.launch(_st.begin_step, dim=max(m.plane_count + m.wall_count, 1), inputs=[],
-                  outputs=[state_out.wall_f, self._clock], device=m.device)
+        wp.launch(_st.begin_step, dim=self._wall_lanes.shape, inputs=[], outputs=[self._wall_lanes, self._clock],
+                  device=m.device)
         wp.launch(
             _st.step_spheres,
             dim=m.sphere_count,
@@ -185,10 +187,13 @@ class Solver:
             ],
             outputs=[
                 state_out.sphere_x, state_out.sphere_v, state_out.sphere_w, state_out.sphere_f, state_out.sphere_t,
-                state_out.wall_f, c.rebuild, self._blowup,
+                self._wall_lanes, c.rebuild, self._blowup,
             ],
             device=m.device,
         )
+        if m.plane_count + m.wall_count:
+            wp.launch(_st.sum_wall_forces, dim=m.plane_count + m.wall_count, inputs=[self._wall_lanes],
+                      outputs=[state_out.wall_f], device=m.device)
         state_out.time = state_in.time + dt
         state_out.step = state_in.step + 1
         state_out.half_step = True

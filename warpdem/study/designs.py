@@ -2,9 +2,9 @@
 
 Every generator returns a DataFrame whose index is the standard order (``std_order``, 1-based),
 with one column per factor (coded levels) and a ``kind`` column: ``"factorial"`` (a two-level
-corner point, Plackett–Burman rows included), ``"axial"`` (a star point of a central composite or
-an edge point of a Box–Behnken design) or ``"center"``. :func:`randomize` shuffles the rows with an
-explicit seed and adds a ``run_order`` column.
+corner point; Plackett–Burman rows and the +-1 edge points of a Box–Behnken design included),
+``"axial"`` (a star point of a central composite design) or ``"center"``. :func:`randomize`
+shuffles the rows with an explicit seed and adds a ``run_order`` column.
 
 Factor names default to the Design-Expert/Minitab letters A, B, C, ... (the letter I is skipped,
 as both packages do). Coding follows the usual convention x = (X - centre) / half_range, so -1 is
@@ -371,7 +371,8 @@ def box_behnken(factors: int | Sequence[str], center_points: int | None = None) 
 
     Each pair of factors runs a 2^2 factorial (Yates order) with the others at 0; then
     ``center_points`` centre runs (default: Design-Expert's 5, 5, 6 for k = 3, 4, 5).
-    Edge points get ``kind="axial"`` (they are the non-centre points of the design).
+    The edge midpoints are the two-level (+-1) part of the design and get ``kind="factorial"``
+    (Minitab calls them edge points, PtType 2); there are no axial points.
     """
     names = _names(factors)
     k = len(names)
@@ -386,7 +387,7 @@ def box_behnken(factors: int | Sequence[str], center_points: int | None = None) 
             r[a], r[b] = xa, xb
             rows.append(r)
     pts = np.vstack([np.array(rows), _centre_block(center_points, k)])
-    kinds = ["axial"] * len(rows) + ["center"] * center_points
+    kinds = ["factorial"] * len(rows) + ["center"] * center_points
     return _frame(pts, names, kinds)
 
 

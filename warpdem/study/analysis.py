@@ -1,0 +1,689 @@
+"""Response-surface statistics in the Design-Expert style, on statsmodels OLS.
+
+The model is fitted in coded units (factor columns of the data frame, -1..+1 for the design's
+range). A model is a list of *terms*; a term is a tuple of factor names with repetition for powers:
+``("A",)`` is A, ``("A", "B")`` is AB, ``("A", "A")`` is A^2. Strings are accepted wherever a term
+is: ``"A"``, ``"AB"``, ``"A*B"``, ``"A:B"``, ``"A^2"``, ``"A2"``, ``"X1X2"``, ``"X1^2"``.
+
+What :func:`fit_model` reports, and how (Design-Expert conventions, see
+``shared/anchors/verification-ecosystem.md`` section 3(c)):
+
+* ANOVA rows ``Model``, one per term, ``Residual``, ``Lack of Fit``, ``Pure Error``,
+  ``Cor Total`` with sum of squares, df, mean square, F and p. Term sums of squares are Type III
+  (partial: the increase in residual SS when the term alone is dropped), which equals Type II for
+  the orthogonal designs of the seeds. Pure error is pooled over all replicated settings,
+  df = sum(n_i - 1); lack of fit is Residual - Pure Error, F = MS_LOF / MS_PE.
+* Fit statistics: std dev = sqrt(MS_res), mean, C.V.% = 100 sd / mean, R^2, adjusted R^2,
+  PRESS = sum((e_i / (1 - h_ii))^2), predicted R^2 = 1 - PRESS / SS_total (no blocks and no
+  separate curvature term here, so nothing is subtracted from SS_total), adequate precision =
+  (max yhat - min yhat) / sqrt(p MS_res / n) with p the number of model parameters (intercept
+  included) and yhat at the design points.
+* The regression equation in coded units and, given the factors' levels, in actual units
+  (the coded polynomial expanded exactly, x = (X - centre) / half_range).
+
+Also: hierarchical backward elimination (:func:`backward_eliminate`), effects and standardized
+effects of two-level designs with Lenth's pseudo standard error for saturated designs
+(:func:`effects_table`, the data of a Pareto chart), and the set of factor settings whose
+prediction hits a target (:func:`solve_target`).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+import statsmodels.api as sm
+from scipy import optimize, stats
+
+from .designs import Factor
+
+__all__ = [
+    "ModelFit",
+    "TargetSolution",
+    "backward_eliminate",
+    "effects_table",
+    "fit_model",
+    "lenth_pse",
+    "model_terms",
+    "parse_term",
+    "response_range",
+    "solve_target",
+    "term_label",
+]
+
+Term = tuple[str, ...]
+
+_SUPERSCRIPT = {"²": 2, "³": 3}
+
+
+# --------------------------------------------------------------------------------------------
+# Terms
+# --------------------------------------------------------------------------------------------
+
+
+def _canonical(term: Iterable[str], factors: Sequence[str]) -> Term:
+    term = tuple(term)
+    bad = [t for t in term if t not in factors]
+    if bad:
+        raise ValueError(f"term {term} names unknown factor(s) {bad}; factors are {list(factors)}")
+    if not term:
+        raise ValueError("empty term (the intercept is always in the model)")
+    return tuple(sorted(term, key=list(factors).index))
+
+
+def parse_term(spec: str | Sequence[str], factors: Sequence[str]) -> Term:
+    """Turn a term given as a string or a tuple into the canonical tuple of factor names."""
+    factors = list(factors)
+    if not isinstance(spec, str):
+        return _canonical(spec, factors)
+    s = spec.strip().replace(" ", "")
+    if s in factors:
+        return (s,)
+    single = all(len(f) == 1 for f in factors)
+    out: list[str] = []
+    for part in (p for p in s.replace(":", "*").split("*") if p):
+        i = 0
+        while i < len(part):
+            name = max((f for f in factors if part.startswith(f, i)), key=len, default=None)
+            if name is None:
+                raise ValueError(f"cannot parse term {spec!r} with factors {factors}")
+            i += len(name)
+            power = 1
+            if i < len(part) and part[i] == "^":
+                j = i + 1
+                while j < len(part) and part[j].isdigit():
+                    j += 1
+                power, i = int(part[i + 1:j]), j
+            elif i < len(part) and part[i] in _SUPERSCRIPT:
+                power, i = _SUPERSCRIPT[part[i]], i + 1
+            elif single and i < len(part) and part[i].isdigit():
+                power, i = int(part[i]), i + 1
+            out += [name] * power
+    return _canonical(out, factors)
+
+
+def term_label(term: Term, factors: Sequence[str] | None = None) -> str:
+    """Design-Expert style label: ``A``, ``AB``, ``A^2``; ``X1*X2``, ``X1^2`` for longer names."""
+    names = list(dict.fromkeys(term))
+    counts = Counter(term)
+    single = all(len(n) == 1 for n in (factors if factors is not None else names))
+    parts = [n + (f"^{counts[n]}" if counts[n] > 1 else "") for n in names]
+    return "".join(parts) if single else "*".join(parts)
+
+
+def model_terms(model: str | Sequence, factors: Sequence[str]) -> list[Term]:
+    """Terms of a named model (``"linear"``, ``"2fi"``, ``"quadratic"``) or of a list of terms.
+
+    Named models list terms in Design-Expert order: main effects, two-factor interactions,
+    pure quadratics.
+    """
+    factors = list(factors)
+    if isinstance(model, str):
+        m = model.lower()
+        if m not in ("linear", "2fi", "quadratic"):
+            raise ValueError(f"model must be 'linear', '2fi', 'quadratic' or a list of terms, got {model!r}")
+        terms: list[Term] = [(f,) for f in factors]
+        if m in ("2fi", "quadratic"):
+            terms += list(itertools.combinations(factors, 2))
+        if m == "quadratic":
+            terms += [(f, f) for f in factors]
+        return terms
+    terms = [parse_term(t, factors) for t in model]
+    if len(set(terms)) != len(terms):
+        raise ValueError(f"a term is repeated in {model}")
+    return terms
+
+
+def _contains(big: Term, small: Term) -> bool:
+    """True when ``small`` is a proper sub-term of ``big`` (e.g. A in AB, A in A^2)."""
+    if big == small:
+        return False
+    cb, cs = Counter(big), Counter(small)
+    return all(cb[k] >= v for k, v in cs.items())
+
+
+def _columns(x: np.ndarray, terms: Sequence[Term], factors: Sequence[str]) -> np.ndarray:
+    idx = {f: i for i, f in enumerate(factors)}
+    x = np.atleast_2d(np.asarray(x, dtype=float))
+    cols = [np.ones(len(x))]
+    for t in terms:
+        cols.append(np.prod([x[:, idx[f]] for f in t], axis=0))
+    return np.column_stack(cols)
+
+
+def _gradient(x: np.ndarray, beta: np.ndarray, terms: Sequence[Term], factors: Sequence[str]) -> np.ndarray:
+    """d yhat / d x at one coded point x (length k)."""
+    idx = {f: i for i, f in enumerate(factors)}
+    g = np.zeros(len(factors))
+    for b, t in zip(beta[1:], terms):
+        cnt = Counter(t)
+        for f, m in cnt.items():
+            d = m * x[idx[f]] ** (m - 1)
+            for h, mh in cnt.items():
+                if h != f:
+                    d *= x[idx[h]] ** mh
+            g[idx[f]] += b * d
+    return g
+
+
+# --------------------------------------------------------------------------------------------
+# The fit
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class ModelFit:
+    """A fitted polynomial model in coded units, with its Design-Expert ANOVA.
+
+    Attributes:
+        response: name of the response column.
+        factors: factor names (columns of the coded data), in order.
+        terms: model terms (without the intercept).
+        data: the coded data used (factor columns and the response).
+        coefficients: coded coefficients with std_err, t, p (index: ``Intercept`` and labels).
+        anova: ANOVA table (index: Model, term labels, Residual, [Lack of Fit, Pure Error],
+            Cor Total; columns sum_sq, df, mean_sq, F, p).
+        stats: std_dev, mean, cv_pct, r2, adj_r2, pred_r2, press, adeq_precision, n, p.
+        fitted, residuals, leverage: per-run arrays.
+        levels: factor levels used for the actual-units equation, when given.
+        elimination: log of :func:`backward_eliminate` (removed term, its p), else empty.
+        ols: the statsmodels results object.
+    """
+
+    response: str
+    factors: list[str]
+    terms: list[Term]
+    data: pd.DataFrame
+    coefficients: pd.DataFrame
+    anova: pd.DataFrame
+    stats: dict
+    fitted: np.ndarray
+    residuals: np.ndarray
+    leverage: np.ndarray
+    levels: dict[str, Factor] | None = None
+    elimination: list[dict] = field(default_factory=list)
+    ols: object = None
+
+    @property
+    def labels(self) -> list[str]:
+        return [term_label(t, self.factors) for t in self.terms]
+
+    def coef(self, term: str | Term = "Intercept") -> float:
+        """Coded coefficient of one term (or of the intercept)."""
+        if term == "Intercept":
+            return float(self.coefficients.loc["Intercept", "coef"])
+        t = parse_term(term, self.factors)
+        return float(self.coefficients.loc[term_label(t, self.factors), "coef"])
+
+    def _x(self, x) -> np.ndarray:
+        if isinstance(x, pd.DataFrame):
+            return x[self.factors].to_numpy(dtype=float)
+        if isinstance(x, Mapping):
+            return np.array([[float(x[f]) for f in self.factors]])
+        return np.atleast_2d(np.asarray(x, dtype=float))
+
+    def predict(self, x) -> np.ndarray:
+        """Prediction at coded points (DataFrame with factor columns, mapping, or array n x k)."""
+        beta = self.coefficients["coef"].to_numpy()
+        return _columns(self._x(x), self.terms, self.factors) @ beta
+
+    def predict_actual(self, x) -> np.ndarray:
+        """Prediction at points given in actual units (needs ``levels``)."""
+        lv = self._levels()
+        xa = self._x(x)
+        xc = np.column_stack([lv[f].to_coded(xa[:, i]) for i, f in enumerate(self.factors)])
+        return self.predict(xc)
+
+    def _levels(self) -> dict[str, Factor]:
+        if not self.levels:
+            raise ValueError("this fit has no factor levels: pass levels=... to fit_model")
+        missing = [f for f in self.factors if f not in self.levels]
+        if missing:
+            raise ValueError(f"no levels for factor(s) {missing}")
+        return self.levels
+
+    def equation(self, units: str = "coded") -> dict[Term, float]:
+        """Polynomial coefficients keyed by monomial (``()`` is the constant).
+
+        ``units="actual"`` expands the coded model with x = (X - centre) / half_range; the result
+        is the model a fit in actual units would give (the same least-squares polynomial).
+        """
+        beta = self.coefficients["coef"].to_numpy()
+        if units == "coded":
+            out = {(): float(beta[0])}
+            out.update({t: float(b) for t, b in zip(self.terms, beta[1:])})
+            return out
+        if units != "actual":
+            raise ValueError("units must be 'coded' or 'actual'")
+        lv = self._levels()
+        poly: dict[Term, float] = {(): float(beta[0])}
+        for t, b in zip(self.terms, beta[1:]):
+            # each factor occurrence contributes X/h (pick it) or -c/h (constant)
+            choices = [((f,), 1.0 / lv[f].half_range, -lv[f].centre / lv[f].half_range) for f in t]
+            for pick in itertools.product((True, False), repeat=len(t)):
+                mono: list[str] = []
+                c = float(b)
+                for (name, inv_h, const), p in zip(choices, pick):
+                    if p:
+                        mono += list(name)
+                        c *= inv_h
+                    else:
+                        c *= const
+                key = _canonical(mono, self.factors) if mono else ()
+                poly[key] = poly.get(key, 0.0) + c
+        return poly
+
+    def equation_string(self, units: str = "coded", digits: int = 4) -> str:
+        """The regression equation as text, e.g. ``aor = 28.34 + 1.295*C - 0.986*C^2``."""
+        eq = self.equation(units)
+        parts = [f"{eq[()]:.{digits}g}"]
+        for mono, c in eq.items():
+            if mono == ():
+                continue
+            cnt = Counter(mono)
+            name = "*".join(n + (f"^{cnt[n]}" if cnt[n] > 1 else "") for n in dict.fromkeys(mono))
+            parts.append(("- " if c < 0 else "+ ") + f"{abs(c):.{digits}g}*{name}")
+        return f"{self.response} = " + " ".join(parts)
+
+    def summary(self) -> str:
+        """ANOVA table, fit statistics and the coded equation as plain text."""
+        a = self.anova.copy()
+        with pd.option_context("display.float_format", lambda v: f"{v:.6g}", "display.width", 120):
+            lines = [f"Response {self.response}: model {', '.join(self.labels) or 'mean'}",
+                     a.to_string(), ""]
+        s = self.stats
+        lines += [f"Std. Dev. {s['std_dev']:.6g}   Mean {s['mean']:.6g}   C.V.% {s['cv_pct']:.4g}",
+                  f"R^2 {s['r2']:.4f}   Adj R^2 {s['adj_r2']:.4f}   Pred R^2 {s['pred_r2']:.4f}   "
+                  f"Adeq Precision {s['adeq_precision']:.3f}   PRESS {s['press']:.6g}",
+                  self.equation_string("coded")]
+        if self.levels:
+            lines.append(self.equation_string("actual"))
+        return "\n".join(lines)
+
+
+def _sse(X: np.ndarray, y: np.ndarray) -> float:
+    beta = np.linalg.lstsq(X, y, rcond=None)[0]
+    r = y - X @ beta
+    return float(r @ r)
+
+
+def _f_p(ms: float, ms_err: float, df1: float, df2: float) -> tuple[float, float]:
+    if not (df1 > 0 and df2 > 0 and ms_err > 0 and np.isfinite(ms_err)):
+        return math.nan, math.nan
+    f = ms / ms_err
+    return f, float(stats.f.sf(f, df1, df2))
+
+
+def fit_model(data: pd.DataFrame, response: str, factors: Sequence[str],
+              model: str | Sequence = "quadratic",
+              levels: Iterable[Factor] | Mapping[str, Factor] | None = None) -> ModelFit:
+    """Fit ``model`` to the coded ``data`` by OLS and build the Design-Expert ANOVA.
+
+    Args:
+        data: one row per run; the factor columns in coded units, and the response.
+        response: name of the response column.
+        factors: names of the factor columns.
+        model: ``"linear"``, ``"2fi"``, ``"quadratic"`` or a list of terms.
+        levels: :class:`~warpdem.study.designs.Factor` per factor, for the actual-units equation.
+    """
+    factors = list(factors)
+    terms = model_terms(model, factors)
+    df = data[factors + [response]].astype(float).reset_index(drop=True)
+    if df.isna().any().any():
+        raise ValueError("data contains missing values")
+    y = df[response].to_numpy()
+    xk = df[factors].to_numpy()
+    X = _columns(xk, terms, factors)
+    n, p = X.shape
+    if np.linalg.matrix_rank(X) < p:
+        raise ValueError("the model is not estimable from this design (aliased terms); "
+                         f"rank {np.linalg.matrix_rank(X)} < {p} parameters")
+    labels = [term_label(t, factors) for t in terms]
+    res = sm.OLS(y, pd.DataFrame(X, columns=["Intercept"] + labels)).fit()
+    fitted = np.asarray(res.fittedvalues)
+    resid = y - fitted
+    sse = float(resid @ resid)
+    df_res = n - p
+    ms_res = sse / df_res if df_res > 0 else math.nan
+    sst = float(((y - y.mean()) ** 2).sum())
+
+    rows = []
+    ss_model = sst - sse
+    f, pv = _f_p(ss_model / (p - 1) if p > 1 else math.nan, ms_res, p - 1, df_res)
+    rows.append(("Model", ss_model, p - 1, ss_model / (p - 1) if p > 1 else math.nan, f, pv))
+    for j, lab in enumerate(labels, start=1):
+        ss = _sse(np.delete(X, j, axis=1), y) - sse
+        ss = max(ss, 0.0)
+        f, pv = _f_p(ss, ms_res, 1, df_res)
+        rows.append((lab, ss, 1, ss, f, pv))
+    rows.append(("Residual", sse, df_res, ms_res, math.nan, math.nan))
+    # pure error from replicated settings
+    key = [tuple(np.round(r, 9)) for r in xk]
+    groups = pd.Series(y).groupby(pd.Series(key, dtype=object).astype(str))
+    ss_pe = float(groups.apply(lambda g: ((g - g.mean()) ** 2).sum()).sum())
+    df_pe = int((groups.size() - 1).sum())
+    df_lof = df_res - df_pe
+    if df_pe > 0 and df_lof > 0:
+        ss_lof = sse - ss_pe
+        ms_pe = ss_pe / df_pe
+        f, pv = _f_p(ss_lof / df_lof, ms_pe, df_lof, df_pe)
+        rows.append(("Lack of Fit", ss_lof, df_lof, ss_lof / df_lof, f, pv))
+        rows.append(("Pure Error", ss_pe, df_pe, ms_pe, math.nan, math.nan))
+    rows.append(("Cor Total", sst, n - 1, math.nan, math.nan, math.nan))
+    anova = pd.DataFrame(rows, columns=["source", "sum_sq", "df", "mean_sq", "F", "p"]).set_index("source")
+    anova["df"] = anova["df"].astype(int)
+
+    # leverage and PRESS
+    if df_res > 0:
+        h = np.asarray(res.get_influence().hat_matrix_diag)
+    else:
+        h = np.ones(n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        press = float(np.sum((resid / (1.0 - h)) ** 2)) if np.all(h < 1 - 1e-10) else math.nan
+    mean = float(y.mean())
+    sd = math.sqrt(ms_res) if df_res > 0 else math.nan
+    st = {
+        "n": n,
+        "p": p,
+        "std_dev": sd,
+        "mean": mean,
+        "cv_pct": 100.0 * sd / mean if mean != 0 else math.nan,
+        "r2": 1.0 - sse / sst if sst > 0 else math.nan,
+        "adj_r2": 1.0 - ms_res / (sst / (n - 1)) if (sst > 0 and df_res > 0) else math.nan,
+        "press": press,
+        "pred_r2": 1.0 - press / sst if sst > 0 else math.nan,
+        "adeq_precision": (fitted.max() - fitted.min()) / math.sqrt(p * ms_res / n)
+        if df_res > 0 and ms_res > 0 else math.nan,
+    }
+    se = np.asarray(res.bse) if df_res > 0 else np.full(p, math.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tval = np.asarray(res.params) / se
+    pcoef = 2 * stats.t.sf(np.abs(tval), df_res) if df_res > 0 else np.full(p, math.nan)
+    coefs = pd.DataFrame({"coef": np.asarray(res.params), "std_err": se, "t": tval, "p": pcoef},
+                         index=pd.Index(["Intercept"] + labels, name="term"))
+    lv = None
+    if levels is not None:
+        lv = dict(levels) if isinstance(levels, Mapping) else {f.name: f for f in levels}
+    return ModelFit(response, factors, terms, df, coefs, anova, st, fitted, resid, h, lv, [], res)
+
+
+def backward_eliminate(data: pd.DataFrame, response: str, factors: Sequence[str],
+                       model: str | Sequence = "quadratic", alpha: float = 0.05,
+                       hierarchical: bool = True,
+                       levels: Iterable[Factor] | Mapping[str, Factor] | None = None) -> ModelFit:
+    """Backward elimination of non-significant terms, one at a time, largest p first.
+
+    A term is removed when its p-value exceeds ``alpha`` (0.05 or 0.1 are usual). With
+    ``hierarchical=True`` a term is kept while a higher-order term containing it stays in the
+    model (A stays while AB or A^2 does). The returned fit's ``elimination`` lists the removed
+    terms with the p-value they had when removed.
+    """
+    factors = list(factors)
+    terms = model_terms(model, factors)
+    log: list[dict] = []
+    while True:
+        fit = fit_model(data, response, factors, terms, levels)
+        cand = [t for t in terms if not (hierarchical and any(_contains(u, t) for u in terms))]
+        pv = {t: fit.anova.loc[term_label(t, factors), "p"] for t in cand}
+        pv = {t: v for t, v in pv.items() if np.isfinite(v)}
+        if not pv:
+            break
+        worst = max(pv, key=pv.get)
+        if pv[worst] <= alpha:
+            break
+        log.append({"removed": term_label(worst, factors), "p": float(pv[worst])})
+        terms = [t for t in terms if t != worst]
+    fit.elimination = log
+    return fit
+
+
+# --------------------------------------------------------------------------------------------
+# Effects of two-level designs
+# --------------------------------------------------------------------------------------------
+
+
+def lenth_pse(effects: Sequence[float]) -> float:
+    """Lenth's (1989) pseudo standard error of a set of effects."""
+    c = np.abs(np.asarray(effects, dtype=float))
+    s0 = 1.5 * np.median(c)
+    small = c[c < 2.5 * s0]
+    return float(1.5 * np.median(small)) if len(small) else float(s0)
+
+
+def effects_table(data: pd.DataFrame, response: str, factors: Sequence[str],
+                  model: str | Sequence = "linear") -> pd.DataFrame:
+    """Effects and standardized effects of a two-level design (the data of a Pareto chart).
+
+    effect = 2 x coded coefficient (high minus low mean for an orthogonal +-1 design).
+    The standardized effect is the t value, effect / SE(effect), when the model leaves residual
+    degrees of freedom; for a saturated model it is effect / PSE with Lenth's pseudo standard
+    error, referred to t with m/3 df (as Minitab does). Sorted by |standardized effect|, with
+    the rank, the % contribution (SS / SS_total) and the 5 % critical value (``t_crit``).
+    """
+    factors = list(factors)
+    fit = fit_model(data, response, factors, model)
+    labels = fit.labels
+    coef = fit.coefficients.loc[labels, "coef"].to_numpy()
+    eff = 2.0 * coef
+    sst = fit.anova.loc["Cor Total", "sum_sq"]
+    ss = fit.anova.loc[labels, "sum_sq"].to_numpy()
+    df_res = int(fit.anova.loc["Residual", "df"])
+    if df_res > 0:
+        std = fit.coefficients.loc[labels, "t"].to_numpy()
+        p = fit.coefficients.loc[labels, "p"].to_numpy()
+        tcrit = float(stats.t.ppf(0.975, df_res))
+        method = f"t, {df_res} residual df"
+    else:
+        pse = lenth_pse(eff)
+        d = len(eff) / 3.0
+        std = eff / pse
+        p = 2 * stats.t.sf(np.abs(std), d)
+        tcrit = float(stats.t.ppf(0.975, d))
+        method = f"Lenth PSE = {pse:.6g}, {d:.3g} df"
+    out = pd.DataFrame({"term": labels, "coefficient": coef, "effect": eff, "sum_sq": ss,
+                        "pct_contribution": 100.0 * ss / sst, "standardized": std, "p": p})
+    out = out.reindex(out["standardized"].abs().sort_values(ascending=False).index)
+    out["rank"] = np.arange(1, len(out) + 1)
+    out = out.set_index("term")
+    out.attrs["t_crit"] = tcrit
+    out.attrs["method"] = method
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Hitting a target
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass
+class TargetSolution:
+    """Factor settings whose predicted response equals a target.
+
+    Attributes:
+        target: the target response.
+        reachable: whether the target lies within the predicted range over the region.
+        chosen: the chosen point (coded factors, ``predicted``, ``distance`` from the centre),
+            by ``rule``.
+        chosen_actual: the chosen point in actual units (when the fit has levels).
+        family: sampled points of the target contour inside the region (same columns plus
+            ``<factor>_actual``), sorted by distance from the design centre.
+        rule: how ``chosen`` was picked.
+        bounds: coded (low, high) per factor.
+        predicted_range: (min, max) of the prediction over the region.
+    """
+
+    target: float
+    reachable: bool
+    chosen: pd.Series
+    chosen_actual: pd.Series | None
+    family: pd.DataFrame
+    rule: str
+    bounds: dict[str, tuple[float, float]]
+    predicted_range: tuple[float, float]
+
+
+def _bounds(fit: ModelFit, bounds) -> dict[str, tuple[float, float]]:
+    if isinstance(bounds, str):
+        if bounds == "cube":
+            b = 1.0
+        elif bounds in ("design", "axial"):
+            b = float(np.abs(fit.data[fit.factors].to_numpy()).max())
+        else:
+            raise ValueError("bounds must be 'cube', 'design'/'axial', a number, a pair or a mapping")
+        return {f: (-b, b) for f in fit.factors}
+    if isinstance(bounds, Mapping):
+        return {f: tuple(map(float, bounds.get(f, (-1.0, 1.0)))) for f in fit.factors}
+    if np.ndim(bounds) == 0:
+        b = float(bounds)
+        return {f: (-b, b) for f in fit.factors}
+    lo, hi = map(float, bounds)
+    return {f: (lo, hi) for f in fit.factors}
+
+
+class _Surface:
+    """Fast scalar prediction and gradient over the free factors (the others held fixed)."""
+
+    def __init__(self, fit: ModelFit, free: list[str], fixed: Mapping[str, float]):
+        self.fit = fit
+        self.free_idx = [fit.factors.index(f) for f in free]
+        self.base = [float(fixed.get(f, 0.0)) for f in fit.factors]
+        beta = fit.coefficients["coef"].to_numpy()
+        self.b0 = float(beta[0])
+        self.beta = beta
+        self.terms = [(float(b), [fit.factors.index(f) for f in t]) for b, t in zip(beta[1:], fit.terms)]
+
+    def full(self, z) -> np.ndarray:
+        x = np.array(self.base)
+        x[self.free_idx] = z
+        return x
+
+    def __call__(self, z) -> float:
+        x = self.base.copy()
+        for i, v in zip(self.free_idx, np.asarray(z, dtype=float).tolist()):
+            x[i] = v
+        val = self.b0
+        for b, ii in self.terms:
+            for i in ii:
+                b *= x[i]
+            val += b
+        return val
+
+    def grad(self, z) -> np.ndarray:
+        return _gradient(self.full(z), self.beta, self.fit.terms, self.fit.factors)[self.free_idx]
+
+
+def _region(fit: ModelFit, bounds, fixed):
+    fixed = dict(fixed or {})
+    b = _bounds(fit, bounds)
+    free = [f for f in fit.factors if f not in fixed]
+    if not free:
+        raise ValueError("all factors are fixed")
+    lo = np.array([b[f][0] for f in free])
+    hi = np.array([b[f][1] for f in free])
+    return b, free, lo, hi, _Surface(fit, free, fixed)
+
+
+def response_range(fit: ModelFit, bounds="cube", fixed: Mapping[str, float] | None = None,
+                   n_starts: int = 16, seed: int = 0) -> tuple[tuple[float, np.ndarray], tuple[float, np.ndarray]]:
+    """((min, argmin), (max, argmax)) of the prediction over the coded region (multi-start)."""
+    _, free, lo, hi, surf = _region(fit, bounds, fixed)
+    rng = np.random.default_rng(seed)
+    starts = [0.5 * (lo + hi)] + list(lo + (hi - lo) * rng.random((n_starts, len(free))))
+    out = []
+    for sign in (1.0, -1.0):
+        best_v, best_z = math.inf, None
+        for x0 in starts:
+            r = optimize.minimize(lambda z: sign * surf(z), x0, jac=lambda z: sign * surf.grad(z),
+                                  method="L-BFGS-B", bounds=list(zip(lo, hi)))
+            if r.fun < best_v:
+                best_v, best_z = float(r.fun), np.clip(r.x, lo, hi)
+        out.append((sign * best_v, surf.full(best_z)))
+    return out[0], out[1]
+
+
+def solve_target(fit: ModelFit, target: float, bounds="cube",
+                 fixed: Mapping[str, float] | None = None, n_samples: int = 100,
+                 seed: int = 0, tol: float | None = None) -> TargetSolution:
+    """Settings in the coded region whose prediction equals ``target``.
+
+    The target contour {x : yhat(x) = target} is a set, not a point. It is sampled by projecting
+    ``n_samples`` random points of the region onto it (each projection: the nearest point of the
+    contour inside the region, scipy SLSQP), and the solution reported as ``chosen`` is the
+    contour point nearest the design centre (smallest Euclidean norm in coded units over the
+    free factors), refined by a direct minimisation. ``bounds``: ``"cube"`` ([-1, 1]^k,
+    default), ``"design"``/``"axial"`` (the largest |coded value| in the data, e.g. +-alpha of a
+    CCD), a number b for [-b, b], a pair, or a mapping per factor. ``fixed`` holds factors at
+    coded values. When the target is outside the predicted range, ``reachable`` is False and
+    the extreme nearest the target is returned.
+    """
+    b, free, lo, hi, surf = _region(fit, bounds, fixed)
+    (vmin, xmin), (vmax, xmax) = response_range(fit, b, fixed, seed=seed)
+    tol = 1e-7 * max(1.0, abs(target), vmax - vmin) if tol is None else tol
+    rng = np.random.default_rng(seed)
+    fi = surf.free_idx
+
+    def record(z) -> dict:
+        x = surf.full(z)
+        row = {f: float(x[i]) for i, f in enumerate(fit.factors)}
+        row["predicted"] = surf(z)
+        row["distance"] = float(np.linalg.norm(x[fi]))
+        return row
+
+    reachable = vmin - tol <= target <= vmax + tol
+    rows: list[dict] = []
+    chosen_row = None
+    if reachable:
+        cons = [{"type": "eq", "fun": lambda z: surf(z) - target, "jac": lambda z: surf.grad(z)[None, :]}]
+        bnds = list(zip(lo, hi))
+        opts = {"ftol": 1e-12, "maxiter": 300}
+
+        def project(anchor, x0):
+            r = optimize.minimize(lambda z: float(np.sum((z - anchor) ** 2)), x0,
+                                  jac=lambda z: 2.0 * (z - anchor), method="SLSQP", bounds=bnds,
+                                  constraints=cons, options=opts)
+            z = np.clip(r.x, lo, hi)
+            return z if abs(surf(z) - target) <= tol else None
+
+        for a in lo + (hi - lo) * rng.random((n_samples, len(free))):
+            z = project(a, a)
+            if z is not None:
+                rows.append(record(z))
+        # the contour point nearest the centre: project the centre, from several starts
+        centre = np.clip(np.zeros(len(free)), lo, hi)
+        starts = [np.array([r[f] for f in free]) for r in sorted(rows, key=lambda r: r["distance"])[:5]]
+        starts += [centre, xmin[fi], xmax[fi]]
+        best = None
+        for x0 in starts:
+            z = project(np.zeros(len(free)), x0)
+            if z is not None and (best is None or z @ z < best @ best):
+                best = z
+        if best is not None:
+            chosen_row = record(best)
+            rows.append(chosen_row)
+        elif rows:
+            chosen_row = min(rows, key=lambda r: r["distance"])
+        else:
+            reachable = False
+    if not reachable:
+        x = xmax if target > vmax else xmin
+        chosen_row = record(x[fi])
+        rows = [chosen_row]
+    family = pd.DataFrame(rows).drop_duplicates(subset=fit.factors).sort_values("distance")
+    family = family.reset_index(drop=True)
+    chosen = pd.Series(chosen_row)
+    chosen_actual = None
+    if fit.levels and all(f in fit.levels for f in fit.factors):
+        for f in fit.factors:
+            family[f"{f}_actual"] = fit.levels[f].to_actual(family[f].to_numpy())
+        chosen_actual = pd.Series({f: float(fit.levels[f].to_actual(chosen[f])) for f in fit.factors})
+        chosen_actual["predicted"] = chosen["predicted"]
+    rule = ("contour point nearest the design centre (smallest Euclidean distance in coded units "
+            "over the free factors)" if reachable else
+            "target outside the predicted range: the region's extreme nearest the target")
+    return TargetSolution(float(target), bool(reachable), chosen, chosen_actual, family, rule,
+                          b, (float(vmin), float(vmax)))
