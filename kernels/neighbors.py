@@ -42,6 +42,29 @@ def sort_column(keys: wp.array2d[int], count: int, col: int):
         keys[t + 1, col] = key
 
 
+@wp.func
+def carry_history(
+    old_keys: wp.array2d[int],
+    old_count: int,
+    old_spring: wp.array2d[wp.vec3],
+    old_roll: wp.array2d[wp.vec3],
+    new_keys: wp.array2d[int],
+    new_count: int,
+    new_spring: wp.array2d[wp.vec3],
+    new_roll: wp.array2d[wp.vec3],
+    col: int,
+):
+    """Give each new (sorted) entry of column ``col`` the history of the old entry with the same key, else zero."""
+    for s in range(new_count):
+        slot = find_sorted(old_keys, old_count, col, new_keys[s, col])
+        if slot >= 0:
+            new_spring[s, col] = old_spring[slot, col]
+            new_roll[s, col] = old_roll[slot, col]
+        else:
+            new_spring[s, col] = wp.vec3(0.0)
+            new_roll[s, col] = wp.vec3(0.0)
+
+
 @wp.kernel
 def build_contacts(
     # Model:
@@ -96,15 +119,7 @@ def build_contacts(
             else:
                 wp.atomic_or(overflow_out, 0, 1)
     sort_column(new_index, count, i)
-    n_old = old_count[i]
-    for s in range(count):
-        slot = find_sorted(old_index, n_old, i, new_index[s, i])
-        if slot >= 0:
-            new_spring[s, i] = old_spring[slot, i]
-            new_roll[s, i] = old_roll[slot, i]
-        else:
-            new_spring[s, i] = wp.vec3(0.0)
-            new_roll[s, i] = wp.vec3(0.0)
+    carry_history(old_index, old_count[i], old_spring, old_roll, new_index, count, new_spring, new_roll, i)
     new_count[i] = count
 
     mesh_capacity = new_mesh_face.shape[0]
@@ -127,14 +142,7 @@ def build_contacts(
                 else:
                     wp.atomic_or(overflow_out, 0, 2)
         sort_column(new_mesh_face, mcount, i)
-        n_old_mesh = old_mesh_count[i]
-        for s in range(mcount):
-            slot = find_sorted(old_mesh_face, n_old_mesh, i, new_mesh_face[s, i])
-            if slot >= 0:
-                new_mesh_spring[s, i] = old_mesh_spring[slot, i]
-                new_mesh_roll[s, i] = old_mesh_roll[slot, i]
-            else:
-                new_mesh_spring[s, i] = wp.vec3(0.0)
-                new_mesh_roll[s, i] = wp.vec3(0.0)
+        carry_history(old_mesh_face, old_mesh_count[i], old_mesh_spring, old_mesh_roll, new_mesh_face, mcount,
+                      new_mesh_spring, new_mesh_roll, i)
     new_mesh_count[i] = mcount
     build_x_out[i] = x_i

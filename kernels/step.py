@@ -62,6 +62,32 @@ def mesh_contact_shadowed(
     return False
 
 
+@wp.func
+def wall_contact(
+    overlap: float,
+    n: wp.vec3,
+    v_i: wp.vec3,
+    w_i: wp.vec3,
+    r_i: float,
+    m_i: float,
+    p: PairParams,
+    spring: wp.vec3,
+    roll: wp.vec3,
+    dt: float,
+):
+    """A sphere against a static wall (infinite radius and mass) along unit normal n (sphere -> wall).
+
+    Returns:
+        (force on the sphere [N], torque on the sphere [N m], updated spring [m], updated rolling spring [N m]).
+    """
+    arm = r_i - 0.5 * overlap
+    v_rel = v_i + wp.cross(w_i, arm * n)
+    f_a, f_n, f_t, xi, k_n = hertz_mindlin(overlap, n, v_rel, spring, r_i, m_i, p, dt)
+    m_roll, roll_new = rolling_resistance(p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i,
+                                          p.rolling_damping, roll, dt)
+    return f_a, wp.cross(arm * n, f_t) + m_roll, xi, roll_new
+
+
 @wp.kernel
 def step_spheres(
     # Model:
@@ -180,17 +206,13 @@ def step_spheres(
             plane_spring[p_id, i] = wp.vec3(0.0)
             plane_roll[p_id, i] = wp.vec3(0.0)
             continue
-        n = -n_p
-        arm = r_i - 0.5 * overlap
-        v_rel = v_i + wp.cross(w_i, arm * n)
         p = pair_params[pw, mat_i, plane_material[p_id]]
-        f_a, f_n, f_t, xi, k_n = hertz_mindlin(overlap, n, v_rel, plane_spring[p_id, i], r_i, m_i, p, dt)
+        f_a, t_a, xi, roll = wall_contact(overlap, -n_p, v_i, w_i, r_i, m_i, p, plane_spring[p_id, i],
+                                          plane_roll[p_id, i], dt)
         plane_spring[p_id, i] = xi
-        m_roll, roll = rolling_resistance(p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i,
-                                          p.rolling_damping, plane_roll[p_id, i], dt)
         plane_roll[p_id, i] = roll
         f += f_a
-        t += wp.cross(arm * n, f_t) + m_roll
+        t += t_a
         wp.atomic_add(wall_f_out, p_id, i % WALL_LANES, -f_a)
 
     # static triangle meshes
@@ -210,17 +232,13 @@ def step_spheres(
             mesh_spring[k, i] = wp.vec3(0.0)
             mesh_roll[k, i] = wp.vec3(0.0)
             continue
-        n = -dq / gap
-        arm = r_i - 0.5 * overlap
-        v_rel = v_i + wp.cross(w_i, arm * n)
         p = pair_params[pw, mat_i, wall_material[wall]]
-        f_a, f_n, f_t, xi, k_n = hertz_mindlin(overlap, n, v_rel, mesh_spring[k, i], r_i, m_i, p, dt)
+        f_a, t_a, xi, roll = wall_contact(overlap, -dq / gap, v_i, w_i, r_i, m_i, p, mesh_spring[k, i],
+                                          mesh_roll[k, i], dt)
         mesh_spring[k, i] = xi
-        m_roll, roll = rolling_resistance(p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i,
-                                          p.rolling_damping, mesh_roll[k, i], dt)
         mesh_roll[k, i] = roll
         f += f_a
-        t += wp.cross(arm * n, f_t) + m_roll
+        t += t_a
         wp.atomic_add(wall_f_out, plane_total + wall, i % WALL_LANES, -f_a)
 
     # leapfrog (velocity Verlet): v(t+dt/2) = v(t-dt/2) + dt a(t); the first step kicks by dt/2
