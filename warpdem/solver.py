@@ -86,6 +86,8 @@ class Solver:
                                     dtype=wp.vec3, device=model.device)
         self._blowup = wp.array([2**31 - 1, 2**31 - 1], dtype=int, device=model.device)
         self._spare: State | None = None
+        # host copy of the rebuild flag, read between captured steps on CUDA (pinned: an async 4-byte copy)
+        self._flag_host = wp.empty(1, dtype=int, device="cpu", pinned=wp.get_device(model.device).is_cuda)
         self._graph = None
 
     # contacts -------------------------------------------------------------------------------
@@ -211,7 +213,7 @@ class Solver:
         steps = int(steps)
         if steps <= 0:
             return state
-        self._t0, self._s0 = state.time, state.step
+        t0, step0 = state.time, state.step
         if self._spare is None or self._spare.sphere_x.shape != state.sphere_x.shape:
             self._spare = self.model.state()
         a, b = state, self._spare
@@ -238,19 +240,18 @@ class Solver:
                     dst.time, dst.step = t_before, step_before
                     graphs.append(cap.graph)
                 self._graph = (key, graphs)
-            flag = wp.empty(1, dtype=int, device="cpu", pinned=True)
             parity = 0
             while done < steps:
-                wp.copy(flag, contacts.rebuild)
+                wp.copy(self._flag_host, contacts.rebuild)
                 wp.synchronize_stream()
-                if flag.numpy()[0]:
+                if self._flag_host.numpy()[0]:
                     self.rebuild(a if parity == 0 else b, contacts)
                 wp.capture_launch(self._graph[1][parity])
                 parity ^= 1
                 done += 1
             if parity:
                 a, b = b, a
-            a.time, a.step, a.half_step = self._t0 + steps * self.dt, self._s0 + steps, True
+            a.time, a.step, a.half_step = t0 + steps * self.dt, step0 + steps, True
         elif use_graph and steps - done >= 2:
             key = (id(a), id(b), id(contacts))
             if self._graph is None or self._graph[0] != key:
@@ -261,7 +262,7 @@ class Solver:
                     self.step(b, a, control, contacts)
                 self._graph = (key, cap.graph)
                 a.time, a.step = t_before, step_before
-                # a CPU capture also executes what it records; a CUDA capture does not
+                # Warp's CPU capture also executes what it records: count those two steps
                 if int(self._clock.numpy()[0]) != before:
                     a.time += 2 * self.dt
                     a.step += 2

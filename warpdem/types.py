@@ -11,7 +11,6 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 
-import numpy as np
 import warp as wp
 
 
@@ -151,24 +150,6 @@ class State:
     half_step: bool = False
     """True once velocities are leapfrog half-step values."""
 
-    def copy_from(self, other: "State") -> None:
-        """Copy every array and counter of ``other`` into this state."""
-        for name in ("sphere_x", "sphere_v", "sphere_w", "sphere_f", "sphere_t", "wall_f"):
-            wp.copy(getattr(self, name), getattr(other, name))
-        self.time, self.step, self.half_step = other.time, other.step, other.half_step
-
-    def clone(self) -> "State":
-        """A deep copy on the same device."""
-        return State(
-            **{
-                name: wp.clone(getattr(self, name))
-                for name in ("sphere_x", "sphere_v", "sphere_w", "sphere_f", "sphere_t", "wall_f")
-            },
-            time=self.time,
-            step=self.step,
-            half_step=self.half_step,
-        )
-
 
 @dataclass
 class Control:
@@ -220,21 +201,3 @@ class Contacts:
     """Second buffers of the history arrays, written by a rebuild and copied back."""
     grid: object = None
     """The grouped ``wp.HashGrid``."""
-    rebuild_count: int = 0
-    """Rebuilds so far (only counted when the host reads it; see Solver)."""
-
-    def bytes_per_sphere(self) -> float:
-        """Device bytes of the contact arrays per sphere (history, scratch and the hash grid)."""
-        total = 0
-        for name in ("neighbor_count", "neighbor_index", "neighbor_spring", "neighbor_roll", "plane_spring",
-                     "plane_roll", "mesh_count", "mesh_face", "mesh_spring", "mesh_roll", "build_x"):
-            a = getattr(self, name)
-            total += a.capacity
-        total += sum(a.capacity for a in self.scratch.values())
-        n = self.neighbor_count.shape[0]
-        return total / max(n, 1)
-
-
-def as_numpy(a) -> np.ndarray:
-    """Host copy of a Warp array (or pass-through for NumPy input)."""
-    return a.numpy() if isinstance(a, wp.array) else np.asarray(a)

@@ -54,7 +54,7 @@ class Record:
 # helpers
 
 
-def _two_body_scene(mat: Material, radius: float, device: str, wall: bool, gravity=(0.0, 0.0, 0.0)):
+def _two_body_scene(mat: Material, wall: bool, gravity=(0.0, 0.0, 0.0)):
     b = ModelBuilder(gravity=gravity)
     b.add_material(mat)
     if wall:
@@ -110,7 +110,7 @@ def case_chung_ooi_1(device: str = "cpu") -> list[Record]:
     for label, E, nu, rho in (("glass", 48e9, 0.20, 2800.0), ("limestone", 20e9, 0.25, 2500.0)):
         mat = Material(label, density=rho, youngs_modulus=E, poisson_ratio=nu)
         R, v = 0.01, 10.0
-        b = _two_body_scene(mat, R, device, wall=False)
+        b = _two_body_scene(mat, wall=False)
         b.set_interaction(label, label, restitution=1.0, static_friction=0.35)
         b.add_sphere((-R - 1e-5, 0, 0), R, label, velocity=(v, 0, 0))
         b.add_sphere((R + 1e-5, 0, 0), R, label, velocity=(-v, 0, 0))
@@ -133,7 +133,7 @@ def case_chung_ooi_2(device: str = "cpu") -> list[Record]:
     for label, E, nu, rho in (("Al alloy", 70e9, 0.30, 2699.0), ("Mg alloy", 40e9, 0.35, 1800.0)):
         mat = Material(label, density=rho, youngs_modulus=E, poisson_ratio=nu)
         R, v = 0.1, 0.2
-        b = _two_body_scene(mat, R, device, wall=True)
+        b = _two_body_scene(mat, wall=True)
         b.set_interaction(label, "rigid", restitution=1.0, static_friction=0.0)
         b.add_plane((0, 0, 0), (0, 0, 1), "rigid")
         b.add_sphere((0, 0, R + 1e-6), R, label, velocity=(0, 0, -v))
@@ -153,7 +153,7 @@ def case_chung_ooi_3(device: str = "cpu") -> list[Record]:
     mat = Material("alumina", density=4000.0, youngs_modulus=380e9, poisson_ratio=0.23)
     R, v = 0.0025, 3.9
     es = (0.1, 0.3, 0.5, 0.7, 0.9)
-    b = _two_body_scene(mat, R, device, wall=True)
+    b = _two_body_scene(mat, wall=True)
     b.add_plane((0, 0, 0), (0, 0, 1), "rigid")
     b.add_sphere((0, 0, R + 1e-6), R, "alumina", velocity=(0, 0, -v))
     # one world per restitution: the sweep is one batched launch
@@ -181,7 +181,7 @@ def case_chung_ooi_4(device: str = "cpu") -> list[Record]:
     mat = Material("alumina", density=4000.0, youngs_modulus=380e9, poisson_ratio=0.23)
     R, v, mu, e = 0.0025, 3.9, 0.092, 0.98
     angles = (40.0, 50.0, 60.0, 70.0, 80.0)
-    b = _two_body_scene(mat, R, device, wall=True)
+    b = _two_body_scene(mat, wall=True)
     b.set_interaction("alumina", "rigid", restitution=e, static_friction=mu)
     b.add_plane((0, 0, 0), (0, 0, 1), "rigid")
     b.add_sphere((0, 0, R + 1e-6), R, "alumina")
