@@ -45,15 +45,6 @@ def closest_point_triangle(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3):
 
 
 @wp.func
-def triangle_closest(mesh: wp.uint64, face: int, p: wp.vec3):
-    """Closest point to p on triangle ``face`` of ``mesh`` and its feature (see closest_point_triangle)."""
-    a = wp.mesh_get_point(mesh, face * 3 + 0)
-    b = wp.mesh_get_point(mesh, face * 3 + 1)
-    c = wp.mesh_get_point(mesh, face * 3 + 2)
-    return closest_point_triangle(p, a, b, c)
-
-
-@wp.func
 def sphere_mass(radius: float, density: float):
     """Mass of a solid sphere [kg]."""
     return density * (4.0 / 3.0) * wp.pi * radius * radius * radius

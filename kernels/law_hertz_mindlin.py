@@ -19,6 +19,46 @@ SQRT_5_6 = wp.constant(0.9128709291752769)
 
 
 @wp.func
+def mindlin_tangential(
+    spring: wp.vec3,
+    n: wp.vec3,
+    v_t: wp.vec3,
+    s_t: float,
+    c_t: float,
+    f_limit: float,
+    dt: float,
+):
+    """Mindlin no-slip tangential spring-dashpot with a Coulomb cap, shared by every normal law.
+
+    Args:
+        spring: tangential spring displacement xi from the last step [m].
+        n: unit normal; v_t: tangential relative velocity [m/s].
+        s_t: tangential stiffness [N/m]; c_t: tangential damping coefficient [N s/m].
+        f_limit: Coulomb limit mu_s * (normal load) [N], >= 0.
+
+    Returns:
+        (tangential force on a [N], updated spring [m]).
+    """
+    # keep the stored spring in the current tangent plane, preserving its length
+    xi_len = wp.length(spring)
+    xi = spring - wp.dot(spring, n) * n
+    xi_proj = wp.length(xi)
+    if xi_proj > 0.0:
+        xi = xi * (xi_len / xi_proj)
+    xi = xi + v_t * dt
+    f_t = -s_t * xi - c_t * v_t
+    f_t_len = wp.length(f_t)
+    if f_t_len > f_limit:
+        if f_t_len > 0.0:
+            f_t = f_t * (f_limit / f_t_len)
+        else:
+            f_t = wp.vec3(0.0)
+        if s_t > 0.0:
+            xi = -(f_t + c_t * v_t) / s_t
+    return f_t, xi
+
+
+@wp.func
 def hertz_mindlin(
     overlap: float,
     n: wp.vec3,
@@ -54,23 +94,5 @@ def hertz_mindlin(
     v_n = wp.dot(v_rel, n)
     f_el = (4.0 / 3.0) * p.e_star * sqrt_rd * overlap
     f_n = f_el + c_n * v_n
-
-    # keep the stored spring in the current tangent plane, preserving its length
-    xi_len = wp.length(spring)
-    xi = spring - wp.dot(spring, n) * n
-    xi_proj = wp.length(xi)
-    if xi_proj > 0.0:
-        xi = xi * (xi_len / xi_proj)
-    v_t = v_rel - v_n * n
-    xi = xi + v_t * dt
-
-    f_t = -s_t * xi - c_t * v_t
-    f_t_len = wp.length(f_t)
-    f_lim = p.mu_s * wp.max(f_n, 0.0)
-    if f_t_len > f_lim:
-        if f_t_len > 0.0:
-            f_t = f_t * (f_lim / f_t_len)
-        else:
-            f_t = wp.vec3(0.0)
-        xi = -(f_t + c_t * v_t) / s_t
+    f_t, xi = mindlin_tangential(spring, n, v_rel - v_n * n, s_t, c_t, p.mu_s * wp.max(f_n, 0.0), dt)
     return -f_n * n + f_t, f_n, f_t, xi, f_el / overlap

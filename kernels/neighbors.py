@@ -8,7 +8,7 @@ key up, by binary search, in the sphere's previous sorted list to inherit the sp
 
 import warp as wp
 
-from .geometry import triangle_closest
+from .geometry import closest_point_triangle
 
 wp.set_module_options({"enable_backward": False})
 
@@ -48,10 +48,12 @@ def carry_history(
     old_count: int,
     old_spring: wp.array2d[wp.vec3],
     old_roll: wp.array2d[wp.vec3],
+    old_aux: wp.array2d[float],
     new_keys: wp.array2d[int],
     new_count: int,
     new_spring: wp.array2d[wp.vec3],
     new_roll: wp.array2d[wp.vec3],
+    new_aux: wp.array2d[float],
     col: int,
 ):
     """Give each new (sorted) entry of column ``col`` the history of the old entry with the same key, else zero."""
@@ -60,9 +62,11 @@ def carry_history(
         if slot >= 0:
             new_spring[s, col] = old_spring[slot, col]
             new_roll[s, col] = old_roll[slot, col]
+            new_aux[s, col] = old_aux[slot, col]
         else:
             new_spring[s, col] = wp.vec3(0.0)
             new_roll[s, col] = wp.vec3(0.0)
+            new_aux[s, col] = 0.0
 
 
 @wp.kernel
@@ -71,78 +75,109 @@ def build_contacts(
     grid: wp.uint64,
     sphere_radius: wp.array[float],
     sphere_world: wp.array[int],
+    sphere_clump: wp.array[int],
     radius_max: float,
-    mesh: wp.uint64,
-    has_mesh: int,
-    triangle_wall: wp.array[int],
+    wall_mesh: wp.array[wp.uint64],
+    wall_face_start: wp.array[int],
     wall_world: wp.array[int],
     # State in:
     x: wp.array[wp.vec3],
+    active: wp.array[int],
+    wall_pose: wp.array[wp.transform],
     skin: float,
+    reach: float,
     # Contacts in (previous lists):
     old_count: wp.array[int],
     old_index: wp.array2d[int],
     old_spring: wp.array2d[wp.vec3],
     old_roll: wp.array2d[wp.vec3],
+    old_aux: wp.array2d[float],
     old_mesh_count: wp.array[int],
     old_mesh_face: wp.array2d[int],
     old_mesh_spring: wp.array2d[wp.vec3],
     old_mesh_roll: wp.array2d[wp.vec3],
+    old_mesh_aux: wp.array2d[float],
     # Out:
     new_count: wp.array[int],
     new_index: wp.array2d[int],
     new_spring: wp.array2d[wp.vec3],
     new_roll: wp.array2d[wp.vec3],
+    new_aux: wp.array2d[float],
     new_mesh_count: wp.array[int],
     new_mesh_face: wp.array2d[int],
     new_mesh_spring: wp.array2d[wp.vec3],
     new_mesh_roll: wp.array2d[wp.vec3],
+    new_mesh_aux: wp.array2d[float],
     build_x_out: wp.array[wp.vec3],
     overflow_out: wp.array[int],
 ):
+    """Candidates within r_i + r_j + skin + reach (``reach``: the longest cohesive break distance)."""
     i = wp.tid()
     x_i = x[i]
+    build_x_out[i] = x_i
+    if active[i] == 0:
+        new_count[i] = 0
+        new_mesh_count[i] = 0
+        return
     r_i = sphere_radius[i]
     world = sphere_world[i]
+    clump = sphere_clump[i]
     capacity = new_index.shape[0]
 
     count = int(0)
-    query = wp.hash_grid_query(grid, x_i, r_i + radius_max + skin, world)
+    query = wp.hash_grid_query(grid, x_i, r_i + radius_max + skin + reach, world)
     j = int(0)
     while wp.hash_grid_query_next(query, j):
-        if j == i:
+        if j == i or active[j] == 0:
             continue
-        if wp.length(x[j] - x_i) < r_i + sphere_radius[j] + skin:
+        if clump >= 0 and sphere_clump[j] == clump:
+            continue
+        if wp.length(x[j] - x_i) < r_i + sphere_radius[j] + skin + reach:
             if count < capacity:
                 new_index[count, i] = j
                 count += 1
             else:
                 wp.atomic_or(overflow_out, 0, 1)
     sort_column(new_index, count, i)
-    carry_history(old_index, old_count[i], old_spring, old_roll, new_index, count, new_spring, new_roll, i)
+    carry_history(old_index, old_count[i], old_spring, old_roll, old_aux, new_index, count, new_spring, new_roll,
+                  new_aux, i)
     new_count[i] = count
 
     mesh_capacity = new_mesh_face.shape[0]
     mcount = int(0)
-    if has_mesh != 0:
-        reach = r_i + skin
-        lower = x_i - wp.vec3(reach)
-        upper = x_i + wp.vec3(reach)
-        mq = wp.mesh_query_aabb(mesh, lower, upper)
-        face = int(0)
-        while wp.mesh_query_aabb_next(mq, face):
-            ww = wall_world[triangle_wall[face]]
-            if ww >= 0 and ww != world:
-                continue
-            q, feature = triangle_closest(mesh, face, x_i)
-            if wp.length(x_i - q) < reach:
+    limit = r_i + skin + reach
+    for wall in range(wall_mesh.shape[0]):
+        ww = wall_world[wall]
+        if ww >= 0 and ww != world:
+            continue
+        # the wall's triangles live in its own frame: query there (a sphere's box is the same in any frame)
+        x_local = wp.transform_point(wp.transform_inverse(wall_pose[wall]), x_i)
+        mesh = wall_mesh[wall]
+        mq = wp.mesh_query_aabb(mesh, x_local - wp.vec3(limit), x_local + wp.vec3(limit))
+        local = int(0)
+        while wp.mesh_query_aabb_next(mq, local):
+            a = wp.mesh_get_point(mesh, local * 3 + 0)
+            b = wp.mesh_get_point(mesh, local * 3 + 1)
+            c = wp.mesh_get_point(mesh, local * 3 + 2)
+            q, feature = closest_point_triangle(x_local, a, b, c)
+            if wp.length(x_local - q) < limit:
                 if mcount < mesh_capacity:
-                    new_mesh_face[mcount, i] = face
+                    new_mesh_face[mcount, i] = wall_face_start[wall] + local
                     mcount += 1
                 else:
                     wp.atomic_or(overflow_out, 0, 2)
-        sort_column(new_mesh_face, mcount, i)
-        carry_history(old_mesh_face, old_mesh_count[i], old_mesh_spring, old_mesh_roll, new_mesh_face, mcount,
-                      new_mesh_spring, new_mesh_roll, i)
+    sort_column(new_mesh_face, mcount, i)
+    carry_history(old_mesh_face, old_mesh_count[i], old_mesh_spring, old_mesh_roll, old_mesh_aux, new_mesh_face,
+                  mcount, new_mesh_spring, new_mesh_roll, new_mesh_aux, i)
     new_mesh_count[i] = mcount
-    build_x_out[i] = x_i
+
+
+@wp.kernel
+def save_wall_poses(
+    pose: wp.array[wp.transform],
+    # Out:
+    build_pose_out: wp.array[wp.transform],
+):
+    """Remember where the walls were when the lists were built (the rebuild criterion compares to it)."""
+    k = wp.tid()
+    build_pose_out[k] = pose[k]

@@ -5,12 +5,17 @@ force atomics are needed and the sum order is fixed: results are deterministic o
 world k of a batch computes exactly what a solo run computes. Each sphere-sphere pair is evaluated
 by both partners in canonical order (lower index as body a), which keeps the two copies of its
 history identical and makes the forces exactly equal and opposite.
+
+Spheres that belong to a clump only gather forces here; :func:`integrate_clumps` then reduces them
+to their clump (one thread per clump, fixed order), integrates the rigid body and places the
+component spheres. Mesh walls move rigidly: each keeps its triangles in its own frame and a pose
+per step (see warpdem/motion.py), so no BVH refit is needed.
 """
 
 import warp as wp
 
-from .geometry import FEATURE_FACE, sphere_mass, triangle_closest
-from .law_hertz_mindlin import hertz_mindlin
+from .geometry import FEATURE_FACE, closest_point_triangle
+from .law_contact import contact_force
 from .law_rolling import ROLLING_EPSD, rolling_resistance
 from .params import PairParams
 
@@ -22,8 +27,31 @@ WALL_LANES = wp.constant(256)
 
 
 @wp.func
+def wall_triangle_closest(
+    wall_mesh: wp.array[wp.uint64],
+    wall_face_start: wp.array[int],
+    wall_pose: wp.array[wp.transform],
+    wall: int,
+    face: int,
+    x: wp.vec3,
+):
+    """Closest point (world frame) to x on global triangle ``face`` of moving wall ``wall``, and its feature."""
+    pose = wall_pose[wall]
+    x_local = wp.transform_point(wp.transform_inverse(pose), x)
+    mesh = wall_mesh[wall]
+    local = face - wall_face_start[wall]
+    a = wp.mesh_get_point(mesh, local * 3 + 0)
+    b = wp.mesh_get_point(mesh, local * 3 + 1)
+    c = wp.mesh_get_point(mesh, local * 3 + 2)
+    q, feature = closest_point_triangle(x_local, a, b, c)
+    return wp.transform_point(pose, q), feature
+
+
+@wp.func
 def mesh_contact_shadowed(
-    mesh: wp.uint64,
+    wall_mesh: wp.array[wp.uint64],
+    wall_face_start: wp.array[int],
+    wall_pose: wp.array[wp.transform],
     x: wp.vec3,
     radius: float,
     k: int,
@@ -48,7 +76,7 @@ def mesh_contact_shadowed(
         face_m = mesh_face[m, i]
         if triangle_wall[face_m] != wall_k:
             continue
-        q_m, feature_m = triangle_closest(mesh, face_m, x)
+        q_m, feature_m = wall_triangle_closest(wall_mesh, wall_face_start, wall_pose, wall_k, face_m, x)
         d_m = wp.length(x - q_m)
         if d_m >= radius or d_m <= 0.0:
             continue
@@ -68,24 +96,40 @@ def wall_contact(
     n: wp.vec3,
     v_i: wp.vec3,
     w_i: wp.vec3,
+    v_wall: wp.vec3,
     r_i: float,
     m_i: float,
     p: PairParams,
     spring: wp.vec3,
     roll: wp.vec3,
+    aux: float,
     dt: float,
 ):
-    """A sphere against a static wall (infinite radius and mass) along unit normal n (sphere -> wall).
+    """A sphere against a wall (infinite radius and mass) along unit normal n (sphere -> wall).
+
+    ``v_wall`` is the wall's velocity at the contact point [m/s].
 
     Returns:
-        (force on the sphere [N], torque on the sphere [N m], updated spring [m], updated rolling spring [N m]).
+        (active, force on the sphere [N], torque on the sphere [N m], updated spring [m], updated rolling
+        spring [N m], updated aux).
     """
     arm = r_i - 0.5 * overlap
-    v_rel = v_i + wp.cross(w_i, arm * n)
-    f_a, f_n, f_t, xi, k_n = hertz_mindlin(overlap, n, v_rel, spring, r_i, m_i, p, dt)
+    v_rel = v_i + wp.cross(w_i, arm * n) - v_wall
+    active, f_a, f_n, f_t, xi, aux_new, k_n = contact_force(overlap, n, v_rel, spring, aux, r_i, m_i, p, dt)
+    if active == 0:
+        return int(0), wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), 0.0
     m_roll, roll_new = rolling_resistance(p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i,
                                           p.rolling_damping, roll, dt)
-    return f_a, wp.cross(arm * n, f_t) + m_roll, xi, roll_new
+    return int(1), f_a, wp.cross(arm * n, f_t) + m_roll, xi, roll_new, aux_new
+
+
+@wp.func
+def flag_blowup(blowup_out: wp.array[int], step: int, i: int):
+    """Record the first step with a blow-up and the lowest sphere index flagged in it."""
+    first = blowup_out[1]
+    if first == BLOWUP_NONE or first == step:
+        wp.atomic_min(blowup_out, 1, step)
+        wp.atomic_min(blowup_out, 0, i)
 
 
 @wp.kernel
@@ -94,6 +138,8 @@ def step_spheres(
     sphere_radius: wp.array[float],
     sphere_material: wp.array[int],
     sphere_world: wp.array[int],
+    sphere_clump: wp.array[int],
+    sphere_body_volume: wp.array[float],
     material_density: wp.array2d[float],
     pair_params: wp.array3d[PairParams],
     world_gravity: wp.array[wp.vec3],
@@ -101,26 +147,33 @@ def step_spheres(
     plane_normal: wp.array[wp.vec3],
     plane_material: wp.array[int],
     plane_world: wp.array[int],
-    mesh: wp.uint64,
+    wall_mesh: wp.array[wp.uint64],
+    wall_face_start: wp.array[int],
     triangle_wall: wp.array[int],
     wall_material: wp.array[int],
-    wall_world: wp.array[int],
     # Contacts in/out (each thread owns its column):
     neighbor_count: wp.array[int],
     neighbor_index: wp.array2d[int],
     neighbor_spring: wp.array2d[wp.vec3],
     neighbor_roll: wp.array2d[wp.vec3],
+    neighbor_aux: wp.array2d[float],
     plane_spring: wp.array2d[wp.vec3],
     plane_roll: wp.array2d[wp.vec3],
+    plane_aux: wp.array2d[float],
     mesh_count: wp.array[int],
     mesh_face: wp.array2d[int],
     mesh_spring: wp.array2d[wp.vec3],
     mesh_roll: wp.array2d[wp.vec3],
+    mesh_aux: wp.array2d[float],
     build_x: wp.array[wp.vec3],
     # State in:
     x_in: wp.array[wp.vec3],
     v_in: wp.array[wp.vec3],
     w_in: wp.array[wp.vec3],
+    active_in: wp.array[int],
+    wall_pose: wp.array[wp.transform],
+    wall_v: wp.array[wp.vec3],
+    wall_w: wp.array[wp.vec3],
     # Step:
     dt: float,
     kick: float,
@@ -134,20 +187,31 @@ def step_spheres(
     f_out: wp.array[wp.vec3],
     t_out: wp.array[wp.vec3],
     wall_f_out: wp.array2d[wp.vec3],
+    wall_t_out: wp.array2d[wp.vec3],
     rebuild_out: wp.array[int],
     blowup_out: wp.array[int],
 ):
     i = wp.tid()
-    world = sphere_world[i]
-    mat_i = sphere_material[i]
-    r_i = sphere_radius[i]
-    m_i = sphere_mass(r_i, material_density[world % material_density.shape[0], mat_i])
-    inertia_i = 0.4 * m_i * r_i * r_i
     x_i = x_in[i]
     v_i = v_in[i]
     w_i = w_in[i]
-    pw = world % pair_params.shape[0]
+    clump = sphere_clump[i]
+    if active_in[i] == 0:
+        # a factory particle not released yet: parked, untouched, invisible to the others
+        if clump < 0:
+            x_out[i] = x_i
+            v_out[i] = v_i
+            w_out[i] = w_i
+        f_out[i] = wp.vec3(0.0)
+        t_out[i] = wp.vec3(0.0)
+        return
+    world = sphere_world[i]
+    mat_i = sphere_material[i]
+    r_i = sphere_radius[i]
     mw = world % material_density.shape[0]
+    pw = world % pair_params.shape[0]
+    # the mass that resists a contact is the body's: the sphere's, or its whole clump's
+    m_i = material_density[mw, mat_i] * sphere_body_volume[i]
 
     f = wp.vec3(0.0)
     t = wp.vec3(0.0)
@@ -162,15 +226,16 @@ def step_spheres(
         d = x_in[b] - x_in[a]
         dist = wp.length(d)
         overlap = r_a + r_b - dist
-        if overlap <= 0.0 or dist <= 0.0:
+        if dist <= 0.0 or active_in[j] == 0:
             neighbor_spring[k, i] = wp.vec3(0.0)
             neighbor_roll[k, i] = wp.vec3(0.0)
+            neighbor_aux[k, i] = 0.0
             continue
         n = d / dist
         mat_a = sphere_material[a]
         mat_b = sphere_material[b]
-        m_a = sphere_mass(r_a, material_density[mw, mat_a])
-        m_b = sphere_mass(r_b, material_density[mw, mat_b])
+        m_a = material_density[mw, mat_a] * sphere_body_volume[a]
+        m_b = material_density[mw, mat_b] * sphere_body_volume[b]
         r_star = r_a * r_b / (r_a + r_b)
         m_star = m_a * m_b / (m_a + m_b)
         arm_a = r_a - 0.5 * overlap
@@ -179,8 +244,15 @@ def step_spheres(
         w_b = w_in[b]
         v_rel = (v_in[a] + wp.cross(w_a, arm_a * n)) - (v_in[b] - wp.cross(w_b, arm_b * n))
         p = pair_params[pw, mat_a, mat_b]
-        f_a, f_n, f_t, xi, k_n = hertz_mindlin(overlap, n, v_rel, neighbor_spring[k, i], r_star, m_star, p, dt)
+        active, f_a, f_n, f_t, xi, aux, k_n = contact_force(overlap, n, v_rel, neighbor_spring[k, i],
+                                                            neighbor_aux[k, i], r_star, m_star, p, dt)
+        if active == 0:
+            neighbor_spring[k, i] = wp.vec3(0.0)
+            neighbor_roll[k, i] = wp.vec3(0.0)
+            neighbor_aux[k, i] = 0.0
+            continue
         neighbor_spring[k, i] = xi
+        neighbor_aux[k, i] = aux
         i_roll = 0.0
         if p.rolling_model == ROLLING_EPSD:
             i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
@@ -194,54 +266,65 @@ def step_spheres(
             f -= f_a
             t += wp.cross(arm_b * n, f_t) - m_roll
 
-    # infinite planes
+    # infinite planes (static)
     for p_id in range(plane_point.shape[0]):
         pl_world = plane_world[p_id]
         if pl_world >= 0 and pl_world != world:
             continue
         n_p = plane_normal[p_id]
         gap = wp.dot(x_i - plane_point[p_id], n_p)
-        overlap = r_i - gap
-        if overlap <= 0.0:
-            plane_spring[p_id, i] = wp.vec3(0.0)
-            plane_roll[p_id, i] = wp.vec3(0.0)
-            continue
         p = pair_params[pw, mat_i, plane_material[p_id]]
-        f_a, t_a, xi, roll = wall_contact(overlap, -n_p, v_i, w_i, r_i, m_i, p, plane_spring[p_id, i],
-                                          plane_roll[p_id, i], dt)
+        active, f_a, t_a, xi, roll, aux = wall_contact(r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, m_i, p,
+                                                       plane_spring[p_id, i], plane_roll[p_id, i],
+                                                       plane_aux[p_id, i], dt)
         plane_spring[p_id, i] = xi
         plane_roll[p_id, i] = roll
-        f += f_a
-        t += t_a
-        wp.atomic_add(wall_f_out, p_id, i % WALL_LANES, -f_a)
+        plane_aux[p_id, i] = aux
+        if active != 0:
+            f += f_a
+            t += t_a
+            q = x_i - gap * n_p
+            wp.atomic_add(wall_f_out, p_id, i % WALL_LANES, -f_a)
+            wp.atomic_add(wall_t_out, p_id, i % WALL_LANES, wp.cross(q - plane_point[p_id], -f_a))
 
-    # static triangle meshes
+    # triangle-mesh walls (rigid, possibly moving)
     plane_total = plane_point.shape[0]
     for k in range(mesh_count[i]):
         face = mesh_face[k, i]
         wall = triangle_wall[face]
-        q, feature = triangle_closest(mesh, face, x_i)
+        q, feature = wall_triangle_closest(wall_mesh, wall_face_start, wall_pose, wall, face, x_i)
         dq = x_i - q
         gap = wp.length(dq)
-        overlap = r_i - gap
-        skip = overlap <= 0.0 or gap <= 0.0
-        if not skip and feature != FEATURE_FACE:
-            skip = mesh_contact_shadowed(mesh, x_i, r_i, k, q, feature, wall, i, mesh_count, mesh_face,
-                                         triangle_wall)
+        skip = gap <= 0.0
+        if not skip and feature != FEATURE_FACE and gap < r_i:
+            skip = mesh_contact_shadowed(wall_mesh, wall_face_start, wall_pose, x_i, r_i, k, q, feature, wall, i,
+                                         mesh_count, mesh_face, triangle_wall)
         if skip:
             mesh_spring[k, i] = wp.vec3(0.0)
             mesh_roll[k, i] = wp.vec3(0.0)
+            mesh_aux[k, i] = 0.0
             continue
+        origin = wp.transform_get_translation(wall_pose[wall])
+        v_wall = wall_v[wall] + wp.cross(wall_w[wall], q - origin)
         p = pair_params[pw, mat_i, wall_material[wall]]
-        f_a, t_a, xi, roll = wall_contact(overlap, -dq / gap, v_i, w_i, r_i, m_i, p, mesh_spring[k, i],
-                                          mesh_roll[k, i], dt)
+        active, f_a, t_a, xi, roll, aux = wall_contact(r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, m_i, p,
+                                                       mesh_spring[k, i], mesh_roll[k, i], mesh_aux[k, i], dt)
         mesh_spring[k, i] = xi
         mesh_roll[k, i] = roll
-        f += f_a
-        t += t_a
-        wp.atomic_add(wall_f_out, plane_total + wall, i % WALL_LANES, -f_a)
+        mesh_aux[k, i] = aux
+        if active != 0:
+            f += f_a
+            t += t_a
+            wp.atomic_add(wall_f_out, plane_total + wall, i % WALL_LANES, -f_a)
+            wp.atomic_add(wall_t_out, plane_total + wall, i % WALL_LANES, wp.cross(q - origin, -f_a))
+
+    f_out[i] = f
+    t_out[i] = t
+    if clump >= 0:
+        return
 
     # leapfrog (velocity Verlet): v(t+dt/2) = v(t-dt/2) + dt a(t); the first step kicks by dt/2
+    inertia_i = 0.4 * m_i * r_i * r_i
     g = world_gravity[world % world_gravity.shape[0]]
     v_new = v_i + kick * (f / m_i + g)
     w_new = w_i + kick * (t / inertia_i)
@@ -249,43 +332,299 @@ def step_spheres(
     x_out[i] = x_new
     v_out[i] = v_new
     w_out[i] = w_new
-    f_out[i] = f
-    t_out[i] = t
 
     speed = wp.length(v_new)
     if not (speed <= velocity_limit) or not wp.isfinite(x_new) or not wp.isfinite(w_new):
-        step = clock[0]
-        first = blowup_out[1]
-        if first == BLOWUP_NONE or first == step:
-            wp.atomic_min(blowup_out, 1, step)
-            wp.atomic_min(blowup_out, 0, i)
+        flag_blowup(blowup_out, clock[0], i)
     if wp.length(x_new - build_x[i]) > 0.5 * skin:
+        rebuild_out[0] = 1
+
+
+@wp.func
+def body_angular_velocity(q: wp.quat, inertia: wp.vec3, angmom: wp.vec3):
+    """World angular velocity R I^-1 R^T L of a body with principal moments ``inertia`` [kg m^2]."""
+    lb = wp.quat_rotate_inv(q, angmom)
+    return wp.quat_rotate(q, wp.vec3(lb[0] / inertia[0], lb[1] / inertia[1], lb[2] / inertia[2]))
+
+
+@wp.func
+def quat_step(q: wp.quat, w: wp.vec3, h: float):
+    """Rotate q by the rotation vector w h (exact for a constant w), renormalised."""
+    angle = wp.length(w) * h
+    if angle > 0.0:
+        q = wp.mul(wp.quat_from_axis_angle(wp.normalize(w), angle), q)
+    return wp.normalize(q)
+
+
+@wp.kernel
+def integrate_clumps(
+    # Model:
+    clump_sphere_start: wp.array[int],
+    clump_sphere_end: wp.array[int],
+    clump_material: wp.array[int],
+    clump_world: wp.array[int],
+    clump_volume: wp.array[float],
+    clump_inertia: wp.array[wp.vec3],
+    sphere_offset: wp.array[wp.vec3],
+    material_density: wp.array2d[float],
+    world_gravity: wp.array[wp.vec3],
+    build_x: wp.array[wp.vec3],
+    # State in:
+    active_in: wp.array[int],
+    sphere_f: wp.array[wp.vec3],
+    sphere_t: wp.array[wp.vec3],
+    x_in: wp.array[wp.vec3],
+    q_in: wp.array[wp.quat],
+    v_in: wp.array[wp.vec3],
+    angmom_in: wp.array[wp.vec3],
+    # Step:
+    dt: float,
+    kick: float,
+    skin: float,
+    velocity_limit: float,
+    clock: wp.array[int],
+    # Out:
+    x_out: wp.array[wp.vec3],
+    q_out: wp.array[wp.quat],
+    v_out: wp.array[wp.vec3],
+    angmom_out: wp.array[wp.vec3],
+    w_out: wp.array[wp.vec3],
+    f_out: wp.array[wp.vec3],
+    t_out: wp.array[wp.vec3],
+    sphere_x_out: wp.array[wp.vec3],
+    sphere_v_out: wp.array[wp.vec3],
+    sphere_w_out: wp.array[wp.vec3],
+    rebuild_out: wp.array[int],
+    blowup_out: wp.array[int],
+):
+    """Reduce component forces to each clump (r x f, fixed order), integrate, place the components.
+
+    Leapfrog on momentum and on angular momentum L (world frame, so a torque-free body keeps L
+    exactly); the orientation advances by an explicit midpoint rule with L held at its half-step value.
+    """
+    c = wp.tid()
+    first = clump_sphere_start[c]
+    last = clump_sphere_end[c]
+    x_c = x_in[c]
+    q_c = q_in[c]
+    if active_in[first] == 0:
+        x_out[c] = x_c
+        q_out[c] = q_c
+        v_out[c] = v_in[c]
+        angmom_out[c] = angmom_in[c]
+        for s in range(first, last):
+            sphere_x_out[s] = x_c + wp.quat_rotate(q_c, sphere_offset[s])
+        return
+    world = clump_world[c]
+    rho = material_density[world % material_density.shape[0], clump_material[c]]
+    mass = rho * clump_volume[c]
+    inertia = rho * clump_inertia[c]
+
+    f = wp.vec3(0.0)
+    t = wp.vec3(0.0)
+    for s in range(first, last):
+        fs = sphere_f[s]
+        f += fs
+        t += sphere_t[s] + wp.cross(wp.quat_rotate(q_c, sphere_offset[s]), fs)
+    f_out[c] = f
+    t_out[c] = t
+
+    g = world_gravity[world % world_gravity.shape[0]]
+    v_new = v_in[c] + kick * (f / mass + g)
+    angmom = angmom_in[c] + kick * t
+    x_new = x_c + dt * v_new
+    w_start = body_angular_velocity(q_c, inertia, angmom)
+    q_mid = quat_step(q_c, w_start, 0.5 * dt)
+    w_mid = body_angular_velocity(q_mid, inertia, angmom)
+    q_new = quat_step(q_c, w_mid, dt)
+
+    x_out[c] = x_new
+    q_out[c] = q_new
+    v_out[c] = v_new
+    angmom_out[c] = angmom
+    w_out[c] = w_mid
+
+    moved = float(0.0)
+    for s in range(first, last):
+        arm = wp.quat_rotate(q_new, sphere_offset[s])
+        xs = x_new + arm
+        sphere_x_out[s] = xs
+        sphere_v_out[s] = v_new + wp.cross(w_mid, arm)
+        sphere_w_out[s] = w_mid
+        moved = wp.max(moved, wp.length(xs - build_x[s]))
+    if not (wp.length(v_new) <= velocity_limit) or not wp.isfinite(x_new) or not wp.isfinite(w_mid):
+        flag_blowup(blowup_out, clock[0], first)
+    if moved > 0.5 * skin:
+        rebuild_out[0] = 1
+
+
+@wp.kernel
+def init_clumps(
+    # Model:
+    clump_material: wp.array[int],
+    clump_world: wp.array[int],
+    clump_volume: wp.array[float],
+    clump_inertia: wp.array[wp.vec3],
+    material_density: wp.array2d[float],
+    # State in:
+    q: wp.array[wp.quat],
+    w: wp.array[wp.vec3],
+    # Out:
+    angmom_out: wp.array[wp.vec3],
+):
+    """Angular momentum L = R I R^T w of each clump from its angular velocity (a fresh state gives w)."""
+    c = wp.tid()
+    world = clump_world[c]
+    rho = material_density[world % material_density.shape[0], clump_material[c]]
+    inertia = rho * clump_inertia[c]
+    wb = wp.quat_rotate_inv(q[c], w[c])
+    angmom_out[c] = wp.quat_rotate(q[c], wp.vec3(wb[0] * inertia[0], wb[1] * inertia[1], wb[2] * inertia[2]))
+
+
+@wp.kernel
+def move_walls(
+    # Control:
+    segment_start: wp.array[int],
+    segment_t0: wp.array[wp.float64],
+    segment_t1: wp.array[wp.float64],
+    segment_v: wp.array[wp.vec3],
+    segment_w: wp.array[wp.vec3],
+    segment_pivot: wp.array[wp.vec3],
+    segment_pose: wp.array[wp.transform],
+    # Model:
+    wall_radius: wp.array[float],
+    # Contacts:
+    wall_build_pose: wp.array[wp.transform],
+    skin: float,
+    # Time:
+    time: wp.array[wp.float64],
+    slot: int,
+    # Out:
+    pose_out: wp.array[wp.transform],
+    v_out: wp.array[wp.vec3],
+    w_out: wp.array[wp.vec3],
+    rebuild_out: wp.array[int],
+):
+    """Pose and velocity of each wall at ``time[slot]`` from its motion segments; flag a rebuild once
+    any point of the wall may have moved skin/2 since the lists were built."""
+    wall = wp.tid()
+    t = time[slot]
+    s = segment_start[wall]
+    last = segment_start[wall + 1] - 1
+    while s < last and t >= segment_t1[s]:
+        s += 1
+    tau = float(wp.max(t - segment_t0[s], wp.float64(0.0)))
+    v = segment_v[s]
+    w = segment_w[s]
+    pivot = segment_pivot[s] + v * tau
+    pose0 = segment_pose[s]
+    angle = wp.length(w) * tau
+    rot = wp.quat_identity()
+    if angle > 0.0:
+        rot = wp.quat_from_axis_angle(wp.normalize(w), angle)
+    p0 = wp.transform_get_translation(pose0)
+    origin = pivot + wp.quat_rotate(rot, p0 - segment_pivot[s])
+    pose = wp.transform(origin, wp.normalize(wp.mul(rot, wp.transform_get_rotation(pose0))))
+    pose_out[wall] = pose
+    v_out[wall] = v + wp.cross(w, origin - pivot)
+    w_out[wall] = w
+
+    built = wall_build_pose[wall]
+    rel = wp.mul(wp.transform_get_rotation(pose), wp.quat_inverse(wp.transform_get_rotation(built)))
+    turn = 2.0 * wp.acos(wp.min(wp.abs(rel[3]), 1.0))
+    shift = wp.length(origin - wp.transform_get_translation(built))
+    if shift + turn * wall_radius[wall] > 0.5 * skin:
         rebuild_out[0] = 1
 
 
 @wp.kernel
 def begin_step(
+    dt: wp.float64,
     # Out:
     wall_f_lanes_out: wp.array2d[wp.vec3],
+    wall_t_lanes_out: wp.array2d[wp.vec3],
     clock_out: wp.array[int],
+    time_out: wp.array[wp.float64],
 ):
-    """Zero the partial wall-force accumulators and advance the device step counter (read by step_spheres)."""
+    """Zero the partial wall accumulators, advance the device step counter and the device time
+    (time[0]: this step's start, time[1]: its end)."""
     wall, lane = wp.tid()
     wall_f_lanes_out[wall, lane] = wp.vec3(0.0)
+    wall_t_lanes_out[wall, lane] = wp.vec3(0.0)
     if wall == 0 and lane == 0:
         clock_out[0] = clock_out[0] + 1
+        t = time_out[1]
+        time_out[0] = t
+        time_out[1] = t + dt
 
 
 @wp.kernel
 def sum_wall_forces(
     # In:
     wall_f_lanes: wp.array2d[wp.vec3],
+    wall_t_lanes: wp.array2d[wp.vec3],
+    impulse_in: wp.array[wp.vec3d],
+    dt: wp.float64,
     # Out:
     wall_f_out: wp.array[wp.vec3],
+    wall_t_out: wp.array[wp.vec3],
+    impulse_out: wp.array[wp.vec3d],
 ):
-    """Sum the partial accumulators of each wall in a fixed order (deterministic)."""
+    """Sum the partial accumulators of each wall in a fixed order (deterministic); accumulate the impulse."""
     wall = wp.tid()
     f = wp.vec3(0.0)
+    t = wp.vec3(0.0)
     for lane in range(wall_f_lanes.shape[1]):
         f += wall_f_lanes[wall, lane]
+        t += wall_t_lanes[wall, lane]
     wall_f_out[wall] = f
+    wall_t_out[wall] = t
+    impulse_out[wall] = impulse_in[wall] + wp.vec3d(f) * dt
+
+
+@wp.kernel
+def place_bodies(
+    # In (host-prepared batch):
+    sphere_index: wp.array[int],
+    sphere_x: wp.array[wp.vec3],
+    sphere_v: wp.array[wp.vec3],
+    clump_index: wp.array[int],
+    clump_x: wp.array[wp.vec3],
+    clump_q: wp.array[wp.quat],
+    clump_v: wp.array[wp.vec3],
+    # Model:
+    clump_sphere_start: wp.array[int],
+    clump_sphere_end: wp.array[int],
+    sphere_offset: wp.array[wp.vec3],
+    # Out:
+    x_out: wp.array[wp.vec3],
+    v_out: wp.array[wp.vec3],
+    w_out: wp.array[wp.vec3],
+    active_out: wp.array[int],
+    cx_out: wp.array[wp.vec3],
+    cq_out: wp.array[wp.quat],
+    cv_out: wp.array[wp.vec3],
+    cl_out: wp.array[wp.vec3],
+    rebuild_out: wp.array[int],
+):
+    """Release factory particles: entries below len(sphere_index) are free spheres, the rest clumps."""
+    k = wp.tid()
+    n_s = sphere_index.shape[0]
+    if k < n_s:
+        i = sphere_index[k]
+        x_out[i] = sphere_x[k]
+        v_out[i] = sphere_v[k]
+        w_out[i] = wp.vec3(0.0)
+        active_out[i] = 1
+    else:
+        c = clump_index[k - n_s]
+        cx_out[c] = clump_x[k - n_s]
+        cq_out[c] = clump_q[k - n_s]
+        cv_out[c] = clump_v[k - n_s]
+        cl_out[c] = wp.vec3(0.0)
+        for s in range(clump_sphere_start[c], clump_sphere_end[c]):
+            x_out[s] = clump_x[k - n_s] + wp.quat_rotate(clump_q[k - n_s], sphere_offset[s])
+            v_out[s] = clump_v[k - n_s]
+            w_out[s] = wp.vec3(0.0)
+            active_out[s] = 1
+    rebuild_out[0] = 1

@@ -8,6 +8,7 @@ import numpy as np
 import warp as wp
 
 from .materials import Interaction, InteractionTable, Material, pair_table
+from .motion import WallMotion, quat_rotate
 from .types import Model
 
 from warpdem.kernels.params import PairParams
@@ -37,9 +38,14 @@ class ModelBuilder:
         self.gravity = _vec3(gravity, "ModelBuilder", "gravity")
         self.materials: list[Material] = []
         self.interactions = InteractionTable()
-        self._x, self._r, self._mat, self._v, self._w, self._world = [], [], [], [], [], []
+        self._x, self._r, self._mat, self._v, self._w = [], [], [], [], []
+        self._clump, self._offset, self._body_volume, self._active = [], [], [], []
+        # clumps: centre, orientation (x, y, z, w), velocity, angular velocity, first sphere, material, template
+        self._cx, self._cq, self._cv, self._cw, self._cfirst, self._cmat, self._ctemplate = [], [], [], [], [], [], []
+        self._templates = []  # ClumpTemplate objects, index = template id
         self._planes = []  # (point, normal, material, world)
-        self._walls = []  # (vertices, triangles, material, world, name)
+        self._walls = []  # (vertices, triangles, material, world, name, motion)
+        self._factories = []
         self.world_count = 1
         self._variations = {}
 
@@ -108,7 +114,83 @@ class ModelBuilder:
         self._v.extend(v)
         self._w.extend(w)
         self._mat.extend([mat] * n)
+        self._clump.extend([-1] * n)
+        self._offset.extend(np.zeros((n, 3)))
+        self._body_volume.extend(4.0 / 3.0 * np.pi * r**3)
+        self._active.extend([1] * n)
         return np.arange(start, start + n)
+
+    def add_clump(self, template, position, material, orientation=(0, 0, 0, 1), velocity=(0, 0, 0),
+                  angular_velocity=(0, 0, 0)) -> int:
+        """Add one rigid clump; returns its index. See :meth:`add_clumps`."""
+        return int(self.add_clumps(template, [position], material, [orientation], [velocity], [angular_velocity])[0])
+
+    def add_clumps(self, template, positions, material, orientations=None, velocities=None,
+                   angular_velocities=None, active: bool = True) -> np.ndarray:
+        """Add rigid multi-sphere clumps of one template.
+
+        Args:
+            template: a :class:`warpdem.ClumpTemplate` (offsets in its principal frame, centre of mass at 0).
+            positions: centres of mass [m], shape (n, 3).
+            material: material of every sphere of the clumps.
+            orientations: quaternions (x, y, z, w) body -> world, shape (n, 4); identity when None.
+            velocities: [m/s], shape (n, 3); angular_velocities: [rad/s], world frame, shape (n, 3).
+            active: False adds them parked (a factory releases them later).
+
+        Returns:
+            the clump indices, shape (n,).
+        """
+        for name in ("sphere_offset", "sphere_radius", "volume", "inertia_unit"):
+            if not hasattr(template, name):
+                raise TypeError(f"add_clumps: template = {template!r} is not allowed; expected a ClumpTemplate "
+                                f"(missing {name})")
+        x = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        n = len(x)
+        q = np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)) if orientations is None else \
+            np.asarray(orientations, dtype=np.float64).reshape(n, 4)
+        v = np.zeros((n, 3)) if velocities is None else np.asarray(velocities, dtype=np.float64).reshape(n, 3)
+        w = np.zeros((n, 3)) if angular_velocities is None else \
+            np.asarray(angular_velocities, dtype=np.float64).reshape(n, 3)
+        for name, arr in (("positions", x), ("orientations", q), ("velocities", v), ("angular_velocities", w)):
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"add_clumps: {name} contain a non-finite value")
+        norms = np.linalg.norm(q, axis=1)
+        if np.any(norms < 1e-6):
+            raise ValueError("add_clumps: orientations contain a zero quaternion; expected unit quaternions (x, y, z, w)")
+        q = q / norms[:, None]
+        mat = self.material_index(material)
+        tid = next((k for k, t in enumerate(self._templates) if t is template), None)
+        if tid is None:
+            self._templates.append(template)
+            tid = len(self._templates) - 1
+        offsets = np.asarray(template.sphere_offset, dtype=np.float64).reshape(-1, 3)
+        radii = np.asarray(template.sphere_radius, dtype=np.float64).reshape(-1)
+        ids = []
+        for k in range(n):
+            c = len(self._cx)
+            arms = quat_rotate(q[k], offsets)
+            self._cfirst.append(len(self._r))
+            self._cx.append(x[k])
+            self._cq.append(q[k])
+            self._cv.append(v[k])
+            self._cw.append(w[k])
+            self._cmat.append(mat)
+            self._ctemplate.append(tid)
+            self._x.extend(x[k] + arms)
+            self._r.extend(radii)
+            self._v.extend(v[k] + np.cross(w[k], arms))
+            self._w.extend(np.tile(w[k], (len(radii), 1)))
+            self._mat.extend([mat] * len(radii))
+            self._clump.extend([c] * len(radii))
+            self._offset.extend(offsets)
+            self._body_volume.extend([float(template.volume)] * len(radii))
+            self._active.extend([int(bool(active))] * len(radii))
+            ids.append(c)
+        return np.asarray(ids, dtype=np.int64)
+
+    @property
+    def clump_count(self) -> int:
+        return len(self._cx)
 
     def add_plane(self, point, normal, material, world: int = -1) -> int:
         """Add an infinite plane through ``point`` [m] whose ``normal`` points to the particle side."""
@@ -120,11 +202,18 @@ class ModelBuilder:
         self._planes.append((p, nrm / length, self.material_index(material), int(world)))
         return len(self._planes) - 1
 
-    def add_wall_mesh(self, vertices, triangles, material, name: str | None = None, world: int = -1) -> int:
-        """Add a static triangle-mesh wall: ``vertices`` shape (v, 3) [m], ``triangles`` shape (t, 3) int.
+    def add_wall_mesh(self, vertices, triangles, material, name: str | None = None, world: int = -1,
+                      motion: WallMotion | None = None) -> int:
+        """Add a rigid triangle-mesh wall: ``vertices`` shape (v, 3) [m], ``triangles`` shape (t, 3) int.
 
-        Triangles are two-sided: a sphere is pushed away from whichever side it touches.
+        Triangles are two-sided: a sphere is pushed away from whichever side it touches. ``motion``
+        (a :class:`warpdem.WallMotion`, static when None) moves the wall; the vertices are given in the
+        wall's own frame, which for the velocity and rotation forms coincides with the world at t = 0.
         """
+        if motion is None:
+            motion = WallMotion.static()
+        if not isinstance(motion, WallMotion):
+            raise ValueError(f"add_wall_mesh: motion = {motion!r} is not allowed; expected a WallMotion or None")
         verts = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
         tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
         label = name or f"wall{len(self._walls)}"
@@ -134,7 +223,7 @@ class ModelBuilder:
             raise ValueError(f"add_wall_mesh {label!r}: triangles index {int(tris.max())} outside 0..{len(verts) - 1}")
         if not np.all(np.isfinite(verts)):
             raise ValueError(f"add_wall_mesh {label!r}: vertices contain a non-finite value")
-        self._walls.append((verts, tris, self.material_index(material), int(world), label))
+        self._walls.append((verts, tris, self.material_index(material), int(world), label, motion))
         return len(self._walls) - 1
 
     @property
@@ -213,9 +302,12 @@ class ModelBuilder:
         device = str(wp.get_device(device))
         W = self.world_count
         n0 = self.sphere_count
+        c0 = self.clump_count
         radius = np.tile(np.asarray(self._r, dtype=np.float32), W)
         material = np.tile(np.asarray(self._mat, dtype=np.int32), W)
         world = np.repeat(np.arange(W, dtype=np.int32), n0)
+        clump0 = np.asarray(self._clump, dtype=np.int64)
+        sphere_clump = np.concatenate([np.where(clump0 >= 0, clump0 + w * c0, -1) for w in range(W)]).astype(np.int32)
 
         mats_w, tables_w = self._world_tables()
         params = pair_table(mats_w, tables_w)
@@ -237,26 +329,33 @@ class ModelBuilder:
         plane_material = np.array([p[2] for p in planes], dtype=np.int32)
         plane_world = np.array([p[3] for p in planes], dtype=np.int32)
 
-        mesh = None
-        if self._walls:
-            verts, tris, tri_wall = [], [], []
-            offset = 0
-            for k, (v, t, _, _, _) in enumerate(self._walls):
-                verts.append(v)
-                tris.append(t + offset)
-                tri_wall.append(np.full(len(t), k, dtype=np.int32))
-                offset += len(v)
-            mesh = wp.Mesh(points=wp.array(np.concatenate(verts).astype(np.float32), dtype=wp.vec3, device=device),
-                           indices=wp.array(np.concatenate(tris).astype(np.int32).reshape(-1), dtype=int, device=device))
-            triangle_wall = np.concatenate(tri_wall)
-        else:
-            triangle_wall = np.zeros(0, dtype=np.int32)
+        meshes, face_start, tri_wall, wall_radius = [], [0], [], []
+        for k, (v, t, *_rest) in enumerate(self._walls):
+            meshes.append(wp.Mesh(points=wp.array(v.astype(np.float32), dtype=wp.vec3, device=device),
+                                  indices=wp.array(t.astype(np.int32).reshape(-1), dtype=int, device=device)))
+            face_start.append(face_start[-1] + len(t))
+            tri_wall.append(np.full(len(t), k, dtype=np.int32))
+            wall_radius.append(float(np.linalg.norm(v, axis=1).max()))
+        triangle_wall = np.concatenate(tri_wall) if tri_wall else np.zeros(0, dtype=np.int32)
         wall_material = np.array([w[2] for w in self._walls], dtype=np.int32)
         wall_world = np.array([w[3] for w in self._walls], dtype=np.int32)
+
+        # clumps, replicated per world (sphere and clump indices shift by a world's counts)
+        cfirst = np.asarray(self._cfirst, dtype=np.int64)
+        tpl = np.asarray(self._ctemplate, dtype=np.int64)
+        clen = np.array([len(self._templates[t].sphere_radius) for t in tpl], dtype=np.int64)
+        starts = np.concatenate([cfirst + w * n0 for w in range(W)]).astype(np.int32)
+        ends = np.concatenate([cfirst + clen + w * n0 for w in range(W)]).astype(np.int32)
+        cvol = np.array([self._templates[t].volume for t in tpl], dtype=np.float32)
+        cinertia = np.array([np.asarray(self._templates[t].inertia_unit, dtype=np.float64) for t in tpl],
+                            dtype=np.float32).reshape(-1, 3)
+        if c0 == 0:
+            starts = ends = np.zeros(1, dtype=np.int32)
 
         r_min = float(radius.min())
         used = sorted(set(self._mat))
         rayleigh = min(mats[k].rayleigh_time(r_min) for mats in mats_w for k in used)
+        reach = contact_reach(params, float(radius.max()))
 
         model = Model(
             device=device,
@@ -273,20 +372,53 @@ class ModelBuilder:
             plane_normal=wp.array(plane_normal, dtype=wp.vec3, device=device),
             plane_material=wp.array(plane_material, dtype=int, device=device),
             plane_world=wp.array(plane_world, dtype=int, device=device),
-            mesh=mesh,
+            wall_meshes=meshes,
+            wall_mesh=wp.array(np.array([m.id for m in meshes], dtype=np.uint64), dtype=wp.uint64, device=device),
+            wall_face_start=wp.array(np.array(face_start, dtype=np.int32), dtype=int, device=device),
+            wall_radius=wp.array(np.array(wall_radius, dtype=np.float32), dtype=float, device=device),
             triangle_wall=wp.array(triangle_wall, dtype=int, device=device),
             wall_material=wp.array(wall_material, dtype=int, device=device),
             wall_world=wp.array(wall_world, dtype=int, device=device),
+            sphere_clump=wp.array(sphere_clump, dtype=int, device=device),
+            sphere_offset=wp.array(np.tile(np.asarray(self._offset, dtype=np.float32).reshape(-1, 3), (W, 1)),
+                                   dtype=wp.vec3, device=device),
+            sphere_body_volume=wp.array(np.tile(np.asarray(self._body_volume, dtype=np.float32), W), dtype=float,
+                                        device=device),
+            clump_count=c0 * W,
+            clump_sphere_start=wp.array(starts, dtype=int, device=device),
+            clump_sphere_end=wp.array(ends, dtype=int, device=device),
+            clump_material=wp.array(np.tile(np.asarray(self._cmat, dtype=np.int32), W), dtype=int, device=device),
+            clump_world=wp.array(np.repeat(np.arange(W, dtype=np.int32), c0), dtype=int, device=device),
+            clump_volume=wp.array(np.tile(cvol, W), dtype=float, device=device),
+            clump_inertia=wp.array(np.tile(cinertia, (W, 1)), dtype=wp.vec3, device=device),
+            contact_reach=reach,
             radius_max=float(radius.max()),
             radius_min=r_min,
             rayleigh_time=float(rayleigh),
             materials=list(self.materials),
             interactions=self.interactions,
             wall_names=[w[4] for w in self._walls],
+            wall_motions=[w[5] for w in self._walls],
+            clump_templates=list(self._templates),
+            clump_template=np.tile(tpl, W),
+            factories=list(self._factories),
         )
+
+        def tiled(values, width):
+            return np.tile(np.asarray(values, dtype=np.float32).reshape(-1, width), (W, 1))
+
         model.initial = {
-            "sphere_x": np.tile(np.asarray(self._x, dtype=np.float32), (W, 1)),
-            "sphere_v": np.tile(np.asarray(self._v, dtype=np.float32), (W, 1)),
-            "sphere_w": np.tile(np.asarray(self._w, dtype=np.float32), (W, 1)),
+            "sphere_x": tiled(self._x, 3),
+            "sphere_v": tiled(self._v, 3),
+            "sphere_w": tiled(self._w, 3),
+            "sphere_active": np.tile(np.asarray(self._active, dtype=np.int32), W),
         }
+        if c0:
+            model.initial.update(clump_x=tiled(self._cx, 3), clump_q=tiled(self._cq, 4), clump_v=tiled(self._cv, 3),
+                                 clump_w=tiled(self._cw, 3))
         return model
+
+
+def contact_reach(params: np.ndarray, radius_max: float) -> float:
+    """Longest distance beyond touching at which any pair's contact can still act [m] (0 without cohesion)."""
+    return 0.0

@@ -84,6 +84,12 @@ class Solver:
         self._clock = wp.zeros(1, dtype=int, device=model.device)
         self._wall_lanes = wp.zeros((max(model.plane_count + model.wall_count, 1), int(_st.WALL_LANES)),
                                     dtype=wp.vec3, device=model.device)
+        self._wall_t_lanes = wp.zeros_like(self._wall_lanes)
+        self._time = wp.zeros(2, dtype=wp.float64, device=model.device)
+        """Device time [s]: [0] the start of the step being taken, [1] its end (the time of state_out)."""
+        self.control = model.control()
+        """The wall motion used when run or step get no Control."""
+        self._no_rebuild = wp.zeros(1, dtype=int, device=model.device)
         self._blowup = wp.array([2**31 - 1, 2**31 - 1], dtype=int, device=model.device)
         self._spare: State | None = None
         # host copy of the rebuild flag, read between captured steps on CUDA (pinned: an async 4-byte copy)
@@ -103,7 +109,7 @@ class Solver:
         m = self.model
         n, dev = m.sphere_count, m.device
         cap = int(self.options.neighbor_capacity or self.default_neighbor_capacity())
-        mcap = int(self.options.mesh_capacity) if m.mesh is not None else 1
+        mcap = int(self.options.mesh_capacity) if m.wall_count else 1
         planes = max(m.plane_count, 1)
 
         def slots(k, dtype):
@@ -117,18 +123,22 @@ class Solver:
             neighbor_index=slots(cap, int),
             neighbor_spring=slots(cap, wp.vec3),
             neighbor_roll=slots(cap, wp.vec3),
+            neighbor_aux=slots(cap, float),
             plane_spring=slots(planes, wp.vec3),
             plane_roll=slots(planes, wp.vec3),
+            plane_aux=slots(planes, float),
             mesh_count=wp.zeros(n, dtype=int, device=dev),
             mesh_face=slots(mcap, int),
             mesh_spring=slots(mcap, wp.vec3),
             mesh_roll=slots(mcap, wp.vec3),
+            mesh_aux=slots(mcap, float),
+            wall_build_pose=wp.zeros(max(m.wall_count, 1), dtype=wp.transform, device=dev),
             build_x=wp.zeros(n, dtype=wp.vec3, device=dev),
             rebuild=wp.ones(1, dtype=int, device=dev),
             overflow=wp.zeros(1, dtype=int, device=dev),
         )
-        for name in ("neighbor_count", "neighbor_index", "neighbor_spring", "neighbor_roll",
-                     "mesh_count", "mesh_face", "mesh_spring", "mesh_roll"):
+        for name in ("neighbor_count", "neighbor_index", "neighbor_spring", "neighbor_roll", "neighbor_aux",
+                     "mesh_count", "mesh_face", "mesh_spring", "mesh_roll", "mesh_aux"):
             c.scratch[name] = wp.zeros_like(getattr(c, name))
         cells = int(min(128, max(8, round((n / m.world_count) ** (1.0 / 3.0) * 2))))
         c.grid = wp.HashGrid(cells, cells, cells, device=dev)
@@ -138,64 +148,125 @@ class Solver:
     def rebuild(self, state: State, contacts: Contacts) -> None:
         """Rebuild the candidate lists from ``state`` and carry the history over."""
         m, c = self.model, contacts
-        c.grid.build(points=state.sphere_x, radius=2.0 * m.radius_max + self.skin, groups=m.sphere_world)
+        reach = m.contact_reach
+        c.grid.build(points=state.sphere_x, radius=2.0 * m.radius_max + self.skin + reach, groups=m.sphere_world)
         s = c.scratch
         wp.launch(
             _nb.build_contacts,
             dim=m.sphere_count,
             inputs=[
-                c.grid.id, m.sphere_radius, m.sphere_world, m.radius_max,
-                m.mesh.id if m.mesh is not None else wp.uint64(0), int(m.mesh is not None),
-                m.triangle_wall, m.wall_world,
-                state.sphere_x, self.skin,
-                c.neighbor_count, c.neighbor_index, c.neighbor_spring, c.neighbor_roll,
-                c.mesh_count, c.mesh_face, c.mesh_spring, c.mesh_roll,
+                c.grid.id, m.sphere_radius, m.sphere_world, m.sphere_clump, m.radius_max,
+                m.wall_mesh, m.wall_face_start, m.wall_world,
+                state.sphere_x, state.sphere_active, state.wall_pose, self.skin, reach,
+                c.neighbor_count, c.neighbor_index, c.neighbor_spring, c.neighbor_roll, c.neighbor_aux,
+                c.mesh_count, c.mesh_face, c.mesh_spring, c.mesh_roll, c.mesh_aux,
             ],
             outputs=[
-                s["neighbor_count"], s["neighbor_index"], s["neighbor_spring"], s["neighbor_roll"],
-                s["mesh_count"], s["mesh_face"], s["mesh_spring"], s["mesh_roll"],
+                s["neighbor_count"], s["neighbor_index"], s["neighbor_spring"], s["neighbor_roll"], s["neighbor_aux"],
+                s["mesh_count"], s["mesh_face"], s["mesh_spring"], s["mesh_roll"], s["mesh_aux"],
                 c.build_x, c.overflow,
             ],
             device=m.device,
         )
         for name, buf in s.items():
             wp.copy(getattr(c, name), buf)
+        if m.wall_count:
+            wp.launch(_nb.save_wall_poses, dim=m.wall_count, inputs=[state.wall_pose], outputs=[c.wall_build_pose],
+                      device=m.device)
         c.rebuild.zero_()
 
     def step(self, state_in: State, state_out: State, control: Control | None, contacts: Contacts,
              dt: float | None = None) -> None:
         """Advance ``state_in`` by one step into ``state_out`` (rebuilding the lists first if due)."""
-        wp.capture_if(contacts.rebuild, on_true=lambda: self.rebuild(state_in, contacts))
-        self._advance(state_in, state_out, contacts, dt)
+        self._set_time(state_in.time)
+        self._step(state_in, state_out, control, contacts, dt)
 
-    def _advance(self, state_in: State, state_out: State, contacts: Contacts, dt: float | None = None) -> None:
+    def _set_time(self, time: float) -> None:
+        """Device time of the next step's start (host write, never inside a capture)."""
+        self._time.assign(np.array([time, time], dtype=np.float64))
+
+    def _step(self, state_in: State, state_out: State, control: Control | None, contacts: Contacts,
+              dt: float | None = None) -> None:
+        if not state_in.half_step:
+            self._start(state_in, control, contacts)
+        wp.capture_if(contacts.rebuild, on_true=lambda: self.rebuild(state_in, contacts))
+        self._advance(state_in, state_out, contacts, control, dt)
+
+    def _start(self, state: State, control: Control | None, contacts: Contacts) -> None:
+        """Complete a fresh state: wall poses at its time, clump angular momenta from angular velocities."""
+        m = self.model
+        if m.wall_count:
+            self._move_walls(state, control, contacts, rebuild=self._no_rebuild)
+        if m.clump_count:
+            wp.launch(_st.init_clumps, dim=m.clump_count,
+                      inputs=[m.clump_material, m.clump_world, m.clump_volume, m.clump_inertia, m.material_density,
+                              state.clump_q, state.clump_w],
+                      outputs=[state.clump_angmom], device=m.device)
+
+    def _move_walls(self, state: State, control: Control | None, contacts: Contacts, rebuild) -> None:
+        """Poses of the walls at the device time[1] into ``state``; ``rebuild`` is flagged when they moved far."""
+        m, ctl = self.model, control or self.control
+        wp.launch(_st.move_walls, dim=m.wall_count,
+                  inputs=[ctl.segment_start, ctl.segment_t0, ctl.segment_t1, ctl.segment_v, ctl.segment_w,
+                          ctl.segment_pivot, ctl.segment_pose, m.wall_radius, contacts.wall_build_pose,
+                          self.skin, self._time, 1],
+                  outputs=[state.wall_pose, state.wall_v, state.wall_w, rebuild], device=m.device)
+
+    def _advance(self, state_in: State, state_out: State, contacts: Contacts, control: Control | None = None,
+                 dt: float | None = None) -> None:
         """Forces and integration of one step, without the rebuild check."""
         m, c = self.model, contacts
         dt = self.dt if dt is None else float(dt)
         kick = dt if state_in.half_step else 0.5 * dt
-        wp.launch(_st.begin_step, dim=self._wall_lanes.shape, inputs=[], outputs=[self._wall_lanes, self._clock],
-                  device=m.device)
+        wp.launch(_st.begin_step, dim=self._wall_lanes.shape, inputs=[wp.float64(dt)],
+                  outputs=[self._wall_lanes, self._wall_t_lanes, self._clock, self._time], device=m.device)
         wp.launch(
             _st.step_spheres,
             dim=m.sphere_count,
             inputs=[
-                m.sphere_radius, m.sphere_material, m.sphere_world, m.material_density, m.pair_params,
-                m.world_gravity, m.plane_point, m.plane_normal, m.plane_material, m.plane_world,
-                m.mesh.id if m.mesh is not None else wp.uint64(0), m.triangle_wall, m.wall_material, m.wall_world,
-                c.neighbor_count, c.neighbor_index, c.neighbor_spring, c.neighbor_roll, c.plane_spring, c.plane_roll,
-                c.mesh_count, c.mesh_face, c.mesh_spring, c.mesh_roll, c.build_x,
-                state_in.sphere_x, state_in.sphere_v, state_in.sphere_w,
+                m.sphere_radius, m.sphere_material, m.sphere_world, m.sphere_clump, m.sphere_body_volume,
+                m.material_density, m.pair_params, m.world_gravity,
+                m.plane_point, m.plane_normal, m.plane_material, m.plane_world,
+                m.wall_mesh, m.wall_face_start, m.triangle_wall, m.wall_material,
+                c.neighbor_count, c.neighbor_index, c.neighbor_spring, c.neighbor_roll, c.neighbor_aux,
+                c.plane_spring, c.plane_roll, c.plane_aux,
+                c.mesh_count, c.mesh_face, c.mesh_spring, c.mesh_roll, c.mesh_aux, c.build_x,
+                state_in.sphere_x, state_in.sphere_v, state_in.sphere_w, state_in.sphere_active,
+                state_in.wall_pose, state_in.wall_v, state_in.wall_w,
                 dt, kick, self.skin, self.options.velocity_limit, self._clock,
             ],
             outputs=[
                 state_out.sphere_x, state_out.sphere_v, state_out.sphere_w, state_out.sphere_f, state_out.sphere_t,
-                self._wall_lanes, c.rebuild, self._blowup,
+                self._wall_lanes, self._wall_t_lanes, c.rebuild, self._blowup,
             ],
             device=m.device,
         )
+        if m.clump_count:
+            wp.launch(
+                _st.integrate_clumps,
+                dim=m.clump_count,
+                inputs=[
+                    m.clump_sphere_start, m.clump_sphere_end, m.clump_material, m.clump_world, m.clump_volume, m.clump_inertia,
+                    m.sphere_offset, m.material_density, m.world_gravity, c.build_x,
+                    state_in.sphere_active, state_out.sphere_f, state_out.sphere_t,
+                    state_in.clump_x, state_in.clump_q, state_in.clump_v, state_in.clump_angmom,
+                    dt, kick, self.skin, self.options.velocity_limit, self._clock,
+                ],
+                outputs=[
+                    state_out.clump_x, state_out.clump_q, state_out.clump_v, state_out.clump_angmom, state_out.clump_w,
+                    state_out.clump_f, state_out.clump_t, state_out.sphere_x, state_out.sphere_v, state_out.sphere_w,
+                    c.rebuild, self._blowup,
+                ],
+                device=m.device,
+            )
         if m.plane_count + m.wall_count:
-            wp.launch(_st.sum_wall_forces, dim=m.plane_count + m.wall_count, inputs=[self._wall_lanes],
-                      outputs=[state_out.wall_f], device=m.device)
+            wp.launch(_st.sum_wall_forces, dim=m.plane_count + m.wall_count,
+                      inputs=[self._wall_lanes, self._wall_t_lanes, state_in.wall_impulse, wp.float64(dt)],
+                      outputs=[state_out.wall_f, state_out.wall_t, state_out.wall_impulse],
+                      device=m.device)
+        wp.copy(state_out.sphere_active, state_in.sphere_active)
+        if m.wall_count:
+            self._move_walls(state_out, control, c, rebuild=c.rebuild)
         state_out.time = state_in.time + dt
         state_out.step = state_in.step + 1
         state_out.half_step = True
@@ -220,23 +291,24 @@ class Solver:
         if use_graph is None:
             # CUDA graphs on GPU; Warp's CPU capture removes the Python launch overhead on CPU too
             use_graph = steps >= 64
+        self._set_time(state.time)
         done = 0
         # the first step runs eagerly: it applies the half kick and allocates the hash grid before any capture
         if not a.half_step or (use_graph and self._graph is None):
-            self.step(a, b, control, contacts)
+            self._step(a, b, control, contacts)
             a, b = b, a
             done = 1
         if use_graph and wp.get_device(self.model.device).is_cuda:
             # Warp's HashGrid build (a CUB radix sort) cannot sit in a conditional graph node, so on CUDA
             # the host reads the rebuild flag each step (one 4-byte copy) and replays a captured step.
-            key = (id(a), id(b), id(contacts))
+            key = (id(a), id(b), id(contacts), id(control))
             if self._graph is None or self._graph[0] != key:
                 graphs = []
                 a.half_step = b.half_step = True
                 for src, dst in ((a, b), (b, a)):
                     t_before, step_before = dst.time, dst.step
                     with wp.ScopedCapture(device=self.model.device) as cap:
-                        self._advance(src, dst, contacts)
+                        self._advance(src, dst, contacts, control)
                     dst.time, dst.step = t_before, step_before
                     graphs.append(cap.graph)
                 self._graph = (key, graphs)
@@ -253,13 +325,13 @@ class Solver:
                 a, b = b, a
             a.time, a.step, a.half_step = t0 + steps * self.dt, step0 + steps, True
         elif use_graph and steps - done >= 2:
-            key = (id(a), id(b), id(contacts))
+            key = (id(a), id(b), id(contacts), id(control))
             if self._graph is None or self._graph[0] != key:
                 before = int(self._clock.numpy()[0])
                 t_before, step_before = a.time, a.step
                 with wp.ScopedCapture(device=self.model.device) as cap:
-                    self.step(a, b, control, contacts)
-                    self.step(b, a, control, contacts)
+                    self._step(a, b, control, contacts)
+                    self._step(b, a, control, contacts)
                 self._graph = (key, cap.graph)
                 a.time, a.step = t_before, step_before
                 # Warp's CPU capture also executes what it records: count those two steps
@@ -274,7 +346,7 @@ class Solver:
             a.step += 2 * pairs
             done += 2 * pairs
         while done < steps:
-            self.step(a, b, control, contacts)
+            self._step(a, b, control, contacts)
             a, b = b, a
             done += 1
         self._spare = b

@@ -11,6 +11,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 
+import numpy as np
 import warp as wp
 
 
@@ -71,14 +72,41 @@ class Model:
     """Material of each plane, shape (plane_count,), int32."""
     plane_world: wp.array
     """World of each plane (-1: every world), shape (plane_count,), int32."""
-    mesh: wp.Mesh | None
-    """All static triangle walls concatenated into one BVH mesh, or None."""
+    wall_meshes: list
+    """One ``wp.Mesh`` (BVH) per triangle-mesh wall, vertices in the wall's own frame."""
+    wall_mesh: wp.array
+    """Mesh ids of ``wall_meshes``, shape (wall_count,), uint64."""
+    wall_face_start: wp.array
+    """Global index of each wall's first triangle, shape (wall_count + 1,), int32."""
+    wall_radius: wp.array
+    """Largest distance of a wall vertex from its frame's origin [m], shape (wall_count,), float32."""
     triangle_wall: wp.array
-    """Wall index of each triangle of ``mesh``, shape (triangle_count,), int32."""
+    """Wall index of each triangle (global numbering), shape (triangle_count,), int32."""
     wall_material: wp.array
     """Material of each mesh wall, shape (wall_count,), int32."""
     wall_world: wp.array
     """World of each mesh wall (-1: every world), shape (wall_count,), int32."""
+    sphere_clump: wp.array
+    """Clump of each sphere (-1: a free sphere), shape (sphere_count,), int32. A clump's spheres are contiguous."""
+    sphere_offset: wp.array
+    """Centre of each clump sphere in its clump's principal frame [m] (zero for free spheres), shape (sphere_count,), vec3."""
+    sphere_body_volume: wp.array
+    """Volume of the body a sphere belongs to (itself, or its clump's union) [m^3], shape (sphere_count,), float32."""
+    clump_count: int
+    clump_sphere_start: wp.array
+    """First sphere of each clump, shape (max(clump_count, 1),), int32."""
+    clump_sphere_end: wp.array
+    """One past the last sphere of each clump, shape (max(clump_count, 1),), int32."""
+    clump_material: wp.array
+    """Material of each clump, shape (clump_count,), int32."""
+    clump_world: wp.array
+    """World of each clump, shape (clump_count,), int32."""
+    clump_volume: wp.array
+    """Volume of the union of a clump's spheres [m^3], shape (clump_count,), float32."""
+    clump_inertia: wp.array
+    """Principal moments of inertia per unit density [m^5], shape (clump_count,), vec3."""
+    contact_reach: float
+    """Longest distance beyond touching at which a contact can still act (cohesive laws) [m]."""
     radius_max: float
     """Largest sphere radius [m]."""
     radius_min: float
@@ -91,8 +119,16 @@ class Model:
     """Host copy of the InteractionTable used to derive ``pair_params``."""
     wall_names: list = field(default_factory=list)
     """Names of the mesh walls, index = wall id."""
+    wall_motions: list = field(default_factory=list)
+    """Host WallMotion of each mesh wall (the default Control)."""
+    clump_templates: list = field(default_factory=list)
+    """Host ClumpTemplate objects used by the clumps (index = template id)."""
+    clump_template: object = None
+    """Host array: template id of each clump, shape (clump_count,)."""
+    factories: list = field(default_factory=list)
+    """Host records of the dynamic factories (see ModelBuilder.add_factory)."""
     initial: dict = field(default_factory=dict)
-    """Host copies of the initial sphere_x, sphere_v, sphere_w, shape (sphere_count, 3) each."""
+    """Host copies of the initial state arrays (sphere_x/v/w, sphere_active, clump_x/q/v/w)."""
 
     @property
     def plane_count(self) -> int:
@@ -104,21 +140,44 @@ class Model:
 
     def state(self) -> "State":
         """A new State holding the initial positions and velocities given to the builder."""
-        n, dev = self.sphere_count, self.device
+        n, nc, dev = self.sphere_count, max(self.clump_count, 1), self.device
 
-        def initial(name):
+        def initial(name, dtype=wp.vec3, count=n):
             if name in self.initial:
-                return wp.array(self.initial[name], dtype=wp.vec3, device=dev)
-            return wp.zeros(n, dtype=wp.vec3, device=dev)
+                return wp.array(self.initial[name], dtype=dtype, device=dev)
+            return wp.zeros(count, dtype=dtype, device=dev)
 
+        walls = max(self.wall_count, 1)
+        surfaces = max(self.wall_count + self.plane_count, 1)
+        identity = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], dtype=np.float32), (walls, 1))
         return State(
             sphere_x=initial("sphere_x"),
             sphere_v=initial("sphere_v"),
             sphere_w=initial("sphere_w"),
             sphere_f=wp.zeros(n, dtype=wp.vec3, device=dev),
             sphere_t=wp.zeros(n, dtype=wp.vec3, device=dev),
-            wall_f=wp.zeros(max(self.wall_count + self.plane_count, 1), dtype=wp.vec3, device=dev),
+            sphere_active=initial("sphere_active", int),
+            clump_x=initial("clump_x", wp.vec3, nc),
+            clump_q=initial("clump_q", wp.quat, nc),
+            clump_v=initial("clump_v", wp.vec3, nc),
+            clump_angmom=initial("clump_angmom", wp.vec3, nc),
+            clump_w=initial("clump_w", wp.vec3, nc),
+            clump_f=wp.zeros(nc, dtype=wp.vec3, device=dev),
+            clump_t=wp.zeros(nc, dtype=wp.vec3, device=dev),
+            wall_pose=wp.array(identity, dtype=wp.transform, device=dev),
+            wall_v=wp.zeros(walls, dtype=wp.vec3, device=dev),
+            wall_w=wp.zeros(walls, dtype=wp.vec3, device=dev),
+            wall_f=wp.zeros(surfaces, dtype=wp.vec3, device=dev),
+            wall_t=wp.zeros(surfaces, dtype=wp.vec3, device=dev),
+            wall_impulse=wp.zeros(surfaces, dtype=wp.vec3d, device=dev),
         )
+
+    def control(self) -> "Control":
+        """The wall motions given to the builder, on the device (a solver uses it when run without one)."""
+        from .motion import MotionTable, WallMotion
+
+        motions = self.wall_motions or [WallMotion.static()]
+        return Control.from_table(MotionTable.build(motions), self.device)
 
 
 @dataclass
@@ -141,8 +200,35 @@ class State:
     """Contact force on each sphere in the last step [N] (gravity excluded), shape (sphere_count,), vec3."""
     sphere_t: wp.array
     """Contact torque about each sphere's centre in the last step [N m], shape (sphere_count,), vec3."""
+    sphere_active: wp.array
+    """1 for a sphere in the simulation, 0 for a factory particle not released yet, shape (sphere_count,), int32."""
+    clump_x: wp.array
+    """Clump centre of mass [m], shape (max(clump_count, 1),), vec3."""
+    clump_q: wp.array
+    """Clump orientation (body principal frame -> world), shape (max(clump_count, 1),), quat (x, y, z, w)."""
+    clump_v: wp.array
+    """Clump velocity [m/s], shape (max(clump_count, 1),), vec3."""
+    clump_angmom: wp.array
+    """Clump angular momentum about its centre of mass, world frame [kg m^2/s], shape (max(clump_count, 1),), vec3."""
+    clump_w: wp.array
+    """Clump angular velocity, world frame [rad/s], shape (max(clump_count, 1),), vec3 (written by the solver)."""
+    clump_f: wp.array
+    """Contact force on each clump in the last step [N], shape (max(clump_count, 1),), vec3."""
+    clump_t: wp.array
+    """Contact torque about each clump's centre of mass in the last step [N m], shape (max(clump_count, 1),), vec3."""
+    wall_pose: wp.array
+    """Pose of each mesh wall (its frame -> world) at ``time``, shape (max(wall_count, 1),), transform."""
+    wall_v: wp.array
+    """Velocity of each wall frame's origin [m/s], shape (max(wall_count, 1),), vec3."""
+    wall_w: wp.array
+    """Angular velocity of each wall [rad/s], shape (max(wall_count, 1),), vec3."""
     wall_f: wp.array
-    """Force exerted by the spheres on each plane, then each mesh wall, in the last step [N], shape (plane_count + wall_count,), vec3."""
+    """Force exerted by the particles on each plane, then each mesh wall, in the last step [N], shape (max(plane_count + wall_count, 1),), vec3."""
+    wall_t: wp.array
+    """Torque of those forces about each plane's point / each wall frame's origin [N m], same shape, vec3."""
+    wall_impulse: wp.array
+    """Force on each surface summed over every step times dt since the state was made [N s], same shape, vec3d
+    (float64): the mean force between two reads is the impulse difference over the time between them."""
     time: float = 0.0
     """Simulated time [s] (host-side)."""
     step: int = 0
@@ -153,7 +239,46 @@ class State:
 
 @dataclass
 class Control:
-    """What moves walls. Static walls only so far: moving walls arrive with prescribed motion."""
+    """What moves the mesh walls: their prescribed motion as constant-twist segments (warpdem/motion.py).
+
+    Segment ``s`` of wall ``k`` is row ``segment_start[k] + s``; the rows of a wall cover [0, inf).
+    """
+
+    segment_start: wp.array
+    """First segment of each wall, shape (wall_count + 1,), int32."""
+    segment_t0: wp.array
+    """Segment start [s], shape (segment_count,), float64."""
+    segment_t1: wp.array
+    """Segment end [s] (1e30: open), shape (segment_count,), float64."""
+    segment_v: wp.array
+    """Translation velocity [m/s], shape (segment_count,), vec3."""
+    segment_w: wp.array
+    """Angular velocity [rad/s], shape (segment_count,), vec3."""
+    segment_pivot: wp.array
+    """Point on the rotation axis at the segment's start [m], shape (segment_count,), vec3."""
+    segment_pose: wp.array
+    """Wall pose at the segment's start, shape (segment_count,), transform."""
+
+    @staticmethod
+    def from_table(table, device) -> "Control":
+        pose = np.concatenate([table.pose_translation, table.pose_rotation], axis=1).astype(np.float32)
+        if len(pose) == 0:
+            pose = np.array([[0, 0, 0, 0, 0, 0, 1]], dtype=np.float32)
+
+        def vec(a):
+            a = np.asarray(a, dtype=np.float32).reshape(-1, 3)
+            return wp.array(a if len(a) else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=device)
+
+        def f64(a):
+            return wp.array(np.asarray(a, dtype=np.float64) if len(a) else np.zeros(1), dtype=wp.float64,
+                            device=device)
+
+        return Control(
+            segment_start=wp.array(table.start, dtype=int, device=device),
+            segment_t0=f64(table.t0), segment_t1=f64(table.t1),
+            segment_v=vec(table.velocity), segment_w=vec(table.angular_velocity), segment_pivot=vec(table.pivot),
+            segment_pose=wp.array(pose, dtype=wp.transform, device=device),
+        )
 
 
 @dataclass
@@ -179,10 +304,14 @@ class Contacts:
     """Tangential spring displacement of the pair (canonical order) [m], shape (neighbor_capacity, sphere_count), vec3."""
     neighbor_roll: wp.array
     """Rolling spring torque of the pair (canonical order) [N m], shape (neighbor_capacity, sphere_count), vec3."""
+    neighbor_aux: wp.array
+    """Scalar history of the pair's law (JKR: in-contact flag; EEPA: largest overlap [m]), shape (neighbor_capacity, sphere_count), float32."""
     plane_spring: wp.array
     """Tangential spring per sphere and plane [m], shape (max(plane_count,1), sphere_count), vec3."""
     plane_roll: wp.array
     """Rolling spring torque per sphere and plane [N m], shape (max(plane_count,1), sphere_count), vec3."""
+    plane_aux: wp.array
+    """Scalar law history per sphere and plane, shape (max(plane_count,1), sphere_count), float32."""
     mesh_count: wp.array
     """Candidate triangles per sphere, shape (sphere_count,), int32."""
     mesh_face: wp.array
@@ -191,6 +320,10 @@ class Contacts:
     """Tangential spring per sphere and triangle [m], shape (mesh_capacity, sphere_count), vec3."""
     mesh_roll: wp.array
     """Rolling spring torque per sphere and triangle [N m], shape (mesh_capacity, sphere_count), vec3."""
+    mesh_aux: wp.array
+    """Scalar law history per sphere and triangle, shape (mesh_capacity, sphere_count), float32."""
+    wall_build_pose: wp.array
+    """Wall poses at the last rebuild, shape (max(wall_count, 1),), transform."""
     build_x: wp.array
     """Sphere centres at the last rebuild [m], shape (sphere_count,), vec3."""
     rebuild: wp.array
