@@ -22,4 +22,16 @@ class PairParams:
     rolling_damping: float
     """EPSD viscous damping ratio eta_r [-] (Ai et al. 2011 use 0.3)."""
     law: int
-    """ContactLaw of the pair: 1 Hertz-Mindlin."""
+    """ContactLaw of the pair: 1 Hertz-Mindlin, 2 Hertz-Mindlin with JKR, 3 EEPA."""
+    gamma: float
+    """Surface energy gamma [J/m^2] (JKR, and EEPA's f_min = -1.5 pi gamma R*); work of adhesion W = 2 gamma."""
+    f0: float
+    """EEPA constant pull-off force [N] (<= 0)."""
+    eepa_n: float
+    """EEPA loading/unloading exponent n [-] (1.5: Hertz-like, 1: linear)."""
+    lambda_p: float
+    """EEPA contact plasticity ratio [-] in [0, 1)."""
+    chi: float
+    """EEPA adhesive branch exponent [-]."""
+    ks_fac: float
+    """EEPA tangential stiffness multiplier [-]."""

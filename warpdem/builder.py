@@ -7,11 +7,18 @@ import dataclasses
 import numpy as np
 import warp as wp
 
+from . import analytic
 from .materials import Interaction, InteractionTable, Material, pair_table
 from .motion import WallMotion, quat_rotate
-from .types import Model
+from .types import ContactLaw, Model
 
 from warpdem.kernels.params import PairParams
+
+
+INTERACTION_SCALARS = ("restitution", "static_friction", "rolling_friction", "rolling_damping", "surface_energy",
+                       "pull_off_force", "slope_exponent", "plasticity_ratio", "tensile_exponent",
+                       "tangential_stiffness_multiplier")
+"""Interaction fields that :meth:`ModelBuilder.vary` can set per world."""
 
 
 def _vec3(value, where: str, name: str) -> np.ndarray:
@@ -42,6 +49,7 @@ class ModelBuilder:
         self._clump, self._offset, self._body_volume, self._active = [], [], [], []
         # clumps: centre, orientation (x, y, z, w), velocity, angular velocity, first sphere, material, template
         self._cx, self._cq, self._cv, self._cw, self._cfirst, self._cmat, self._ctemplate = [], [], [], [], [], [], []
+        self._cscale = []
         self._templates = []  # ClumpTemplate objects, index = template id
         self._planes = []  # (point, normal, material, world)
         self._walls = []  # (vertices, triangles, material, world, name, motion)
@@ -126,7 +134,7 @@ class ModelBuilder:
         return int(self.add_clumps(template, [position], material, [orientation], [velocity], [angular_velocity])[0])
 
     def add_clumps(self, template, positions, material, orientations=None, velocities=None,
-                   angular_velocities=None, active: bool = True) -> np.ndarray:
+                   angular_velocities=None, active: bool = True, scale=None) -> np.ndarray:
         """Add rigid multi-sphere clumps of one template.
 
         Args:
@@ -136,6 +144,7 @@ class ModelBuilder:
             orientations: quaternions (x, y, z, w) body -> world, shape (n, 4); identity when None.
             velocities: [m/s], shape (n, 3); angular_velocities: [rad/s], world frame, shape (n, 3).
             active: False adds them parked (a factory releases them later).
+            scale: size factor per clump, shape (n,) or scalar (offsets and radii x s, volume x s^3, inertia x s^5).
 
         Returns:
             the clump indices, shape (n,).
@@ -154,6 +163,9 @@ class ModelBuilder:
         for name, arr in (("positions", x), ("orientations", q), ("velocities", v), ("angular_velocities", w)):
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"add_clumps: {name} contain a non-finite value")
+        s = np.broadcast_to(np.asarray(1.0 if scale is None else scale, dtype=np.float64), (n,)).copy()
+        if not np.all(np.isfinite(s) & (s > 0)):
+            raise ValueError(f"add_clumps: scale = {scale!r} is not allowed; expected factors > 0")
         norms = np.linalg.norm(q, axis=1)
         if np.any(norms < 1e-6):
             raise ValueError("add_clumps: orientations contain a zero quaternion; expected unit quaternions (x, y, z, w)")
@@ -165,27 +177,31 @@ class ModelBuilder:
             tid = len(self._templates) - 1
         offsets = np.asarray(template.sphere_offset, dtype=np.float64).reshape(-1, 3)
         radii = np.asarray(template.sphere_radius, dtype=np.float64).reshape(-1)
-        ids = []
-        for k in range(n):
-            c = len(self._cx)
-            arms = quat_rotate(q[k], offsets)
-            self._cfirst.append(len(self._r))
-            self._cx.append(x[k])
-            self._cq.append(q[k])
-            self._cv.append(v[k])
-            self._cw.append(w[k])
-            self._cmat.append(mat)
-            self._ctemplate.append(tid)
-            self._x.extend(x[k] + arms)
-            self._r.extend(radii)
-            self._v.extend(v[k] + np.cross(w[k], arms))
-            self._w.extend(np.tile(w[k], (len(radii), 1)))
-            self._mat.extend([mat] * len(radii))
-            self._clump.extend([c] * len(radii))
-            self._offset.extend(offsets)
-            self._body_volume.extend([float(template.volume)] * len(radii))
-            self._active.extend([int(bool(active))] * len(radii))
-            ids.append(c)
+        k = len(radii)
+        c0 = len(self._cx)
+        # arms[i, s]: offset s of clump i rotated into the world (vectorised: a factory may add 10^6 clumps)
+        u, qw = q[:, None, :3], q[:, None, 3:4]
+        scaled = offsets[None, :, :] * s[:, None, None]
+        tmp = 2.0 * np.cross(u, scaled)
+        arms = scaled + qw * tmp + np.cross(u, tmp)
+        self._cfirst.extend(len(self._r) + k * np.arange(n))
+        self._cx.extend(x)
+        self._cq.extend(q)
+        self._cv.extend(v)
+        self._cw.extend(w)
+        self._cmat.extend([mat] * n)
+        self._ctemplate.extend([tid] * n)
+        self._cscale.extend(s)
+        self._x.extend((x[:, None, :] + arms).reshape(-1, 3))
+        self._r.extend((radii[None, :] * s[:, None]).reshape(-1))
+        self._v.extend((v[:, None, :] + np.cross(w[:, None, :], arms)).reshape(-1, 3))
+        self._w.extend(np.repeat(w, k, axis=0))
+        self._mat.extend([mat] * (n * k))
+        self._clump.extend(np.repeat(np.arange(c0, c0 + n), k))
+        self._offset.extend(scaled.reshape(-1, 3))
+        self._body_volume.extend(np.repeat(float(template.volume) * s**3, k))
+        self._active.extend([int(bool(active))] * (n * k))
+        ids = np.arange(c0, c0 + n)
         return np.asarray(ids, dtype=np.int64)
 
     @property
@@ -241,7 +257,7 @@ class ModelBuilder:
         """Give a scalar parameter one value per world.
 
         ``target`` is ``material.NAME.FIELD`` (density, youngs_modulus, shear_modulus, poisson_ratio),
-        ``interaction.A.B.FIELD`` (restitution, static_friction, rolling_friction, rolling_damping)
+        ``interaction.A.B.FIELD`` (any of ``INTERACTION_SCALARS``)
         or ``gravity`` (values shape (world_count, 3)). Call after :meth:`replicate`.
         """
         vals = list(values)
@@ -255,7 +271,7 @@ class ModelBuilder:
         elif parts[0] == "interaction" and len(parts) == 4:
             self.material_index(parts[1])
             self.material_index(parts[2])
-            if parts[3] not in ("restitution", "static_friction", "rolling_friction", "rolling_damping"):
+            if parts[3] not in INTERACTION_SCALARS:
                 raise ValueError(f"vary {target!r}: field {parts[3]!r} is not an interaction scalar")
         elif parts != ["gravity"]:
             raise ValueError(f"vary: target = {target!r} is not allowed; expected material.NAME.FIELD, "
@@ -346,9 +362,11 @@ class ModelBuilder:
         clen = np.array([len(self._templates[t].sphere_radius) for t in tpl], dtype=np.int64)
         starts = np.concatenate([cfirst + w * n0 for w in range(W)]).astype(np.int32)
         ends = np.concatenate([cfirst + clen + w * n0 for w in range(W)]).astype(np.int32)
-        cvol = np.array([self._templates[t].volume for t in tpl], dtype=np.float32)
-        cinertia = np.array([np.asarray(self._templates[t].inertia_unit, dtype=np.float64) for t in tpl],
-                            dtype=np.float32).reshape(-1, 3)
+        cscale = np.asarray(self._cscale, dtype=np.float64)
+        tvol = np.array([t.volume for t in self._templates], dtype=np.float64)
+        tinertia = np.array([np.asarray(t.inertia_unit, dtype=np.float64) for t in self._templates]).reshape(-1, 3)
+        cvol = (tvol[tpl] * cscale**3).astype(np.float32) if c0 else np.zeros(0, np.float32)
+        cinertia = (tinertia[tpl] * cscale[:, None] ** 5).astype(np.float32) if c0 else np.zeros((0, 3), np.float32)
         if c0 == 0:
             starts = ends = np.zeros(1, dtype=np.int32)
 
@@ -420,5 +438,12 @@ class ModelBuilder:
 
 
 def contact_reach(params: np.ndarray, radius_max: float) -> float:
-    """Longest distance beyond touching at which any pair's contact can still act [m] (0 without cohesion)."""
-    return 0.0
+    """Longest gap at which any pair's contact can still act [m]: JKR's |delta_c|, largest for a sphere on a
+    wall (R* = radius_max, |delta_c| grows as R*^(1/3)); 0 without JKR."""
+    jkr = params[params["law"] == int(ContactLaw.JKR)]
+    if len(jkr) == 0:
+        return 0.0
+    reach = [-analytic.jkr_break_overlap(radius_max, float(p["e_star"]), float(p["gamma"]))
+             for p in jkr if p["gamma"] > 0]
+    # 5 % margin: float32 rounding of the break test must never find a pair outside the lists
+    return 1.05 * max(reach, default=0.0)

@@ -102,7 +102,14 @@ class Interaction:
         rolling_friction: rolling friction coefficient mu_r [-], >= 0 (torque = mu_r R* F_n).
         rolling_model: RollingModel (or its name): NONE, CONSTANT_TORQUE (type A) or EPSD (type C).
         rolling_damping: EPSD dashpot ratio eta_r [-], >= 0 (0.3 as Ai et al. 2011).
-        law: ContactLaw of the pair.
+        law: ContactLaw of the pair: HERTZ_MINDLIN, JKR or EEPA.
+        surface_energy: gamma [J/m^2], >= 0 (JKR; EEPA's f_min = -1.5 pi gamma R*). EDEM's "Surface Energy"
+            entered as is; the work of adhesion is W = 2 gamma.
+        pull_off_force: EEPA constant pull-off force f0 [N], <= 0 (EDEM "Constant Pull-Off Force").
+        slope_exponent: EEPA loading/unloading exponent n [-], in [1, 2] (1.5: Hertz-like).
+        plasticity_ratio: EEPA contact plasticity ratio lambda_p [-], in [0, 1) (0: elastic).
+        tensile_exponent: EEPA adhesive branch exponent chi [-], in (0, 3].
+        tangential_stiffness_multiplier: EEPA k_t factor [-], > 0.
     """
 
     restitution: float = 0.5
@@ -111,6 +118,12 @@ class Interaction:
     rolling_model: RollingModel = RollingModel.CONSTANT_TORQUE
     rolling_damping: float = 0.3
     law: ContactLaw = ContactLaw.HERTZ_MINDLIN
+    surface_energy: float = 0.0
+    pull_off_force: float = 0.0
+    slope_exponent: float = 1.5
+    plasticity_ratio: float = 0.5
+    tensile_exponent: float = 1.5
+    tangential_stiffness_multiplier: float = 1.0
 
     def __post_init__(self):
         where = "Interaction"
@@ -122,6 +135,18 @@ class Interaction:
                self.rolling_friction, "a rolling friction coefficient >= 0")
         _check(_finite(self.rolling_damping) and self.rolling_damping >= 0.0, where, "rolling_damping",
                self.rolling_damping, "a damping ratio >= 0")
+        _check(_finite(self.surface_energy) and self.surface_energy >= 0.0, where, "surface_energy",
+               self.surface_energy, "a surface energy >= 0 J/m^2")
+        _check(_finite(self.pull_off_force) and self.pull_off_force <= 0.0, where, "pull_off_force",
+               self.pull_off_force, "a constant pull-off force <= 0 N (attractive)")
+        _check(_finite(self.slope_exponent) and 1.0 <= self.slope_exponent <= 2.0, where, "slope_exponent",
+               self.slope_exponent, "an exponent in [1, 2]")
+        _check(_finite(self.plasticity_ratio) and 0.0 <= self.plasticity_ratio < 1.0, where, "plasticity_ratio",
+               self.plasticity_ratio, "a ratio in [0, 1)")
+        _check(_finite(self.tensile_exponent) and 0.0 < self.tensile_exponent <= 3.0, where, "tensile_exponent",
+               self.tensile_exponent, "an exponent in (0, 3]")
+        _check(_finite(self.tangential_stiffness_multiplier) and self.tangential_stiffness_multiplier > 0.0, where,
+               "tangential_stiffness_multiplier", self.tangential_stiffness_multiplier, "a factor > 0")
         object.__setattr__(self, "rolling_model", _enum(RollingModel, self.rolling_model, where, "rolling_model"))
         object.__setattr__(self, "law", _enum(ContactLaw, self.law, where, "law"))
         _check(self.law != ContactLaw.NONE, where, "law", self.law, "a contact law other than NONE")
@@ -139,7 +164,8 @@ def _enum(cls, value, where, name):
     if isinstance(value, str):
         key = value.strip().upper().replace("-", "_").replace(" ", "_")
         aliases = {"A": "CONSTANT_TORQUE", "TYPE_A": "CONSTANT_TORQUE", "STANDARD": "CONSTANT_TORQUE",
-                   "C": "EPSD", "TYPE_C": "EPSD", "HM": "HERTZ_MINDLIN"}
+                   "C": "EPSD", "TYPE_C": "EPSD", "HM": "HERTZ_MINDLIN", "HM_JKR": "JKR",
+                   "HERTZ_MINDLIN_JKR": "JKR", "HERTZ_MINDLIN_WITH_JKR": "JKR"}
         key = aliases.get(key, key)
         if key in cls.__members__:
             return cls[key]
@@ -180,7 +206,8 @@ def pair_table(materials_per_world: list[list[Material]], tables_per_world: list
     w_count, m_count = len(materials_per_world), len(materials_per_world[0])
     dtype = np.dtype([("e_star", np.float32), ("g_star", np.float32), ("beta", np.float32), ("mu_s", np.float32),
                       ("mu_r", np.float32), ("rolling_model", np.int32), ("rolling_damping", np.float32),
-                      ("law", np.int32)])
+                      ("law", np.int32), ("gamma", np.float32), ("f0", np.float32), ("eepa_n", np.float32),
+                      ("lambda_p", np.float32), ("chi", np.float32), ("ks_fac", np.float32)])
     out = np.zeros((w_count, m_count, m_count), dtype=dtype)
     for w in range(w_count):
         mats, table = materials_per_world[w], tables_per_world[w]
@@ -189,5 +216,7 @@ def pair_table(materials_per_world: list[list[Material]], tables_per_world: list
                 ia = table.get(mats[a].name, mats[b].name)
                 e_star, g_star = effective_moduli(mats[a], mats[b])
                 out[w, a, b] = (e_star, g_star, ia.beta, ia.static_friction, ia.rolling_friction,
-                                int(ia.rolling_model), ia.rolling_damping, int(ia.law))
+                                int(ia.rolling_model), ia.rolling_damping, int(ia.law), ia.surface_energy,
+                                ia.pull_off_force, ia.slope_exponent, ia.plasticity_ratio, ia.tensile_exponent,
+                                ia.tangential_stiffness_multiplier)
     return out

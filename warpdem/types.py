@@ -30,6 +30,11 @@ class ContactLaw(enum.IntEnum):
 
     NONE = 0
     HERTZ_MINDLIN = 1
+    """Hertz-Mindlin (no slip), EDEM's default."""
+    JKR = 2
+    """Hertz-Mindlin with JKR cohesion (EDEM "Hertz-Mindlin with JKR"), surface energy gamma."""
+    EEPA = 3
+    """Edinburgh Elasto-Plastic Adhesion (Morrissey 2013; Thakur et al. 2014)."""
 
 
 class Overflow(enum.IntFlag):

@@ -415,3 +415,6 @@ def run_all(device: str = "cpu", only: list[str] | None = None) -> list[Record]:
 from .verify_bodies import BODY_CASES  # noqa: E402
 
 CASES.update(BODY_CASES)
+from .verify_cohesion import COHESION_CASES  # noqa: E402
+
+CASES.update(COHESION_CASES)
