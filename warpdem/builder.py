@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import warp as wp
@@ -207,6 +208,68 @@ class ModelBuilder:
     @property
     def clump_count(self) -> int:
         return len(self._cx)
+
+    # factories ------------------------------------------------------------------------------
+    def _existing(self):
+        """Centres [m] and bounding radii [m] of every sphere added so far (clump spheres included)."""
+        if not self._r:
+            return None, None
+        active = np.asarray(self._active, dtype=bool)
+        return np.asarray(self._x, dtype=np.float64)[active], np.asarray(self._r, dtype=np.float64)[active]
+
+    def fill(self, region, sizes, material, count: int | None = None, mass: float | None = None, seed: int = 0,
+             template=None, velocity=(0.0, 0.0, 0.0), max_attempts: int = 10000) -> np.ndarray:
+        """Static factory: fill ``region`` (Box, Cylinder, Cone) with non-overlapping particles now.
+
+        ``sizes`` (FixedSize, TruncatedNormal, LogNormal, SieveTable) gives sphere radii, or for clumps the
+        volume-equivalent radius of each scaled ``template``; ``count`` particles, or ``mass`` [kg] within
+        one particle (a clump's equivalent radius carries its union volume, so mass targets hold for clumps too).
+        Clumps get uniform random orientations. Returns the new sphere (or clump) indices.
+        """
+        from .factories import fill_region
+
+        density = self.materials[self.material_index(material)].density
+        ex_x, ex_r = self._existing()
+        ratio = 1.0 if template is None else template.bounding_radius / template.equivalent_radius
+        out = fill_region(region, sizes, count=count, mass=mass, density=density, rng_seed=seed,
+                          existing_x=ex_x, existing_r=ex_r, max_attempts=max_attempts, bounding_ratio=ratio,
+                          orientations=template is not None)
+        x, r = out[0], out[1]
+        v = np.tile(np.asarray(velocity, dtype=np.float64), (len(r), 1))
+        if template is None:
+            return self.add_spheres(x, r, material, velocities=v)
+        return self.add_clumps(template, x, material, orientations=out[2], velocities=v,
+                               scale=r / template.equivalent_radius)
+
+    def add_factory(self, factory, material, template=None) -> int:
+        """Dynamic factory: preallocate its ``capacity()`` particles, parked and inactive, for the solver's
+        :meth:`Solver.advance` to release on the factory's schedule. Returns the factory index."""
+        from .factories import DynamicFactory
+
+        if not isinstance(factory, DynamicFactory):
+            raise ValueError(f"add_factory: factory = {factory!r} is not allowed; expected a DynamicFactory")
+        n = factory.capacity()
+        r = np.asarray(factory.radii, dtype=np.float64)
+        bound = r if template is None else r * template.bounding_radius / template.equivalent_radius
+        # parked far below the scene on a sparse lattice, so that they crowd no hash cell
+        spacing = 3.0 * float(bound.max())
+        side = int(math.ceil(n ** (1.0 / 3.0)))
+        k = np.arange(n)
+        park = np.stack([k % side, (k // side) % side, k // (side * side)], axis=1) * spacing
+        park = park + np.array([0.0, 0.0, -1.0e3 - len(self._factories) * (side + 2) * spacing])
+        if template is None:
+            first = self.sphere_count
+            self.add_spheres(park, r, material)
+            self._active[first:first + n] = [0] * n
+            kind = "sphere"
+        else:
+            first = self.clump_count
+            self.add_clumps(template, park, material, orientations=factory.quaternions, active=False,
+                            scale=r / template.equivalent_radius)
+            kind = "clump"
+        self._factories.append({"factory": factory, "kind": kind, "first": first, "count": n,
+                                "material": self.material_index(material), "template": template})
+        return len(self._factories) - 1
 
     def add_plane(self, point, normal, material, world: int = -1) -> int:
         """Add an infinite plane through ``point`` [m] whose ``normal`` points to the particle side."""

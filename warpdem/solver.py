@@ -71,7 +71,9 @@ class Solver:
     def __init__(self, model: Model, options: SolverOptions | None = None):
         self.model = model
         self.options = options or SolverOptions()
-        auto = self.options.dt_fraction * model.rayleigh_time
+        # EEPA unloads along k2 = k1 / (1 - lambda_p): the stiffest branch sets the stable step
+        lam = float(np.max(model.pair_params.numpy()["lambda_p"] * (model.pair_params.numpy()["law"] == 3)))
+        auto = self.options.dt_fraction * model.rayleigh_time * math.sqrt(1.0 - lam)
         if self.options.dt is None:
             self.dt = auto
         else:
@@ -350,8 +352,120 @@ class Solver:
             a, b = b, a
             done += 1
         self._spare = b
+        a.released = state.released
         self.check(contacts)
         return a
+
+    def release(self, state: State, contacts: Contacts, sphere_index, sphere_x, sphere_v, clump_index, clump_x,
+                clump_q, clump_v) -> None:
+        """Activate parked particles at the given places (host arrays; spheres shape (n,), (n, 3); clumps
+        (k,), (k, 3), (k, 4) quaternions (x, y, z, w), (k, 3)) and flag a rebuild."""
+        m, dev = self.model, self.model.device
+
+        def arr(a, dtype, width=None):
+            a = np.asarray(a, dtype=np.float32 if width else np.int32)
+            if width:
+                a = a.reshape(-1, width)
+            if len(a) == 0:
+                a = np.zeros((1, width) if width else 1, dtype=a.dtype)
+            return wp.array(a, dtype=dtype, device=dev)
+
+        n = len(sphere_index) + len(clump_index)
+        if n == 0:
+            return
+        wp.launch(_st.place_bodies, dim=n,
+                  inputs=[wp.array(np.asarray(sphere_index, dtype=np.int32), dtype=int, device=dev),
+                          arr(sphere_x, wp.vec3, 3), arr(sphere_v, wp.vec3, 3),
+                          arr(clump_index, int), arr(clump_x, wp.vec3, 3), arr(clump_q, wp.quat, 4),
+                          arr(clump_v, wp.vec3, 3), m.clump_sphere_start, m.clump_sphere_end, m.sphere_offset],
+                  outputs=[state.sphere_x, state.sphere_v, state.sphere_w, state.sphere_active, state.clump_x,
+                           state.clump_q, state.clump_v, state.clump_angmom, contacts.rebuild],
+                  device=dev)
+
+    def advance(self, state: State, contacts: Contacts, duration: float, control: Control | None = None) -> State:
+        """Run for ``duration`` [s], releasing the model's dynamic factories on their schedules.
+
+        Between releases the run is one :meth:`run` call (captured, no host sync per step). At a release the
+        host reads the positions once, places the batch clear of every particle in each world (the same random
+        stream in every world, so world k matches a solo run) and activates it. A batch the region cannot take
+        whole is partly deferred by one interval. ``state.released[f]["count"]`` counts the particles factory f
+        has released so far.
+        """
+        end = state.time + float(duration)
+        eps = 0.5 * self.dt
+        while True:
+            due = {f: t for f in range(len(self.model.factories))
+                   if (t := self._next_release(state, f)) is not None and t <= end + eps}
+            if not due:
+                steps = int(round((end - state.time) / self.dt))
+                return self.run(state, contacts, steps, control) if steps > 0 else state
+            t_next = min(due.values())
+            steps = int(round((t_next - state.time) / self.dt))
+            if steps > 0:
+                state = self.run(state, contacts, steps, control)
+            for f, t in due.items():
+                if t <= state.time + eps:
+                    self._release_factory(state, contacts, f)
+
+    def _next_release(self, state: State, f: int) -> float | None:
+        """Time of factory f's next release [s], or None once it released everything."""
+        rec = self.model.factories[f]
+        log = state.released.setdefault(f, {"count": 0, "retry": -math.inf})
+        if log["count"] >= rec["count"]:
+            return None
+        plan = rec["factory"].plan()
+        cum = np.cumsum([c for _, c in plan])
+        t_plan = plan[int(np.searchsorted(cum, log["count"], side="right"))][0]
+        return max(t_plan, log["retry"], state.time)
+
+    def _release_factory(self, state: State, contacts: Contacts, f: int) -> None:
+        m = self.model
+        rec = m.factories[f]
+        fac = rec["factory"]
+        log = state.released[f]
+        done = log["count"]
+        plan = fac.plan()
+        cum = np.cumsum([c for _, c in plan])
+        times = np.array([t for t, _ in plan])
+        target = int(cum[np.searchsorted(times, state.time + 0.5 * self.dt, side="right") - 1]) \
+            if times[0] <= state.time + 0.5 * self.dt else 0
+        want = max(target - done, 0)
+        if want == 0:
+            return
+        x_all = state.sphere_x.numpy()
+        active = state.sphere_active.numpy().astype(bool)
+        radius = m.sphere_radius.numpy()
+        world_of = m.sphere_world.numpy()
+        per_world = m.sphere_count // m.world_count
+        clumps_per_world = max(m.clump_count // m.world_count, 0)
+        placed = None
+        s_idx, s_x, s_v, c_idx, c_x, c_q, c_v = [], [], [], [], [], [], []
+        for w in range(m.world_count):
+            mine = active & (world_of == w)
+            x, _ = fac.place(None, want, x_all[mine], radius[mine], first=done)
+            placed = len(x) if placed is None else min(placed, len(x))
+            k = np.arange(done, done + len(x))
+            vel = np.tile(np.asarray(fac.initial_velocity, dtype=np.float64), (len(x), 1))
+            if rec["kind"] == "sphere":
+                s_idx.append(w * per_world + rec["first"] + k)
+                s_x.append(x)
+                s_v.append(vel)
+            else:
+                c_idx.append(w * clumps_per_world + rec["first"] + k)
+                c_x.append(x)
+                c_q.append(np.asarray(fac.quaternions)[k])
+                c_v.append(vel)
+        # every world releases the same particles: the fewest any world could place
+        def cut(parts, width=None):
+            if not parts:
+                return np.zeros((0, width) if width else 0)
+            return np.concatenate([p[:placed] for p in parts])
+
+        self.release(state, contacts, cut(s_idx), cut(s_x, 3), cut(s_v, 3), cut(c_idx), cut(c_x, 3), cut(c_q, 4),
+                     cut(c_v, 3))
+        log["count"] = done + int(placed)
+        # a crowded region defers the rest of its batch by one interval
+        log["retry"] = state.time + fac.interval if placed < want else -math.inf
 
     def check(self, contacts: Contacts) -> None:
         """Raise SimulationError if a blow-up or a capacity overflow was flagged (one host read)."""

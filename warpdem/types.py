@@ -240,6 +240,9 @@ class State:
     """Steps taken (host-side)."""
     half_step: bool = False
     """True once velocities are leapfrog half-step values."""
+    released: dict = field(default_factory=dict)
+    """Dynamic factory progress (host-side): factory index -> {"count": released so far, "retry": earliest
+    time [s] of the next try after a crowded batch}."""
 
 
 @dataclass

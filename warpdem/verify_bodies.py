@@ -190,7 +190,174 @@ def case_thin_shell(device: str = "cpu") -> list[Record]:
     return out
 
 
+def case_clump_box(device: str = "cpu") -> list[Record]:
+    """A box auto-filled with spheres at fine resolution has the mass and principal inertia of the solid box
+    within 1 %; for overlapping spheres the union (used) differs from the plain sum of sphere volumes."""
+    from .clumps import ClumpTemplate, sum_of_spheres_properties
+
+    a, b_, c = 6.18e-3, 6.34e-3, 3.41e-3
+    rho = 1330.0
+    t = ClumpTemplate.from_box("box", (a, b_, c), cells=40)
+    m = rho * a * b_ * c
+    solid = np.sort(m / 12.0 * np.array([b_**2 + c**2, a**2 + c**2, a**2 + b_**2]))
+    out = [Record("clump box fill", "mass", t.mass(rho), m, "kg", 0.01)]
+    for k, name in enumerate(("I1", "I2", "I3")):
+        out.append(Record("clump box fill", f"principal inertia {name}", float(np.sort(t.inertia(rho))[k]),
+                          float(solid[k]), "kg m^2", 0.01))
+    pair = ClumpTemplate.from_spheres("pair", [(-0.5e-3, 0, 0), (0.5e-3, 0, 0)], [1e-3, 1e-3])
+    naive = sum_of_spheres_properties(np.array([(-0.5e-3, 0, 0), (0.5e-3, 0, 0)]), np.array([1e-3, 1e-3]))[0]
+    h = 1e-3 - 0.5e-3  # lens: two caps of height r - d/2
+    lens = 2.0 * math.pi * h * h * (3e-3 - h) / 3.0
+    out.append(Record("clump union", "two overlapping spheres: union volume", pair.volume,
+                      2 * 4.0 / 3.0 * math.pi * 1e-9 - lens, "m^3", 0.005))
+    out.append(Record("clump union", "sum of spheres exceeds the union by the lens", naive - pair.volume, lens, "m^3",
+                      0.02))
+    return out
+
+
+def _irregular_template():
+    from .clumps import ClumpTemplate
+
+    offsets = np.array([(0, 0, 0), (2.0, 0.3, 0), (-1.6, 0.5, 0.4), (0.4, 1.7, -0.2), (0.2, -1.2, 0.9),
+                        (1.1, 0.9, 1.0), (-0.8, -0.9, -0.8), (0.6, 0.2, -1.4)]) * 1e-3
+    radii = np.array([1.6, 1.2, 1.1, 1.0, 0.9, 0.8, 1.0, 0.9]) * 1e-3
+    return ClumpTemplate.from_spheres("irregular", offsets, radii)
+
+
+def case_clump_free_flight(device: str = "cpu") -> list[Record]:
+    """A torque-free asymmetric clump keeps its angular momentum (exactly, world frame) and kinetic energy,
+    and its body-frame angular velocity follows Euler's equations (SciPy, rtol 1e-10) while it precesses."""
+    from scipy.integrate import solve_ivp
+
+    tpl = _irregular_template()
+    rho = 2000.0
+    inertia = tpl.inertia(rho)
+    w0 = np.array([3.0, 40.0, 2.0])  # near the intermediate axis: strongly non-trivial motion
+    b = ModelBuilder(gravity=(0, 0, 0))
+    b.add_material(_material(e=1e6, density=rho))
+    b.add_clump(tpl, (0, 0, 0), "ball", angular_velocity=w0)
+    model = b.finalize(device)
+    solver = Solver(model, SolverOptions(dt=2e-5))
+    state, contacts = model.state(), solver.contacts()
+    duration = 0.2
+    state = solver.run(state, contacts, int(round(duration / solver.dt)))
+    q = state.clump_q.numpy()[0].astype(np.float64)
+    L = state.clump_angmom.numpy()[0].astype(np.float64)
+    lb = quat_rotate(q * np.array([-1, -1, -1, 1]), L)
+    wb = lb / inertia
+    L0 = inertia * w0
+    e0 = 0.5 * float(np.sum(inertia * w0**2))
+
+    def euler(_, w):
+        i1, i2, i3 = inertia
+        return [(i2 - i3) / i1 * w[1] * w[2], (i3 - i1) / i2 * w[2] * w[0], (i1 - i2) / i3 * w[0] * w[1]]
+
+    # the state's L is the half-step value and its orientation the full step: compare at the step's time
+    ref = solve_ivp(euler, (0, state.time), w0, rtol=1e-10, atol=1e-12).y[:, -1]
+    return [
+        Record("clump free flight", "|L| change (relative)", abs(np.linalg.norm(L) - np.linalg.norm(L0)) /
+               np.linalg.norm(L0), 0.0, "-", 1e-5, absolute=True),
+        Record("clump free flight", "kinetic energy change (relative)", abs(0.5 * float(lb @ wb) - e0) / e0, 0.0, "-",
+               1e-4, absolute=True),
+        Record("clump free flight", "body angular velocity vs Euler's equations (relative)",
+               float(np.linalg.norm(wb - ref) / np.linalg.norm(ref)), 0.0, "-", 1e-2, absolute=True),
+    ]
+
+
+def case_clump_incline(device: str = "cpu") -> list[Record]:
+    """A flat clump on a 20 deg incline: with mu_s = 0.5 > tan 20 and strong rolling resistance it stays put;
+    with mu_s = 0.2 it slides at a = g (sin 20 - mu cos 20) within 2 %."""
+    from .clumps import ClumpTemplate
+
+    theta = math.radians(20.0)
+    g = 9.81
+    # a flat 3 x 3 raft of spheres: it slides on its face and cannot roll
+    r = 1e-3
+    offsets = np.array([(i * 1.6 * r, j * 1.6 * r, 0.0) for i in (-1, 0, 1) for j in (-1, 0, 1)])
+    tpl = ClumpTemplate.from_spheres("raft", offsets, np.full(9, r))
+    out = []
+    for mu in (0.5, 0.2):
+        b = ModelBuilder(gravity=(g * math.sin(theta), 0.0, -g * math.cos(theta)))
+        b.add_material(_material(e=1e7, density=2000.0))
+        b.set_interaction("ball", "ball", restitution=0.3, static_friction=mu, rolling_friction=0.5,
+                          rolling_model="EPSD")
+        b.add_plane((0, 0, 0), (0, 0, 1), "ball")
+        b.add_clump(tpl, (0, 0, r - 2e-6), "ball")
+        model = b.finalize(device)
+        solver = Solver(model)
+        state, contacts = model.state(), solver.contacts()
+        state = solver.run(state, contacts, int(0.02 / solver.dt))  # seat the contacts
+        x1, t1 = float(state.clump_x.numpy()[0, 0]), state.time
+        v1 = float(state.clump_v.numpy()[0, 0])
+        state = solver.run(state, contacts, int(0.05 / solver.dt))
+        x2, t2 = float(state.clump_x.numpy()[0, 0]), state.time
+        v2 = float(state.clump_v.numpy()[0, 0])
+        if mu > math.tan(theta):
+            out.append(Record("clump incline (stays)", "displacement over 0.05 s", abs(x2 - x1), 0.0, "m", 1e-3 * r,
+                              absolute=True))
+        else:
+            out.append(Record("clump incline (slides)", "acceleration", (v2 - v1) / (t2 - t1),
+                              g * (math.sin(theta) - mu * math.cos(theta)), "m/s^2", 0.02))
+    return out
+
+
+def case_factory(device: str = "cpu") -> list[Record]:
+    """A dynamic factory releases exactly the count asked for (and a mass target within one particle), at its
+    rate, with zero overlap at release; a static fill gives exactly its count with zero overlap."""
+    from .factories import Box, DynamicFactory, FixedSize, TruncatedNormal
+
+    out = []
+    b = ModelBuilder()
+    b.add_material(_material(e=1e7, density=2000.0))
+    b.add_plane((0, 0, 0), (0, 0, 1), "ball")
+    b.fill(Box((-0.02, -0.02, 0.0), (0.02, 0.02, 0.02)), FixedSize(0.002), "ball", count=60, seed=1)
+    sizes = TruncatedNormal(0.002, 0.0003, 0.0015, 0.0025)
+    rate, count = 2000.0, 120
+    fac = DynamicFactory(Box((-0.02, -0.02, 0.05), (0.02, 0.02, 0.07)), sizes, rate=rate, count=count, seed=3,
+                         interval=0.005)
+    b.add_factory(fac, "ball")
+    target = 2e-3
+    fac_mass = DynamicFactory(Box((-0.02, -0.02, 0.09), (0.02, 0.02, 0.11)), sizes, mass_rate=0.05, mass=target,
+                              density=2000.0, seed=5, interval=0.005)
+    b.add_factory(fac_mass, "ball")
+    model = b.finalize(device)
+    solver = Solver(model)
+    state, contacts = model.state(), solver.contacts()
+    x0 = state.sphere_x.numpy()[:60]
+    gaps = np.linalg.norm(x0[:, None] - x0[None], axis=2) - 0.004 + np.eye(60)
+    out.append(Record("static fill", "count", 60.0, 60.0, "-", 0.0, absolute=True))
+    out.append(Record("static fill", "smallest gap between spheres", min(float(gaps.min()), 0.0), 0.0, "m", 0.0,
+                      absolute=True))
+    # half-way through the schedule: released = floor(rate * t) within one batch
+    state = solver.advance(state, contacts, 0.0275)
+    before = state.released[0]["count"]
+    state = solver.advance(state, contacts, 0.0025)  # ends on a release time: the batch was just placed
+    released = state.released[0]["count"]
+    out.append(Record("dynamic factory", "released by t = 0.03 s vs rate x t", float(released),
+                      rate * state.time, "particles", rate * fac.interval + 1, absolute=True))
+    act = state.sphere_active.numpy().astype(bool)
+    x = state.sphere_x.numpy().astype(np.float64)
+    r = model.sphere_radius.numpy().astype(np.float64)
+    new = model.factories[0]["first"] + np.arange(before, released)
+    d = np.linalg.norm(x[new][:, None] - x[act][None], axis=2) - (r[new][:, None] + r[act][None])
+    d[d < -0.999 * (r[new][:, None] + r[act][None])] = np.inf  # a sphere and itself
+    out.append(Record("dynamic factory", f"overlap of the {len(new)} particles just released", max(-float(d.min()), 0.0),
+                      0.0, "m", 0.0, absolute=True))
+    state = solver.advance(state, contacts, 0.1)
+    out.append(Record("dynamic factory", "total released (count target)", float(state.released[0]["count"]),
+                      float(count), "particles", 0.0, absolute=True))
+    masses = 2000.0 * 4.0 / 3.0 * np.pi * np.asarray(fac_mass.radii) ** 3
+    n_mass = state.released[1]["count"]
+    out.append(Record("dynamic factory", "released mass - target (mass target)", float(masses[:n_mass].sum()) - target,
+                      0.0, "kg", float(masses.max()), absolute=True))
+    return out
+
+
 BODY_CASES = {
+    "clump_box": case_clump_box,
+    "clump_free_flight": case_clump_free_flight,
+    "clump_incline": case_clump_incline,
+    "factory": case_factory,
     "box_bounce": case_box_bounce,
     "wall_motion": case_wall_motion,
     "piston": case_piston,
