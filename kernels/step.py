@@ -226,6 +226,11 @@ def step_spheres(
         d = x_in[b] - x_in[a]
         dist = wp.length(d)
         overlap = r_a + r_b - dist
+        # apart and without history: no law acts (a JKR pair keeps aux = 1 while it hangs on in a gap)
+        if overlap <= 0.0 and neighbor_aux[k, i] == 0.0:
+            neighbor_spring[k, i] = wp.vec3(0.0)
+            neighbor_roll[k, i] = wp.vec3(0.0)
+            continue
         if dist <= 0.0 or active_in[j] == 0:
             neighbor_spring[k, i] = wp.vec3(0.0)
             neighbor_roll[k, i] = wp.vec3(0.0)

@@ -20,8 +20,47 @@ from .solver import Solver, SolverOptions
 DIAMETER = 0.005
 
 
-def build_bed(count: int, device: str, seed: int = 1):
-    """Model of ``count`` spheres (rounded to full 5-layer lattices) in a square box; returns (model, side [m])."""
+def bench_template(spheres: int):
+    """A clump of ``spheres`` (8: a 2 x 2 x 2 block of overlapping spheres) that fits a sphere of d = 5 mm."""
+    from .clumps import ClumpTemplate
+
+    if spheres != 8:
+        raise ValueError(f"bench: clumps = {spheres} is not allowed; expected 8 (the issue's benchmark clump)")
+    a, rs = 0.12 * DIAMETER, 0.2 * DIAMETER
+    offsets = [(x, y, z) for x in (-a, a) for y in (-a, a) for z in (-a, a)]
+    return ClumpTemplate.from_spheres("bench8", offsets, [rs] * 8)
+
+
+def _box_mesh(side: float, height: float, cells: int):
+    """Floor and four side walls of the bed's box as one mesh, each face split into cells x cells quads."""
+    g = np.linspace(0.0, 1.0, cells + 1)
+    u, v = np.meshgrid(g, g, indexing="ij")
+    quads = [(i * (cells + 1) + j, (i + 1) * (cells + 1) + j, (i + 1) * (cells + 1) + j + 1, i * (cells + 1) + j + 1)
+             for i in range(cells) for j in range(cells)]
+    faces = [
+        np.stack([u * side, v * side, 0 * u], -1),
+        np.stack([0 * u, u * side, v * height], -1),
+        np.stack([0 * u + side, u * side, v * height], -1),
+        np.stack([u * side, 0 * u, v * height], -1),
+        np.stack([u * side, 0 * u + side, v * height], -1),
+    ]
+    verts, tris = [], []
+    for f in faces:
+        base = sum(len(x) for x in verts)
+        verts.append(f.reshape(-1, 3))
+        tris.extend([(base + a, base + b, base + c) for a, b, c, d in quads] +
+                    [(base + a, base + c, base + d) for a, b, c, d in quads])
+    return np.concatenate(verts), np.array(tris)
+
+
+def build_bed(count: int, device: str, seed: int = 1, clumps: int = 0, walls: str = "planes", law: str = "HM",
+              mesh_cells: int = 40):
+    """Model of ``count`` bodies (rounded to full 5-layer lattices) in a square box; returns (model, side [m]).
+
+    ``clumps`` = 8 makes each body an 8-sphere clump (random orientation) instead of a sphere; ``walls`` =
+    "mesh" replaces the five planes by one triangle mesh of 10 mesh_cells^2 triangles (a funnel-sized mesh);
+    ``law`` (HM, JKR, EEPA) sets the contact law of every pair, with moderate cohesion.
+    """
     layers = 5
     per_side = max(2, int(round(math.sqrt(count / layers))))
     side = per_side * DIAMETER
@@ -32,13 +71,30 @@ def build_bed(count: int, device: str, seed: int = 1):
     pts[:, :2] += rng.uniform(-2e-4, 2e-4, (len(pts), 2))
     b = ModelBuilder()
     b.add_material(Material("bed", density=2500.0, youngs_modulus=1e8, poisson_ratio=0.3))
-    b.set_default_interaction(restitution=0.5, static_friction=0.5, rolling_friction=0.0)
-    b.add_plane((0, 0, 0), (0, 0, 1), "bed")
-    b.add_plane((0, 0, 0), (1, 0, 0), "bed")
-    b.add_plane((side, 0, 0), (-1, 0, 0), "bed")
-    b.add_plane((0, 0, 0), (0, 1, 0), "bed")
-    b.add_plane((0, side, 0), (0, -1, 0), "bed")
-    b.add_spheres(pts, 0.5 * DIAMETER, "bed")
+    cohesion = {"HM": {}, "JKR": {"law": "JKR", "surface_energy": 0.5},
+                "EEPA": {"law": "EEPA", "surface_energy": 0.5, "pull_off_force": -1e-4, "plasticity_ratio": 0.3}}
+    if law not in cohesion:
+        raise ValueError(f"bench: law = {law!r} is not allowed; expected HM, JKR or EEPA")
+    b.set_default_interaction(restitution=0.5, static_friction=0.5, rolling_friction=0.0, **cohesion[law])
+    if walls == "planes":
+        b.add_plane((0, 0, 0), (0, 0, 1), "bed")
+        b.add_plane((0, 0, 0), (1, 0, 0), "bed")
+        b.add_plane((side, 0, 0), (-1, 0, 0), "bed")
+        b.add_plane((0, 0, 0), (0, 1, 0), "bed")
+        b.add_plane((0, side, 0), (0, -1, 0), "bed")
+    elif walls == "mesh":
+        # triangles of about two diameters or more, up to mesh_cells per face edge (a funnel has ~10^4)
+        cells = int(max(2, min(mesh_cells, side / (2.0 * DIAMETER))))
+        v, t = _box_mesh(side, layers * 1.1 * DIAMETER + DIAMETER, cells)
+        b.add_wall_mesh(v, t, "bed", name="box")
+    else:
+        raise ValueError(f"bench: walls = {walls!r} is not allowed; expected planes or mesh")
+    if clumps:
+        from .factories import random_quaternions
+
+        b.add_clumps(bench_template(clumps), pts, "bed", orientations=random_quaternions(rng, len(pts)))
+    else:
+        b.add_spheres(pts, 0.5 * DIAMETER, "bed")
     return b.finalize(device), side
 
 
@@ -73,13 +129,13 @@ def device_bytes(obj) -> int:
 
 
 def run_bench(device: str = "cpu", count: int | None = None, steps: int | None = None,
-              settle_steps: int = 20000) -> dict:
-    """Settle the bed, then time ``steps`` steps; returns the figures."""
+              settle_steps: int = 20000, clumps: int = 0, walls: str = "planes", law: str = "HM") -> dict:
+    """Settle the bed, then time ``steps`` steps; returns the figures (``count`` bodies: spheres or clumps)."""
     is_cuda = wp.get_device(device).is_cuda
     count = count or (1_000_000 if is_cuda else 2000)
     steps = steps or (2000 if is_cuda else 5000)
-    model, side = build_bed(count, device)
-    solver = Solver(model, SolverOptions(dt=1e-5))
+    model, side = build_bed(count, device, clumps=clumps, walls=walls, law=law)
+    solver = Solver(model, SolverOptions(dt=1e-5, mesh_capacity=32 if walls == "mesh" else 16))
     state = model.state()
     contacts = solver.contacts()
     t0 = time.perf_counter()
@@ -97,8 +153,13 @@ def run_bench(device: str = "cpu", count: int | None = None, steps: int | None =
     n = model.sphere_count
     b_model, b_state, b_contacts = device_bytes(model), 2 * device_bytes(state), device_bytes(contacts)
     ke = 0.5 * float(np.sum(state.sphere_v.numpy() ** 2)) / n
+    bodies = model.clump_count or n
     return {
         "device": str(wp.get_device(device).name if is_cuda else "cpu"),
+        "law": law,
+        "walls": walls if walls == "planes" else f"mesh ({model.triangle_wall.shape[0]} triangles)",
+        "clumps": model.clump_count,
+        "clump_steps_per_s": model.clump_count * steps / wall if model.clump_count else 0.0,
         "spheres": n,
         "steps": steps,
         "wall_s": wall,

@@ -54,7 +54,8 @@ def cmd_bench(args) -> int:
     _quiet_warp()
     from .bench import run_bench
 
-    res = run_bench(args.device, args.count, args.steps, args.settle_steps)
+    res = run_bench(args.device, args.count, args.steps, args.settle_steps, clumps=args.clumps, walls=args.walls,
+                    law=args.law)
     rows = [(k, f"{v:.4g}" if isinstance(v, float) else str(v)) for k, v in res.items()]
     _table("warpdem bench: settled bed, Hertz-Mindlin with history", ["figure", "value"], rows)
     if args.json:
@@ -94,9 +95,12 @@ def main(argv=None) -> int:
     b = sub.add_parser("bench", help="throughput of a settled bed")
     b.add_argument("--device", default="cpu")
     b.add_argument("--json")
-    b.add_argument("--count", type=int, help="spheres (default 2000 on CPU, 1,000,000 on CUDA)")
+    b.add_argument("--count", type=int, help="bodies (default 2000 on CPU, 1,000,000 on CUDA)")
     b.add_argument("--steps", type=int, help="timed steps")
     b.add_argument("--settle-steps", type=int, default=20000)
+    b.add_argument("--clumps", type=int, default=0, help="8: every body an 8-sphere clump (count = clumps)")
+    b.add_argument("--walls", default="planes", choices=["planes", "mesh"], help="box as planes or one mesh")
+    b.add_argument("--law", default="HM", choices=["HM", "JKR", "EEPA"], help="contact law of every pair")
     b.set_defaults(fn=cmd_bench)
     pl = sub.add_parser("pile", help="pour a small pile on a plate and print its angle of repose")
     pl.add_argument("--device", default="cpu")
