@@ -4,13 +4,32 @@ The public API, listed once in ``__all__``.
 """
 
 from .builder import ModelBuilder
+from .clumps import ClumpTemplate, pellet_template, phosphate_template
+from .factories import (Box, Cone, Cylinder, DynamicFactory, FixedSize, LogNormal, SieveTable, TruncatedNormal,
+                        fill_region, random_quaternions)
 from .materials import Interaction, InteractionTable, Material, effective_moduli
+from .motion import Segment, WallMotion
 from .solver import SimulationError, Solver, SolverOptions
 from .types import ContactLaw, Contacts, Control, Model, Overflow, RollingModel, State
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "Box",
+    "ClumpTemplate",
+    "Cone",
+    "Cylinder",
+    "DynamicFactory",
+    "FixedSize",
+    "LogNormal",
+    "Segment",
+    "SieveTable",
+    "TruncatedNormal",
+    "WallMotion",
+    "fill_region",
+    "pellet_template",
+    "phosphate_template",
+    "random_quaternions",
     "ContactLaw",
     "Contacts",
     "Control",
