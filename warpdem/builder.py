@@ -248,6 +248,12 @@ class ModelBuilder:
 
         if not isinstance(factory, DynamicFactory):
             raise ValueError(f"add_factory: factory = {factory!r} is not allowed; expected a DynamicFactory")
+        if template is not None:
+            need = template.bounding_radius / template.equivalent_radius
+            if factory.bounding_ratio < need * (1 - 1e-9):
+                raise ValueError(f"add_factory: factory.bounding_ratio = {factory.bounding_ratio!r} is not allowed for "
+                                 f"template {template.name!r}; expected at least its bounding / equivalent radius "
+                                 f"= {need:.6g}, or released clumps could overlap")
         n = factory.capacity()
         r = np.asarray(factory.radii, dtype=np.float64)
         bound = r if template is None else r * template.bounding_radius / template.equivalent_radius

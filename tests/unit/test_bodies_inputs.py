@@ -78,3 +78,13 @@ def test_clump_and_sphere_mix_and_union_mass_is_used():
     assert np.linalg.norm(x[0] - x[1]) == pytest.approx(2e-3, rel=1e-5)
     assert x[2, 2] == pytest.approx(1e-3, abs=1e-4)  # the sphere rests on the floor
     assert x[:2, 2].min() > 1.4e-3  # the clump landed on the floor too, not through it
+
+
+def test_clump_factory_needs_the_template_bounding_ratio():
+    """A dynamic factory of clumps must keep them apart by their bounding radius, or add_factory refuses it."""
+    b = wd.ModelBuilder()
+    b.add_material(wd.Material("m", density=1000, youngs_modulus=1e7, poisson_ratio=0.3))
+    grain = wd.phosphate_template()
+    fac = wd.DynamicFactory(wd.Box((0, 0, 0), (0.01, 0.01, 0.01)), wd.FixedSize(1e-3), rate=100, count=5, seed=1)
+    with pytest.raises(ValueError, match="bounding_ratio = 1.0"):
+        b.add_factory(fac, "m", template=grain)
