@@ -27,7 +27,7 @@ from warpdem.factories import (
     random_quaternions,
 )
 
-PSD_CSV = Path(__file__).resolve().parents[3] / "shared" / "reference" / "phosphate_psd.csv"
+PSD_CSV = Path(__file__).resolve().parents[2] / "studies" / "reference" / "phosphate_psd.csv"
 Z = 5.0  # tolerance in standard errors
 
 REGIONS = {
