@@ -24,19 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .materials import _check, _finite
+
 _FOUR_THIRDS_PI = 4.0 * math.pi / 3.0
-
-
-def _check(cond: bool, where: str, field_name: str, value, allowed: str) -> None:
-    if not cond:
-        raise ValueError(f"{where}: {field_name} = {value!r} is not allowed; expected {allowed}")
-
-
-def _finite(x) -> bool:
-    try:
-        return math.isfinite(float(x))
-    except (TypeError, ValueError):
-        return False
 
 
 def _short(a: np.ndarray) -> str:
