@@ -171,13 +171,3 @@ def build_contacts(
                   mcount, new_mesh_spring, new_mesh_roll, new_mesh_aux, i)
     new_mesh_count[i] = mcount
 
-
-@wp.kernel
-def save_wall_poses(
-    pose: wp.array[wp.transform],
-    # Out:
-    build_pose_out: wp.array[wp.transform],
-):
-    """Remember where the walls were when the lists were built (the rebuild criterion compares to it)."""
-    k = wp.tid()
-    build_pose_out[k] = pose[k]

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .types import Contacts, Control, Model, Overflow, State
+from .types import ContactLaw, Contacts, Control, Model, Overflow, State
 
 from warpdem.kernels import neighbors as _nb
 from warpdem.kernels import step as _st
@@ -72,7 +72,8 @@ class Solver:
         self.model = model
         self.options = options or SolverOptions()
         # EEPA unloads along k2 = k1 / (1 - lambda_p): the stiffest branch sets the stable step
-        lam = float(np.max(model.pair_params.numpy()["lambda_p"] * (model.pair_params.numpy()["law"] == 3)))
+        pairs = model.pair_params.numpy()
+        lam = float(np.max(pairs["lambda_p"] * (pairs["law"] == int(ContactLaw.EEPA))))
         auto = self.options.dt_fraction * model.rayleigh_time * math.sqrt(1.0 - lam)
         if self.options.dt is None:
             self.dt = auto
@@ -172,9 +173,7 @@ class Solver:
         )
         for name, buf in s.items():
             wp.copy(getattr(c, name), buf)
-        if m.wall_count:
-            wp.launch(_nb.save_wall_poses, dim=m.wall_count, inputs=[state.wall_pose], outputs=[c.wall_build_pose],
-                      device=m.device)
+        wp.copy(c.wall_build_pose, state.wall_pose)
         c.rebuild.zero_()
 
     def step(self, state_in: State, state_out: State, control: Control | None, contacts: Contacts,
@@ -266,7 +265,8 @@ class Solver:
                       inputs=[self._wall_lanes, self._wall_t_lanes, state_in.wall_impulse, wp.float64(dt)],
                       outputs=[state_out.wall_f, state_out.wall_t, state_out.wall_impulse],
                       device=m.device)
-        wp.copy(state_out.sphere_active, state_in.sphere_active)
+        if state_out.sphere_active is not state_in.sphere_active:
+            wp.copy(state_out.sphere_active, state_in.sphere_active)
         if m.wall_count:
             self._move_walls(state_out, control, c, rebuild=c.rebuild)
         state_out.time = state_in.time + dt
@@ -289,6 +289,8 @@ class Solver:
         t0, step0 = state.time, state.step
         if self._spare is None or self._spare.sphere_x.shape != state.sphere_x.shape:
             self._spare = self.model.state()
+        # the twin shares the activity flags: they change only at a release, never within a step
+        self._spare.sphere_active = state.sphere_active
         a, b = state, self._spare
         if use_graph is None:
             # CUDA graphs on GPU; Warp's CPU capture removes the Python launch overhead on CPU too

@@ -26,17 +26,21 @@ E = 1.0e7
 """Sphere Young's modulus [Pa] (the plate is 1e6 times stiffer)."""
 
 
+HEAVY_BALL = Material("ball", density=1e12, youngs_modulus=E, poisson_ratio=0.3)
+"""So heavy that the plate's pull and push do not move it: the plate prescribes the overlap."""
+PLATE = Material("plate", density=7800.0, youngs_modulus=E * 1e6, poisson_ratio=0.3)
+PRESS_E_STAR = effective_moduli(HEAVY_BALL, PLATE)[0]
+
+
 def _press(device: str, law: str, stroke: list[tuple[float, float, int]], dt: float = 2e-7, **interaction):
     """Drive a plate along z from a gap of 2 um through ``stroke`` [(target overlap [m], speed [m/s],
     sample every k steps)], against a sphere too heavy to move.
 
     Returns (overlap [m], force on the plate along -z [N], stroke segment) at the samples, and the E* of the pair.
     """
-    ball = Material("ball", density=1e12, youngs_modulus=E, poisson_ratio=0.3)
-    plate = Material("plate", density=7800.0, youngs_modulus=E * 1e6, poisson_ratio=0.3)
     b = ModelBuilder(gravity=(0, 0, 0))
-    b.add_material(ball)
-    b.add_material(plate)
+    b.add_material(HEAVY_BALL)
+    b.add_material(PLATE)
     b.set_interaction("ball", "plate", restitution=1.0, static_friction=0.0, law=law, **interaction)
     gap0 = 2e-6
     segments, chunks, t, pos = [], [], 0.0, -gap0
@@ -60,20 +64,18 @@ def _press(device: str, law: str, stroke: list[tuple[float, float, int]], dt: fl
             overlap.append(R - (state.sphere_x.numpy()[0, 2] - state.wall_pose.numpy()[0, 2]))
             force.append(-state.wall_f.numpy()[model.plane_count, 2])
             segment.append(k)
-    e_star, _ = effective_moduli(ball, plate)
-    return np.array(overlap), np.array(force), np.array(segment), e_star
+    return np.array(overlap), np.array(force), np.array(segment), PRESS_E_STAR
 
 
 def case_jkr_quasi_static(device: str = "cpu") -> list[Record]:
     """JKR sphere on a plate, displacement-controlled: F(delta) on the stable branch at 20 points (1 %),
     peak attraction -3 pi gamma R* (1 %), force at break -1.832 pi gamma R* and break overlap delta_c (2 %)."""
     gamma = 0.1
-    dc = analytic.jkr_break_overlap(R, E * 1.1, gamma)  # scale only: the E* of the run is used below
+    dc = analytic.jkr_break_overlap(R, PRESS_E_STAR, gamma)
     # slow and finely sampled near the break, where the force turns steeply
     overlap, force, _, e_star = _press(device, "JKR", [(2e-6, 2e-3, 100), (0.9 * dc, 2e-3, 100),
                                                        (1.2 * dc, 2e-4, 6)], surface_energy=gamma)
     out = []
-    dc = analytic.jkr_break_overlap(R, e_star, gamma)
     unloading = np.arange(len(overlap)) > np.argmax(overlap)
     live = unloading & (np.abs(force) > 0)
     # 20 points of the withdrawal, from the deepest overlap to just above the break
@@ -153,7 +155,7 @@ def case_jkr_sticking(device: str = "cpu") -> list[Record]:
     more, so that estimate is a lower bound (reported, not asserted)."""
     rho, gamma = 2500.0, 0.05
     ball = Material("ball", density=rho, youngs_modulus=E, poisson_ratio=0.3)
-    plate = Material("plate", density=7800.0, youngs_modulus=E * 1e6, poisson_ratio=0.3)
+    plate = PLATE
     e_star, _ = effective_moduli(ball, plate)
     m = rho * 4.0 / 3.0 * math.pi * R**3
 
