@@ -76,6 +76,7 @@ def build_contacts(
     sphere_radius: wp.array[float],
     sphere_world: wp.array[int],
     sphere_clump: wp.array[int],
+    sphere_wall: wp.array[int],
     radius_max: float,
     wall_mesh: wp.array[wp.uint64],
     wall_face_start: wp.array[int],
@@ -115,7 +116,8 @@ def build_contacts(
     i = wp.tid()
     x_i = x[i]
     build_x_out[i] = x_i
-    if active[i] == 0:
+    # parked factory particles and spheres glued to a wall take no part as the gathering side
+    if active[i] == 0 or sphere_wall[i] >= 0:
         new_count[i] = 0
         new_mesh_count[i] = 0
         return

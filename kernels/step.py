@@ -140,6 +140,7 @@ def step_spheres(
     sphere_world: wp.array[int],
     sphere_clump: wp.array[int],
     sphere_body_volume: wp.array[float],
+    sphere_wall: wp.array[int],
     material_density: wp.array2d[float],
     pair_params: wp.array3d[PairParams],
     world_gravity: wp.array[wp.vec3],
@@ -179,6 +180,7 @@ def step_spheres(
     kick: float,
     skin: float,
     velocity_limit: float,
+    impact_speed_min: float,
     clock: wp.array[int],
     # Out:
     x_out: wp.array[wp.vec3],
@@ -188,6 +190,9 @@ def step_spheres(
     t_out: wp.array[wp.vec3],
     wall_f_out: wp.array2d[wp.vec3],
     wall_t_out: wp.array2d[wp.vec3],
+    face_impact_count_out: wp.array2d[int],
+    face_impact_energy_out: wp.array2d[wp.float64],
+    face_impact_speed_out: wp.array2d[float],
     rebuild_out: wp.array[int],
     blowup_out: wp.array[int],
 ):
@@ -196,8 +201,9 @@ def step_spheres(
     v_i = v_in[i]
     w_i = w_in[i]
     clump = sphere_clump[i]
-    if active_in[i] == 0:
-        # a factory particle not released yet: parked, untouched, invisible to the others
+    if active_in[i] == 0 or sphere_wall[i] >= 0:
+        # a factory particle not released yet (parked, invisible to the others), or a sphere glued to a
+        # wall (infinitely heavy; follow_walls places it): neither gathers forces
         if clump < 0:
             x_out[i] = x_i
             v_out[i] = v_i
@@ -264,12 +270,20 @@ def step_spheres(
         m_roll, roll = rolling_resistance(p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll,
                                           p.rolling_damping, neighbor_roll[k, i], dt)
         neighbor_roll[k, i] = roll
+        f_i = f_a
         if i == a:
-            f += f_a
             t += wp.cross(arm_a * n, f_t) + m_roll
         else:
-            f -= f_a
+            f_i = -f_a
             t += wp.cross(arm_b * n, f_t) - m_roll
+        f += f_i
+        glued = sphere_wall[j]
+        if glued >= 0:
+            # a particle-coated wall feels the reaction on its glued sphere
+            origin_j = wp.transform_get_translation(wall_pose[glued])
+            c_pt = x_in[a] + arm_a * n
+            wp.atomic_add(wall_f_out, plane_point.shape[0] + glued, i % WALL_LANES, -f_i)
+            wp.atomic_add(wall_t_out, plane_point.shape[0] + glued, i % WALL_LANES, wp.cross(c_pt - origin_j, -f_i))
 
     # infinite planes (static)
     for p_id in range(plane_point.shape[0]):
@@ -322,6 +336,15 @@ def step_spheres(
             t += t_a
             wp.atomic_add(wall_f_out, plane_total + wall, i % WALL_LANES, -f_a)
             wp.atomic_add(wall_t_out, plane_total + wall, i % WALL_LANES, wp.cross(q - origin, -f_a))
+            # an impact is the first step of a touch: leapfrog moved the sphere by dt * v_i since the last
+            # step, so it was clear of the face then iff the overlap is at most the approach this step
+            approach = wp.dot(v_i - v_wall, dq / -gap)
+            overlap = r_i - gap
+            if overlap > 0.0 and overlap <= approach * dt and approach >= impact_speed_min:
+                fw = world % face_impact_count_out.shape[0]
+                wp.atomic_add(face_impact_count_out, fw, face, 1)
+                wp.atomic_add(face_impact_energy_out, fw, face, wp.float64(0.5 * m_i * approach * approach))
+                wp.atomic_max(face_impact_speed_out, fw, face, approach)
 
     f_out[i] = f
     t_out[i] = t
@@ -539,6 +562,38 @@ def move_walls(
     turn = 2.0 * wp.acos(wp.min(wp.abs(rel[3]), 1.0))
     shift = wp.length(origin - wp.transform_get_translation(built))
     if shift + turn * wall_radius[wall] > 0.5 * skin:
+        rebuild_out[0] = 1
+
+
+@wp.kernel
+def follow_walls(
+    # Model:
+    attached_index: wp.array[int],
+    sphere_wall: wp.array[int],
+    sphere_offset: wp.array[wp.vec3],
+    # State in:
+    wall_pose: wp.array[wp.transform],
+    wall_v: wp.array[wp.vec3],
+    wall_w: wp.array[wp.vec3],
+    build_x: wp.array[wp.vec3],
+    skin: float,
+    # Out:
+    x_out: wp.array[wp.vec3],
+    v_out: wp.array[wp.vec3],
+    w_out: wp.array[wp.vec3],
+    rebuild_out: wp.array[int],
+):
+    """Place the spheres glued to walls (a particle-coated surface) at their wall's pose and give them the
+    wall's velocity at their centre."""
+    k = wp.tid()
+    i = attached_index[k]
+    wall = sphere_wall[i]
+    pose = wall_pose[wall]
+    x = wp.transform_point(pose, sphere_offset[i])
+    x_out[i] = x
+    v_out[i] = wall_v[wall] + wp.cross(wall_w[wall], x - wp.transform_get_translation(pose))
+    w_out[i] = wall_w[wall]
+    if wp.length(x - build_x[i]) > 0.5 * skin:
         rebuild_out[0] = 1
 
 

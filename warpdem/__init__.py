@@ -3,6 +3,7 @@
 The public API, listed once in ``__all__``.
 """
 
+from . import geometry, measure, rigs
 from .builder import ModelBuilder
 from .clumps import ClumpTemplate, pellet_template, phosphate_template
 from .factories import (Box, Cone, Cylinder, DynamicFactory, FixedSize, LogNormal, SieveTable, TruncatedNormal,
@@ -11,10 +12,26 @@ from .materials import Interaction, InteractionTable, Material, effective_moduli
 from .motion import Segment, WallMotion
 from .solver import SimulationError, Solver, SolverOptions
 from .types import ContactLaw, Contacts, Control, Model, Overflow, RollingModel, State
+from .export import ResultWriter, ShapeGeometry, WallGeometry, side_view_png
+from .runner import RunResult, run_scene
+from .scene import SceneSpec, StageError, read_stage, write_stage
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "geometry",
+    "measure",
+    "rigs",
+    "ResultWriter",
+    "RunResult",
+    "SceneSpec",
+    "ShapeGeometry",
+    "StageError",
+    "WallGeometry",
+    "read_stage",
+    "run_scene",
+    "side_view_png",
+    "write_stage",
     "Box",
     "ClumpTemplate",
     "Cone",

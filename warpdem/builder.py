@@ -15,6 +15,10 @@ from .types import ContactLaw, Model
 
 from warpdem.kernels.params import PairParams
 
+GLUED_VOLUME = 1.0e12
+"""Body volume [m^3] of a sphere glued to a wall: its mass exceeds any particle's by > 1e10, so a contact's
+reduced mass is the particle's to float32 precision, while products of masses stay finite in float32."""
+
 
 INTERACTION_SCALARS = ("restitution", "static_friction", "rolling_friction", "rolling_damping", "surface_energy",
                        "pull_off_force", "slope_exponent", "plasticity_ratio", "tensile_exponent",
@@ -48,6 +52,7 @@ class ModelBuilder:
         self.interactions = InteractionTable()
         self._x, self._r, self._mat, self._v, self._w = [], [], [], [], []
         self._clump, self._offset, self._body_volume, self._active = [], [], [], []
+        self._glued = []  # wall a sphere is glued to, -1 for none
         # clumps: centre, orientation (x, y, z, w), velocity, angular velocity, first sphere, material, template
         self._cx, self._cq, self._cv, self._cw, self._cfirst, self._cmat, self._ctemplate = [], [], [], [], [], [], []
         self._cscale = []
@@ -127,7 +132,70 @@ class ModelBuilder:
         self._offset.extend(np.zeros((n, 3)))
         self._body_volume.extend(4.0 / 3.0 * np.pi * r**3)
         self._active.extend([1] * n)
+        self._glued.extend([-1] * n)
         return np.arange(start, start + n)
+
+    def attach_spheres(self, wall, positions, radius, material) -> np.ndarray:
+        """Glue spheres to a mesh wall (a particle-coated surface, as seed 002 glues ore grains to its lifting
+        cylinder and base): ``positions`` shape (n, 3) [m] in the wall's own frame, ``radius`` scalar or (n,) [m].
+        Glued spheres move with the wall, are infinitely heavy for the particles they touch and pass those
+        contact forces to the wall's force and torque. Returns their indices."""
+        k = self._wall_index(wall, "attach_spheres")
+        idx = self.add_spheres(positions, radius, material)
+        for i in idx:
+            self._glued[i] = k
+            self._offset[i] = np.asarray(self._x[i], dtype=np.float64)
+            self._body_volume[i] = GLUED_VOLUME
+        # the glued spheres start where the wall's pose at t = 0 puts them (placed by the solver's first step)
+        return idx
+
+    def coat_wall(self, wall, radius: float, material, spacing: float | None = None, side: float = 1.0,
+                  seed: int = 0) -> np.ndarray:
+        """Cover a mesh wall with glued spheres of ``radius`` [m], centres ``radius`` off the surface on the side
+        of the triangle normals (right-hand winding; ``side = -1`` for the other side), at least ``spacing`` [m]
+        apart (default 2 x radius: touching neighbours), by seeded random sequential placement. Returns the
+        sphere indices (see :meth:`attach_spheres`)."""
+        from scipy.spatial import cKDTree
+
+        k = self._wall_index(wall, "coat_wall")
+        if not (np.isfinite(radius) and radius > 0):
+            raise ValueError(f"coat_wall: radius = {radius!r} is not allowed; expected a radius > 0 m")
+        spacing = 2.0 * radius if spacing is None else float(spacing)
+        if not (np.isfinite(spacing) and spacing > 0):
+            raise ValueError(f"coat_wall: spacing = {spacing!r} is not allowed; expected a distance > 0 m")
+        if side not in (1, -1, 1.0, -1.0):
+            raise ValueError(f"coat_wall: side = {side!r} is not allowed; expected 1 or -1")
+        verts, tris = self._walls[k][0], self._walls[k][1]
+        a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
+        cross = np.cross(b - a, c - a)
+        area = 0.5 * np.linalg.norm(cross, axis=1)
+        normal = cross / np.maximum(2.0 * area, 1e-300)[:, None]
+        rng = np.random.default_rng(seed)
+        # candidates: about 8 per final sphere, uniform over the surface area
+        n_cand = int(max(16, 8 * area.sum() / (0.866 * spacing**2)))
+        face = rng.choice(len(tris), size=n_cand, p=area / area.sum())
+        u, v = rng.random(n_cand), rng.random(n_cand)
+        flip = u + v > 1
+        u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+        pts = a[face] + u[:, None] * (b - a)[face] + v[:, None] * (c - a)[face] + side * radius * normal[face]
+        taken = np.zeros(n_cand, dtype=bool)
+        blocked = np.zeros(n_cand, dtype=bool)
+        near = cKDTree(pts).query_ball_point(pts, spacing * (1 - 1e-9))
+        for i in range(n_cand):
+            if not blocked[i]:
+                taken[i] = True
+                blocked[near[i]] = True
+        return self.attach_spheres(k, pts[taken], radius, material)
+
+    def _wall_index(self, wall, where: str) -> int:
+        if isinstance(wall, str):
+            for k, w in enumerate(self._walls):
+                if w[4] == wall:
+                    return k
+        elif isinstance(wall, (int, np.integer)) and 0 <= int(wall) < len(self._walls):
+            return int(wall)
+        names = ", ".join(repr(w[4]) for w in self._walls) or "none yet"
+        raise ValueError(f"{where}: wall = {wall!r} is not a mesh wall; defined walls: {names}")
 
     def add_clump(self, template, position, material, orientation=(0, 0, 0, 1), velocity=(0, 0, 0),
                   angular_velocity=(0, 0, 0)) -> int:
@@ -202,6 +270,7 @@ class ModelBuilder:
         self._offset.extend(scaled.reshape(-1, 3))
         self._body_volume.extend(np.repeat(float(template.volume) * s**3, k))
         self._active.extend([int(bool(active))] * (n * k))
+        self._glued.extend([-1] * (n * k))
         ids = np.arange(c0, c0 + n)
         return np.asarray(ids, dtype=np.int64)
 
@@ -393,6 +462,8 @@ class ModelBuilder:
         world = np.repeat(np.arange(W, dtype=np.int32), n0)
         clump0 = np.asarray(self._clump, dtype=np.int64)
         sphere_clump = np.concatenate([np.where(clump0 >= 0, clump0 + w * c0, -1) for w in range(W)]).astype(np.int32)
+        sphere_wall = np.tile(np.asarray(self._glued, dtype=np.int32), W)
+        attached = np.flatnonzero(sphere_wall >= 0).astype(np.int32)
 
         mats_w, tables_w = self._world_tables()
         params = pair_table(mats_w, tables_w)
@@ -467,6 +538,9 @@ class ModelBuilder:
             wall_material=wp.array(wall_material, dtype=int, device=device),
             wall_world=wp.array(wall_world, dtype=int, device=device),
             sphere_clump=wp.array(sphere_clump, dtype=int, device=device),
+            sphere_wall=wp.array(sphere_wall, dtype=int, device=device),
+            attached_index=wp.array(attached if len(attached) else np.zeros(1, np.int32), dtype=int, device=device),
+            attached_count=len(attached),
             sphere_offset=wp.array(np.tile(np.asarray(self._offset, dtype=np.float32).reshape(-1, 3), (W, 1)),
                                    dtype=wp.vec3, device=device),
             sphere_body_volume=wp.array(np.tile(np.asarray(self._body_volume, dtype=np.float32), W), dtype=float,
@@ -488,6 +562,7 @@ class ModelBuilder:
             wall_motions=[w[5] for w in self._walls],
             clump_templates=list(self._templates),
             clump_template=np.tile(tpl, W),
+            clump_scale=np.tile(cscale, W),
             factories=list(self._factories),
         )
 

@@ -1,4 +1,4 @@
-"""Command line: ``warpdem pile | verify | bench | audit``."""
+"""Command line: ``warpdem run | scene new | pile | verify | bench | audit``."""
 
 from __future__ import annotations
 
@@ -84,6 +84,75 @@ def cmd_audit(args) -> int:
     return main_audit(args.json)
 
 
+def _sets(items) -> dict:
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise SystemExit(f"--set {item!r}: expected name=value")
+        k, v = item.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def cmd_run(args) -> int:
+    _quiet_warp()
+    from . import rigs
+    from .runner import run_scene
+    from .scene import StageError
+
+    try:
+        spec = rigs.load(args.scene, _sets(args.set))
+    except StageError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    out = args.out or f"runs/{spec.rig}"
+    bar = None
+    try:
+        from tqdm import tqdm
+
+        bar = tqdm(total=1000, desc=spec.rig, unit="", bar_format="{l_bar}{bar}| {elapsed}<{remaining} {postfix}")
+    except ImportError:
+        pass
+
+    def progress(frac, msg):
+        if bar is not None:
+            bar.n = int(1000 * frac)
+            bar.set_postfix_str(msg)
+            bar.refresh()
+
+    res = run_scene(spec, device=args.device, out_dir=out, frames=not args.no_frames, progress=progress)
+    if bar is not None:
+        bar.close()
+    info = res.info
+    print(f"{info['rig']}: {info['spheres']} spheres ({info['clumps']} clumps, {info['glued_spheres']} glued), "
+          f"{info['simulated_s']:.3f} s simulated in {info['wall_s']:.1f} s wall on {info['device']} "
+          f"({info['steps']} steps, stop: {info['stop']})")
+    m = res.metrics[0]
+    for k in ("angle_fit_deg", "angle_fit_sd_deg", "angle_image_deg", "angle_cone_deg", "max_displacement_m",
+              "compression_ratio", "max_force_n", "fill_height_m", "inertial_number_max"):
+        if k in m and m[k] is not None:
+            print(f"  {k}: {m[k]:.4g}")
+    for phase, walls in m.get("phases", {}).items():
+        for wall, s in walls.items():
+            print(f"  {phase} / {wall}: {s['total_count']} impacts, max normal speed {s['max_speed_m_s']:.3g} m/s, "
+                  f"energy {s['total_energy_j']:.4g} J")
+    print(f"results in {out}/ (metrics.json, result.usdc, pile.png)")
+    return 0
+
+
+def cmd_scene(args) -> int:
+    from . import rigs
+    from .scene import StageError
+
+    try:
+        rigs.new(args.rig, args.output, _sets(args.set), smoke=args.smoke)
+    except StageError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.output}")
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="warpdem", description="DEM on NVIDIA Warp")
     sub = p.add_subparsers(dest="command", required=True)
@@ -111,6 +180,23 @@ def main(argv=None) -> int:
     au = sub.add_parser("audit", help="recompute the seed papers' published statistics from their own data")
     au.add_argument("--json", help="write the records to this file ('-': JSON to stdout instead of the table)")
     au.set_defaults(fn=cmd_audit)
+    r = sub.add_parser("run", help="run a scene (USD stage) and write metrics.json, result.usdc, pile.png")
+    r.add_argument("scene")
+    r.add_argument("--set", action="append", metavar="NAME=VALUE",
+                   help="override: material.NAME.FIELD, interaction.A.B.FIELD, run.FIELD, measure.FIELD, "
+                        "factory.NAME.FIELD, or a rig parameter (regenerates the scene)")
+    r.add_argument("--device", default="cpu")
+    r.add_argument("--out", help="output folder (default runs/RIG)")
+    r.add_argument("--no-frames", action="store_true", help="skip the time-sampled USD and VTK")
+    r.set_defaults(fn=cmd_run)
+    sc = sub.add_parser("scene", help="author scenes")
+    scs = sc.add_subparsers(dest="scene_command", required=True)
+    sn = scs.add_parser("new", help="write a rig's stage from parameters")
+    sn.add_argument("rig", choices=["funnel", "lifting_cylinder", "die_press", "truck_tipper"])
+    sn.add_argument("--set", action="append", metavar="NAME=VALUE", help="rig parameter")
+    sn.add_argument("--smoke", action="store_true", help="start from the CPU smoke-test size")
+    sn.add_argument("-o", "--output", required=True)
+    sn.set_defaults(fn=cmd_scene)
     args = p.parse_args(argv)
     return args.fn(args)
 

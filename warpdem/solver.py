@@ -30,6 +30,9 @@ class SolverOptions:
         neighbor_capacity: candidate slots per sphere; None derives it from the radius ratio.
         mesh_capacity: candidate triangle slots per sphere.
         velocity_limit: a sphere faster than this [m/s] stops the run as a blow-up.
+        impact_speed_min: a sphere's first touch of a wall face counts as an impact (``State.face_impact_*``)
+            when its normal approach speed is at least this [m/s]; it keeps resting contacts that chatter
+            out of the impact statistics.
     """
 
     dt: float | None = None
@@ -38,6 +41,7 @@ class SolverOptions:
     neighbor_capacity: int | None = None
     mesh_capacity: int = 16
     velocity_limit: float = 500.0
+    impact_speed_min: float = 0.05
 
     def __post_init__(self):
         def bad(name, value, allowed):
@@ -55,6 +59,8 @@ class SolverOptions:
             bad("mesh_capacity", self.mesh_capacity, "an integer >= 1")
         if not (self.velocity_limit > 0):
             bad("velocity_limit", self.velocity_limit, "a speed > 0 m/s")
+        if not (math.isfinite(self.impact_speed_min) and self.impact_speed_min >= 0):
+            bad("impact_speed_min", self.impact_speed_min, "a speed >= 0 m/s")
 
 
 class Solver:
@@ -158,7 +164,7 @@ class Solver:
             _nb.build_contacts,
             dim=m.sphere_count,
             inputs=[
-                c.grid.id, m.sphere_radius, m.sphere_world, m.sphere_clump, m.radius_max,
+                c.grid.id, m.sphere_radius, m.sphere_world, m.sphere_clump, m.sphere_wall, m.radius_max,
                 m.wall_mesh, m.wall_face_start, m.wall_world,
                 state.sphere_x, state.sphere_active, state.wall_pose, self.skin, reach,
                 c.neighbor_count, c.neighbor_index, c.neighbor_spring, c.neighbor_roll, c.neighbor_aux,
@@ -179,6 +185,8 @@ class Solver:
     def step(self, state_in: State, state_out: State, control: Control | None, contacts: Contacts,
              dt: float | None = None) -> None:
         """Advance ``state_in`` by one step into ``state_out`` (rebuilding the lists first if due)."""
+        for name in State.SHARED_RECORDS:
+            setattr(state_out, name, getattr(state_in, name))
         self._set_time(state_in.time)
         self._step(state_in, state_out, control, contacts, dt)
 
@@ -212,6 +220,11 @@ class Solver:
                           ctl.segment_pivot, ctl.segment_pose, m.wall_radius, contacts.wall_build_pose,
                           self.skin, self._time, 1],
                   outputs=[state.wall_pose, state.wall_v, state.wall_w, rebuild], device=m.device)
+        if m.attached_count:
+            wp.launch(_st.follow_walls, dim=m.attached_count,
+                      inputs=[m.attached_index, m.sphere_wall, m.sphere_offset, state.wall_pose, state.wall_v,
+                              state.wall_w, contacts.build_x, self.skin],
+                      outputs=[state.sphere_x, state.sphere_v, state.sphere_w, rebuild], device=m.device)
 
     def _advance(self, state_in: State, state_out: State, contacts: Contacts, control: Control | None = None,
                  dt: float | None = None) -> None:
@@ -226,7 +239,7 @@ class Solver:
             dim=m.sphere_count,
             inputs=[
                 m.sphere_radius, m.sphere_material, m.sphere_world, m.sphere_clump, m.sphere_body_volume,
-                m.material_density, m.pair_params, m.world_gravity,
+                m.sphere_wall, m.material_density, m.pair_params, m.world_gravity,
                 m.plane_point, m.plane_normal, m.plane_material, m.plane_world,
                 m.wall_mesh, m.wall_face_start, m.triangle_wall, m.wall_material,
                 c.neighbor_count, c.neighbor_index, c.neighbor_spring, c.neighbor_roll, c.neighbor_aux,
@@ -234,11 +247,12 @@ class Solver:
                 c.mesh_count, c.mesh_face, c.mesh_spring, c.mesh_roll, c.mesh_aux, c.build_x,
                 state_in.sphere_x, state_in.sphere_v, state_in.sphere_w, state_in.sphere_active,
                 state_in.wall_pose, state_in.wall_v, state_in.wall_w,
-                dt, kick, self.skin, self.options.velocity_limit, self._clock,
+                dt, kick, self.skin, self.options.velocity_limit, self.options.impact_speed_min, self._clock,
             ],
             outputs=[
                 state_out.sphere_x, state_out.sphere_v, state_out.sphere_w, state_out.sphere_f, state_out.sphere_t,
-                self._wall_lanes, self._wall_t_lanes, c.rebuild, self._blowup,
+                self._wall_lanes, self._wall_t_lanes, state_in.face_impact_count, state_in.face_impact_energy,
+                state_in.face_impact_speed, c.rebuild, self._blowup,
             ],
             device=m.device,
         )
@@ -289,8 +303,11 @@ class Solver:
         t0, step0 = state.time, state.step
         if self._spare is None or self._spare.sphere_x.shape != state.sphere_x.shape:
             self._spare = self.model.state()
-        # the twin shares the activity flags: they change only at a release, never within a step
+        # the twin shares the activity flags (they change only at a release, never within a step) and the
+        # impact records (running sums every step adds to)
         self._spare.sphere_active = state.sphere_active
+        for name in State.SHARED_RECORDS:
+            setattr(self._spare, name, getattr(state, name))
         a, b = state, self._spare
         if use_graph is None:
             # CUDA graphs on GPU; Warp's CPU capture removes the Python launch overhead on CPU too

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 import warp as wp
@@ -96,7 +97,14 @@ class Model:
     sphere_offset: wp.array
     """Centre of each clump sphere in its clump's principal frame [m] (zero for free spheres), shape (sphere_count,), vec3."""
     sphere_body_volume: wp.array
-    """Volume of the body a sphere belongs to (itself, or its clump's union) [m^3], shape (sphere_count,), float32."""
+    """Volume of the body a sphere belongs to (itself, or its clump's union) [m^3], shape (sphere_count,), float32.
+    A sphere glued to a wall carries ``GLUED_VOLUME``, so that it is, for its partners, infinitely heavy."""
+    sphere_wall: wp.array
+    """Mesh wall a sphere is glued to (a particle-coated surface; -1: none), shape (sphere_count,), int32. A glued
+    sphere's ``sphere_offset`` is its centre in the wall's frame."""
+    attached_index: wp.array
+    """Indices of the glued spheres, shape (max(attached_count, 1),), int32."""
+    attached_count: int
     clump_count: int
     clump_sphere_start: wp.array
     """First sphere of each clump, shape (max(clump_count, 1),), int32."""
@@ -130,6 +138,8 @@ class Model:
     """Host ClumpTemplate objects used by the clumps (index = template id)."""
     clump_template: object = None
     """Host array: template id of each clump, shape (clump_count,)."""
+    clump_scale: object = None
+    """Host array: scale of each clump relative to its template, shape (clump_count,)."""
     factories: list = field(default_factory=list)
     """Host records of the dynamic factories (see ModelBuilder.add_factory)."""
     initial: dict = field(default_factory=dict)
@@ -154,6 +164,7 @@ class Model:
 
         walls = max(self.wall_count, 1)
         surfaces = max(self.wall_count + self.plane_count, 1)
+        faces = (self.world_count, max(self.triangle_wall.shape[0], 1))
         identity = np.tile(np.array([0, 0, 0, 0, 0, 0, 1], dtype=np.float32), (walls, 1))
         return State(
             sphere_x=initial("sphere_x"),
@@ -175,6 +186,9 @@ class Model:
             wall_f=wp.zeros(surfaces, dtype=wp.vec3, device=dev),
             wall_t=wp.zeros(surfaces, dtype=wp.vec3, device=dev),
             wall_impulse=wp.zeros(surfaces, dtype=wp.vec3d, device=dev),
+            face_impact_count=wp.zeros(faces, dtype=int, device=dev),
+            face_impact_energy=wp.zeros(faces, dtype=wp.float64, device=dev),
+            face_impact_speed=wp.zeros(faces, dtype=float, device=dev),
         )
 
     def control(self) -> "Control":
@@ -234,6 +248,15 @@ class State:
     wall_impulse: wp.array
     """Force on each surface summed over every step times dt since the state was made [N s], same shape, vec3d
     (float64): the mean force between two reads is the impulse difference over the time between them."""
+    face_impact_count: wp.array = None
+    """Impacts on each mesh-wall triangle per world since the last :meth:`reset_impacts`, shape
+    (world_count, max(triangle_count, 1)), int32 (triangles numbered globally, see ``Model.wall_face_start``).
+    An impact is a sphere's first step of touching a face with a normal approach speed of at least
+    ``SolverOptions.impact_speed_min``; a clump's spheres count one by one."""
+    face_impact_energy: wp.array = None
+    """Sum of the normal impact energies 0.5 m u_n^2 (m the body's mass) [J], same shape, float64."""
+    face_impact_speed: wp.array = None
+    """Largest normal impact speed u_n [m/s], same shape, float32."""
     time: float = 0.0
     """Simulated time [s] (host-side)."""
     step: int = 0
@@ -243,6 +266,15 @@ class State:
     released: dict = field(default_factory=dict)
     """Dynamic factory progress (host-side): factory index -> {"count": released so far, "retry": earliest
     time [s] of the next try after a crowded batch}."""
+
+
+    SHARED_RECORDS: ClassVar[tuple] = ("face_impact_count", "face_impact_energy", "face_impact_speed")
+    """Running records a solver's twin states share (every step adds to them)."""
+
+    def reset_impacts(self) -> None:
+        """Zero the impact records (e.g. between the loading and the discharge of a tipper)."""
+        for name in self.SHARED_RECORDS:
+            getattr(self, name).zero_()
 
 
 @dataclass

@@ -1,0 +1,374 @@
+"""Post-processing measures (warpdem.measure): angle of repose on synthetic cones of known slope,
+die-press curves, wall impact summaries, the settling monitor, the plots and the input checks."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from warpdem.measure import (SettleMonitor, angle_cone, angle_image, angle_surface_fit, impact_phases,
+                             impact_summary, plot_angles, plot_press, press_curve, press_summary, silhouette,
+                             synthetic_cone)
+
+R_BASE = 0.06  # cone base radius [m]
+R_SPHERE = 0.002  # sphere radius [m]
+ANGLES = [20.0, 30.0, 45.0]
+# (polydispersity, base_z [m], center [m]) of the piles every method is checked on
+PILES = [(0.0, 0.0, (0.0, 0.0)), (0.1, 0.0, (0.0, 0.0)), (0.1, 0.25, (0.3, -0.2))]
+
+
+def _cone(angle, pd=0.0, base_z=0.0, center=(0.0, 0.0), seed=0):
+    return synthetic_cone(angle, R_BASE, R_SPHERE, seed=seed, polydispersity=pd, base_z=base_z, center=center)
+
+
+# --------------------------------------------------------------------------------------------------
+# the synthetic cone itself
+# --------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("angle", ANGLES)
+@pytest.mark.parametrize("pd,base_z,center", PILES)
+def test_synthetic_cone_geometry(angle, pd, base_z, center):
+    """synthetic_cone: tops under the cone surface, bottom layer on the base, no overlaps, radii within
+    r(1 +- pd), a few thousand spheres at most, and every sphere either within 0.3 r of the surface or
+    covered by a sphere right above it (dense outermost layer)."""
+    x, r = _cone(angle, pd, base_z, center)
+    assert 100 < len(r) < 4000
+    assert np.all(r >= R_SPHERE * (1 - pd) - 1e-15) and np.all(r <= R_SPHERE * (1 + pd) + 1e-15)
+    tan_a = math.tan(math.radians(angle))
+    rho = np.hypot(x[:, 0] - center[0], x[:, 1] - center[1])
+    gap = (base_z + R_BASE * tan_a - tan_a * rho) - (x[:, 2] + r)
+    assert gap.min() >= -1e-12
+    assert np.all(x[:, 2] - r >= base_z - 1e-12)
+    assert np.isclose((x[:, 2] - r).min(), base_z)
+    pairs = cKDTree(x).query_pairs(2.0 * r.max(), output_type="ndarray")
+    dist = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1)
+    assert np.all(dist >= r[pairs[:, 0]] + r[pairs[:, 1]] - 1e-12)
+    # covered: another sphere above within half a radius horizontally
+    tree2 = cKDTree(x[:, :2])
+    covered = np.zeros(len(r), bool)
+    for i, j in tree2.query_pairs(0.5 * R_SPHERE):
+        covered[i if x[i, 2] < x[j, 2] else j] = True
+    assert np.all(covered | (gap <= 0.3 * r + 1e-12))
+
+
+def test_synthetic_cone_seeded():
+    """synthetic_cone is reproducible for a seed and differs between seeds."""
+    a, ra = _cone(30.0, 0.1, seed=5)
+    b, rb = _cone(30.0, 0.1, seed=5)
+    c, _ = _cone(30.0, 0.1, seed=6)
+    assert np.array_equal(a, b) and np.array_equal(ra, rb)
+    assert a.shape != c.shape or not np.array_equal(a, c)
+
+
+# --------------------------------------------------------------------------------------------------
+# angle of repose
+# --------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("angle", ANGLES)
+@pytest.mark.parametrize("pd,base_z,center", PILES)
+def test_surface_fit_within_half_degree(angle, pd, base_z, center):
+    """angle_surface_fit recovers the synthetic cone slope within 0.5 deg in 8 sectors (monodisperse,
+    10 % polydisperse, shifted base and axis)."""
+    x, r = _cone(angle, pd, base_z, center)
+    res = angle_surface_fit(x, r, base_z=base_z, center=center)
+    assert res["slices"] == 8 and len(res["per_slice_deg"]) == 8
+    assert res["mean_deg"] == pytest.approx(angle, abs=0.5)
+    assert res["sd_deg"] == pytest.approx(np.std(res["per_slice_deg"], ddof=1))
+    assert res["bin_width_m"] >= 2.5 * 2 * r.mean() - 1e-12
+
+
+@pytest.mark.parametrize("angle", ANGLES)
+@pytest.mark.parametrize("pd,base_z,center", PILES)
+def test_image_within_one_degree(angle, pd, base_z, center):
+    """angle_image (4 orthographic silhouettes, 8 flanks) recovers the synthetic cone slope within 1 deg."""
+    x, r = _cone(angle, pd, base_z, center)
+    res = angle_image(x, r, base_z=base_z, center=center)
+    assert res["views"] == 4 and len(res["per_side_deg"]) == 8
+    assert res["mean_deg"] == pytest.approx(angle, abs=1.0)
+
+
+@pytest.mark.parametrize("angle", ANGLES)
+def test_cone_formula_bias_is_the_toe(angle):
+    """The seed formula atan(2h/d) reads steeper than the flanks by exactly the toe effect: no sphere fits
+    under the last 2r/tan(angle) of the cone, so d/2 = R - 2r/tan(angle) + r; the angle matches
+    atan(h / (R - 2r/tan(angle) + r)) within 0.4 deg (an error of +1 to +3 deg here)."""
+    x, r = _cone(angle)
+    tan_a = math.tan(math.radians(angle))
+    predicted = math.degrees(math.atan(R_BASE * tan_a / (R_BASE - 2 * R_SPHERE / tan_a + R_SPHERE)))
+    assert angle_cone(x, r) == pytest.approx(predicted, abs=0.4)
+
+
+@pytest.mark.parametrize("angle", ANGLES)
+@pytest.mark.parametrize("pd,base_z,center", PILES)
+def test_cone_formula_toe_corrected_within_1p5_degree(angle, pd, base_z, center):
+    """angle_cone(toe_correction=True), the cone through the sphere tops, is within 1.5 deg."""
+    x, r = _cone(angle, pd, base_z, center)
+    assert angle_cone(x, r, base_z=base_z, center=center, toe_correction=True) == pytest.approx(angle, abs=1.5)
+
+
+def test_center_none_estimates_the_axis():
+    """center=None finds the axis of an off-centre cone within one radius, and the angles follow."""
+    x, r = _cone(30.0, 0.1, 0.25, (0.3, -0.2))
+    res = angle_surface_fit(x, r, base_z=0.25, center=None)
+    assert np.hypot(res["center"][0] - 0.3, res["center"][1] + 0.2) < R_SPHERE
+    assert res["mean_deg"] == pytest.approx(30.0, abs=0.5)
+    assert angle_image(x, r, base_z=0.25, center=None)["mean_deg"] == pytest.approx(30.0, abs=1.0)
+
+
+def test_image_is_the_silhouette():
+    """The binary image is the union of the projected discs: its top boundary equals the brute-force
+    silhouette height max_i z_i + sqrt(r_i^2 - (u - u_i)^2) within one pixel in every column, the apex
+    column within one pixel of the highest top, and the pile is solid below the boundary."""
+    x, r = _cone(30.0, 0.1, 0.25, (0.3, -0.2))
+    res = angle_image(x, r, base_z=0.25, center=(0.3, -0.2), return_images=True)
+    p = res["pixel_m"]
+    assert p == pytest.approx(r.min() / 4)
+    assert len(res["images"]) == 4
+    for k, (img, geo) in enumerate(zip(res["images"], res["geometry"])):
+        assert img.dtype == bool
+        t = 2 * math.pi * k / 4
+        u = -(x[:, 0] - 0.3) * math.sin(t) + (x[:, 1] + 0.2) * math.cos(t)
+        uc = geo["u0_m"] + p * np.arange(img.shape[1])
+        du = uc[None, :] - u[:, None]
+        h2 = r[:, None] ** 2 - du**2
+        brute = np.where(h2 > 0, x[:, 2:3] + np.sqrt(np.maximum(h2, 0)), -np.inf).max(axis=0)
+        filled = img.any(axis=0)
+        assert np.array_equal(filled, np.isfinite(brute))
+        top_row = np.argmax(img, axis=0)
+        height = geo["z0_m"] - p * top_row
+        assert np.all(np.abs(height[filled] - brute[filled]) <= p)
+        # apex
+        a = int(np.argmax(x[:, 2] + r))
+        col = geo["axis_column"] + int(round(u[a] / p))
+        assert abs(height[col] - (x[a, 2] + r[a])) <= p
+        # solid: every column filled from its boundary down to the base
+        base_row = (geo["z0_m"] - 0.25) / p
+        expected = np.clip(base_row - top_row[filled] + 0.5, 0, None).sum()
+        assert img.sum() == pytest.approx(expected, rel=0.03)
+
+
+def test_silhouette_disc_area():
+    """One sphere rasterises to a disc of area pi r^2 (within 1 %) with the axis on a pixel column."""
+    x, r = np.array([[0.01, 0.003, 0.05]]), np.array([0.002])
+    out = silhouette(x, r, azimuth_deg=90.0, pixel=r[0] / 25)
+    img = out["image"]
+    assert img.sum() * out["pixel_m"] ** 2 == pytest.approx(math.pi * r[0] ** 2, rel=0.01)
+    # seen from +y (azimuth 90) the image axis u runs along -x: the disc is left of the axis column
+    cols = np.flatnonzero(img.any(axis=0))
+    centre_u = out["u0_m"] + out["pixel_m"] * cols.mean()
+    assert centre_u == pytest.approx(-0.01, abs=out["pixel_m"])
+
+
+def test_image_speed_20000_spheres():
+    """angle_image on about 20,000 spheres with 4 views runs well under 5 s on one core."""
+    import time
+
+    x, r = synthetic_cone(35.0, 0.15, R_SPHERE, seed=3, polydispersity=0.1)
+    assert len(r) > 19000
+    t0 = time.perf_counter()
+    res = angle_image(x, r)
+    assert time.perf_counter() - t0 < 5.0
+    assert res["mean_deg"] == pytest.approx(35.0, abs=1.0)
+
+
+def test_small_pile_is_rejected():
+    """A pile too small for 3 cells of 2.5 sphere diameters per sector raises a ValueError that says so."""
+    x, r = synthetic_cone(30.0, 0.012, R_SPHERE)
+    with pytest.raises(ValueError, match="too small"):
+        angle_surface_fit(x, r)
+
+
+# --------------------------------------------------------------------------------------------------
+# die press
+# --------------------------------------------------------------------------------------------------
+
+def _stroke(z_end=0.0297, fill=0.08, k=2.0e7, z_start=0.09, n=2001):
+    z = np.linspace(z_start, z_end, n)
+    f = k * np.clip(fill - z, 0, None) ** 2
+    return z, f
+
+
+def test_press_summary_seed_001_numbers():
+    """press_summary reproduces seed 001: a fill of 80 mm pressed to 29.7 mm gives 50.3 mm travel and a
+    compression ratio of 0.629 (to 1e-3); max force and final height follow from F = k d^2."""
+    z, f = _stroke()
+    s = press_summary(z, f, fill_height=0.08)
+    assert s["max_displacement_m"] == pytest.approx(0.0503, abs=1e-6)
+    assert s["compression_ratio"] == pytest.approx(0.629, abs=1e-3)
+    assert s["final_height_m"] == pytest.approx(0.0297, abs=1e-9)
+    assert s["max_force_n"] == pytest.approx(2.0e7 * 0.0503**2, rel=1e-9)
+    assert s["limit_reached"] is False
+
+
+def test_press_summary_force_limit_and_backstop():
+    """With force_limit the stroke ends where F first reaches the limit (interpolated between samples);
+    heights are measured from backstop_z."""
+    z, f = _stroke()
+    limit = 2.0e7 * 0.04**2
+    s = press_summary(z + 0.5, f, fill_height=0.08, force_limit=limit, backstop_z=0.5)
+    assert s["limit_reached"] is True
+    assert s["max_displacement_m"] == pytest.approx(0.04, abs=2e-5)
+    assert s["compression_ratio"] == pytest.approx(0.5, abs=3e-4)
+    assert s["final_height_m"] == pytest.approx(0.04, abs=2e-5)
+    assert s["max_force_n"] == limit
+
+
+def test_press_curve_from_contact():
+    """press_curve starts at contact: at the given contact_z (displacement = contact_z - z), or at the first
+    force above 1 % of the maximum."""
+    z, f = _stroke()
+    c = press_curve(z, f, contact_z=0.08)
+    assert c["displacement_m"][0] == pytest.approx(0.0, abs=z[0] - z[1])
+    assert np.allclose(c["displacement_m"], 0.08 - z[c["contact_index"]:])
+    assert np.allclose(c["force_n"], 2.0e7 * np.clip(c["displacement_m"], 0, None) ** 2, rtol=1e-9, atol=1e-6)
+    zl = np.linspace(0.09, 0.03, 601)
+    fl = 1.0e6 * np.clip(0.08 - zl, 0, None)  # linear: 1 % of max at 0.5 mm past contact
+    c = press_curve(zl, fl)
+    i = c["contact_index"]
+    assert fl[i] > 0.01 * fl.max() >= fl[i - 1]
+    assert c["displacement_m"][0] == 0.0 and len(c["force_n"]) == len(zl) - i
+    assert c["contact_z_m"] == pytest.approx(0.08 - 0.0005, abs=1e-4)
+
+
+# --------------------------------------------------------------------------------------------------
+# impacts
+# --------------------------------------------------------------------------------------------------
+
+def test_impact_summary_hand_made():
+    """impact_summary: totals, the fastest face, count-weighted mean energy, energy per area and the
+    most-hit faces (most first, faces without impacts left out)."""
+    count = np.array([3, 0, 10, 1, 5])
+    energy = np.array([0.3, 0.0, 2.0, 0.5, 0.2])
+    speed = np.array([1.0, 0.0, 2.5, 4.0, 0.7])
+    area = np.array([1e-4, 2e-4, 1e-4, 1e-4, 5e-5])
+    s = impact_summary(count, energy, speed, area)
+    assert s["total_count"] == 19
+    assert s["total_energy_j"] == pytest.approx(3.0)
+    assert s["max_speed_m_s"] == 4.0 and s["max_speed_face"] == 3
+    assert s["mean_energy_per_impact_j"] == pytest.approx(3.0 / 19)
+    assert s["hot_faces"] == [2, 4, 0, 3]
+    assert s["energy_per_area_j_m2"] == pytest.approx(3.0 / 5.5e-4)
+    assert np.allclose(s["face_energy_per_area_j_m2"], energy / area)
+    many = impact_summary(np.arange(30), np.ones(30), np.ones(30))
+    assert many["hot_faces"] == list(range(29, 19, -1))
+    assert "energy_per_area_j_m2" not in many
+    assert math.isnan(impact_summary([0, 0], [0, 0], [0, 0])["mean_energy_per_impact_j"])
+
+
+def test_impact_phases_differences():
+    """impact_phases: counts and energies of a phase are differences of cumulative snapshots, max speed is
+    taken as given per phase; phases keep their order."""
+    snaps = {
+        "fill": (np.array([2, 0, 1]), np.array([0.2, 0.0, 0.1]), np.array([1.0, 0.0, 0.5])),
+        "press": (np.array([5, 4, 1]), np.array([0.5, 0.8, 0.1]), np.array([0.3, 2.0, 0.0])),
+        "eject": (np.array([5, 4, 7]), np.array([0.5, 0.8, 1.3]), np.array([0.0, 0.0, 3.0])),
+    }
+    out = impact_phases(snaps)
+    assert list(out) == ["fill", "press", "eject"]
+    assert out["fill"]["total_count"] == 3 and out["fill"]["total_energy_j"] == pytest.approx(0.3)
+    assert out["press"]["total_count"] == 7 and out["press"]["total_energy_j"] == pytest.approx(1.1)
+    assert out["press"]["hot_faces"] == [1, 0] and out["press"]["max_speed_face"] == 1
+    assert out["eject"]["total_count"] == 6 and out["eject"]["total_energy_j"] == pytest.approx(1.2)
+    assert out["eject"]["max_speed_m_s"] == 3.0 and out["eject"]["hot_faces"] == [2]
+    bad = dict(snaps, eject=(np.array([5, 3, 7]), snaps["eject"][1], snaps["eject"][2]))
+    with pytest.raises(ValueError, match=r"snapshots\['eject'\].*cumulative"):
+        impact_phases(bad)
+
+
+# --------------------------------------------------------------------------------------------------
+# settling
+# --------------------------------------------------------------------------------------------------
+
+def test_settle_monitor():
+    """SettleMonitor: True only after `window` consecutive samples below the threshold; a sample above
+    restarts the count; the history keeps every (t, ke) and settled_time the first settling."""
+    m = SettleMonitor(1e-6, window=3)
+    ke = [1e-3, 5e-7, 5e-7, 2e-6, 5e-7, 5e-7, 5e-7, 1e-7, 1e-3]
+    got = [m.update(0.1 * i, e) for i, e in enumerate(ke)]
+    assert got == [False, False, False, False, False, False, True, True, False]
+    assert m.history == [(pytest.approx(0.1 * i), e) for i, e in enumerate(ke)]
+    assert m.settled_time == pytest.approx(0.6)
+    one = SettleMonitor(1.0, window=1)
+    assert one.update(0.0, 0.5) is True
+    assert SettleMonitor(1.0).update(0.0, 1.0) is False  # "below" is strict
+
+
+# --------------------------------------------------------------------------------------------------
+# plots
+# --------------------------------------------------------------------------------------------------
+
+def test_plots_write_png(tmp_path):
+    """plot_press and plot_angles write PNG files."""
+    z, f = _stroke()
+    p1 = tmp_path / "press.png"
+    plot_press(press_curve(z, f), p1)
+    x, r = _cone(30.0)
+    p2 = tmp_path / "angles.png"
+    plot_angles(angle_surface_fit(x, r), p2)
+    p3 = tmp_path / "flanks.png"
+    plot_angles(angle_image(x, r), p3)
+    for p in (p1, p2, p3):
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# --------------------------------------------------------------------------------------------------
+# input checks
+# --------------------------------------------------------------------------------------------------
+
+_X, _R = synthetic_cone(30.0, 0.03, 0.002)
+_Z, _F = np.linspace(0.09, 0.03, 50), np.linspace(0.0, 100.0, 50)
+
+
+@pytest.mark.parametrize("call,names", [
+    (lambda: angle_surface_fit(np.zeros((0, 3)), np.zeros(0)), "x = "),
+    (lambda: angle_surface_fit(_X, _R[:-1]), "r = "),
+    (lambda: angle_surface_fit(_X, -_R), "r = "),
+    (lambda: angle_surface_fit(_X, _R, slices=1), "slices = 1"),
+    (lambda: angle_surface_fit(_X, _R, bins=2), "bins = 2"),
+    (lambda: angle_surface_fit(_X, _R, inner=0.9, outer=0.5), "outer = 0.5"),
+    (lambda: angle_surface_fit(_X, _R, center=(0.0,)), "center = "),
+    (lambda: angle_surface_fit(_X, _R, base_z=1.0), "base_z = 1.0"),
+    (lambda: angle_cone(_X, _R, base_z=float("nan")), "base_z = nan"),
+    (lambda: angle_image(_X, _R, views=0), "views = 0"),
+    (lambda: angle_image(_X, _R, pixel=0.0), "pixel = 0.0"),
+    (lambda: angle_image(_X, _R, inner=-0.1), "inner = -0.1"),
+    (lambda: synthetic_cone(90.0, 0.06, 0.002), "angle_deg = 90.0"),
+    (lambda: synthetic_cone(30.0, -0.06, 0.002), "base_radius = -0.06"),
+    (lambda: synthetic_cone(30.0, 0.06, 0.0), "sphere_radius = 0.0"),
+    (lambda: synthetic_cone(30.0, 0.06, 0.002, polydispersity=1.0), "polydispersity = 1.0"),
+    (lambda: synthetic_cone(30.0, 0.001, 0.002), "base_radius = 0.001"),
+    (lambda: press_curve(_Z[:1], _F[:1]), "piston_z = "),
+    (lambda: press_curve(_Z, _F[:-1]), "piston_force = "),
+    (lambda: press_curve(_Z[::-1], _F), "piston_z = .*downward"),
+    (lambda: press_curve(_Z, np.zeros(50)), "piston_force = "),
+    (lambda: press_curve(_Z, _F, contact_z=0.01), "contact_z = 0.01"),
+    (lambda: press_summary(_Z, _F, fill_height=0.0), "fill_height = 0.0"),
+    (lambda: press_summary(_Z, _F, fill_height=0.08, force_limit=-1.0), "force_limit = -1.0"),
+    (lambda: impact_summary([], [], []), "face_count = "),
+    (lambda: impact_summary([1, -1], [0, 0], [0, 0]), "face_count = "),
+    (lambda: impact_summary([1.5, 1], [0, 0], [0, 0]), "face_count = "),
+    (lambda: impact_summary([1, 1], [0, 0, 0], [0, 0]), "face_energy = "),
+    (lambda: impact_summary([1, 1], [0, 0], [0, -1.0]), "face_max_speed = "),
+    (lambda: impact_summary([1, 1], [0, 0], [0, 0], face_area=[1.0, 0.0]), "face_area = "),
+    (lambda: impact_phases({}), "snapshots = "),
+    (lambda: SettleMonitor(0.0), "threshold = 0.0"),
+    (lambda: SettleMonitor(-1e-6), "threshold = -1e-06"),
+    (lambda: SettleMonitor(1e-6, window=0), "window = 0"),
+    (lambda: SettleMonitor(1e-6).update(0.0, -1.0), "kinetic_energy_per_particle = -1.0"),
+    (lambda: plot_press({}, "x.png"), "curve = "),
+    (lambda: plot_angles({}, "x.png"), "result = "),
+])
+def test_bad_input_names_argument(call, names):
+    """Bad input raises ValueError naming the argument and its value, and saying what is allowed."""
+    with pytest.raises(ValueError, match=names) as err:
+        call()
+    assert "expected" in str(err.value) or "need" in str(err.value)
+
+
+def test_settle_monitor_time_must_not_go_back():
+    """SettleMonitor.update rejects a time before the previous update's."""
+    m = SettleMonitor(1e-6)
+    m.update(1.0, 1.0)
+    with pytest.raises(ValueError, match="time = 0.5"):
+        m.update(0.5, 1.0)

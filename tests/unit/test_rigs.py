@@ -1,0 +1,468 @@
+"""The four test rigs as USD stages: stage round trip, stage validation, rig parameters, the wall meshes, and
+one smoke-size CPU run of each rig (its output files and the physics they hold)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from warpdem import geometry, rigs, runner
+from warpdem.scene import StageError, read_stage, write_stage
+
+pytest.importorskip("pxr")
+from pxr import Sdf, Usd, UsdGeom  # noqa: E402
+
+RIG_NAMES = ["funnel", "lifting_cylinder", "die_press", "truck_tipper"]
+MOVING_WALLS = {"Piston", "Cylinder", "Body", "Tailgate", "Bucket"}
+
+
+# ----------------------------------------------------------------------------------------------------
+# one smoke run per rig, shared by the module
+# ----------------------------------------------------------------------------------------------------
+class _Runs:
+    """Runs each rig at most once (on first request): stage written with ``rigs.new``, read back with
+    ``rigs.load``, run on the CPU with frames written to ``out_<rig>``."""
+
+    def __init__(self, root):
+        self.root = root
+        self.cache = {}
+
+    def __call__(self, rig: str) -> dict:
+        if rig not in self.cache:
+            path = self.root / f"{rig}.usda"
+            rigs.new(rig, path, smoke=True)
+            spec = rigs.load(path)
+            out = self.root / f"out_{rig}"
+            result = runner.run_scene(spec, device="cpu", out_dir=out)
+            with open(out / "metrics.json") as fh:
+                metrics = json.load(fh)
+            self.cache[rig] = {"spec": spec, "result": result, "out": out, "metrics": metrics}
+        return self.cache[rig]
+
+
+@pytest.fixture(scope="module")
+def rig_run(tmp_path_factory):
+    return _Runs(tmp_path_factory.mktemp("rigs"))
+
+
+# ----------------------------------------------------------------------------------------------------
+# 1. stage round trip
+# ----------------------------------------------------------------------------------------------------
+def _close(a, b, rtol=1e-6, atol=1e-9):
+    if a is None or b is None:
+        return a is None and b is None
+    return np.allclose(np.asarray(a, dtype=float), np.asarray(b, dtype=float), rtol=rtol, atol=atol)
+
+
+def _coat(c):
+    """A coat dict with builder defaults filled in (spacing None -> 2 radius, side 1, seed 0)."""
+    if c is None:
+        return None
+    c = dict(c)
+    if c.get("spacing") is None:
+        c["spacing"] = 2.0 * c["radius"]
+    c.setdefault("side", 1)
+    c.setdefault("seed", 0)
+    return c
+
+
+@pytest.mark.parametrize("rig", RIG_NAMES)
+def test_stage_round_trip(rig):
+    """read_stage(write_stage(spec)) gives back the smoke spec's materials (density, G, nu), pair interactions
+    (every field), walls (vertices, triangles, keyframes, coat), factories (region, counts, sizes), shapes,
+    gravity, authoring, run and measure settings. Vertices and factory scales go through float32 in USD, so
+    they are compared to float32 precision; wall orientations are stored as quatf and read back through the
+    local-to-world matrix, which costs ~1e-6 on small-angle quaternions (5e-6 allowed, ~1e-5 rad); the
+    coat's spacing, left to the builder's default 2 r in the
+    spec, is written explicitly as 2 r."""
+    want = rigs.spec(rig, smoke=True)
+    got = read_stage(write_stage(want))
+
+    assert got.rig == want.rig
+    assert got.authoring == want.authoring
+    assert _close(got.gravity, want.gravity)
+
+    assert [m.name for m in got.materials] == [m.name for m in want.materials]
+    for g, w in zip(got.materials, want.materials):
+        assert g.density == pytest.approx(w.density, rel=1e-12), g.name
+        assert g.G == pytest.approx(w.G, rel=1e-9), g.name
+        assert g.poisson_ratio == pytest.approx(w.poisson_ratio, rel=1e-12), g.name
+
+    assert [(a, b) for a, b, _ in got.pairs] == [(a, b) for a, b, _ in want.pairs]
+    for (a, b, gi), (_, _, wi) in zip(got.pairs, want.pairs):
+        assert gi == wi, f"pair {a}/{b}: {gi} != {wi}"
+
+    assert [(s.name, s.kind) for s in got.shapes] == [(s.name, s.kind) for s in want.shapes]
+
+    assert [w.name for w in got.walls] == [w.name for w in want.walls]
+    for g, w in zip(got.walls, want.walls):
+        assert g.material == w.material, w.name
+        assert g.vertices.shape == w.vertices.shape, w.name
+        assert np.allclose(g.vertices, w.vertices, rtol=1e-6, atol=1e-7), w.name
+        assert np.array_equal(g.triangles, w.triangles), w.name
+        assert _close(g.times, w.times, atol=1e-9), f"{w.name}: times {g.times} != {w.times}"
+        assert _close(g.translations, w.translations, atol=1e-9), f"{w.name}: translations"
+        assert _close(g.rotations, w.rotations, rtol=0, atol=5e-6), f"{w.name}: rotations"
+        gc, wc = _coat(g.coat), _coat(w.coat)
+        if wc is None:
+            assert gc is None, w.name
+        else:
+            assert gc is not None, w.name
+            assert set(gc) == set(wc), w.name
+            for k in wc:
+                if isinstance(wc[k], float):
+                    assert gc[k] == pytest.approx(wc[k], rel=1e-12), (w.name, k)
+                else:
+                    assert gc[k] == wc[k], (w.name, k)
+
+    assert [f.name for f in got.factories] == [f.name for f in want.factories]
+    for g, w in zip(got.factories, want.factories):
+        assert g.mode == w.mode and g.material == w.material and g.shape == w.shape, w.name
+        assert g.region[0] == w.region[0], w.name
+        assert len(g.region) == len(w.region), w.name
+        for gv, wv in zip(g.region[1:], w.region[1:]):
+            assert _close(gv, wv, rtol=1e-6, atol=1e-8), f"{w.name}: region {g.region} != {w.region}"
+        assert g.count == w.count and g.seed == w.seed, w.name
+        for k in ("mass", "rate", "mass_rate", "start_time", "interval"):
+            assert _close(getattr(g, k), getattr(w, k)), (w.name, k)
+        assert _close(g.initial_velocity, w.initial_velocity), w.name
+        assert set(g.sizes) == set(w.sizes), w.name
+        for k, v in w.sizes.items():
+            if isinstance(v, str):
+                assert g.sizes[k] == v, (w.name, k)
+            else:
+                assert g.sizes[k] == pytest.approx(v, rel=1e-12), (w.name, k)
+
+    for f in ("duration", "dt_fraction", "settle_energy", "settle_after", "output_interval", "impact_speed_min"):
+        assert getattr(got.run, f) == pytest.approx(getattr(want.run, f), rel=1e-12, abs=0), f
+
+    gm, wm = got.measure, want.measure
+    assert gm.kind == wm.kind
+    assert gm.base_height == pytest.approx(wm.base_height, abs=1e-15)
+    assert _close(gm.center, wm.center)
+    assert gm.piston == wm.piston
+    assert gm.force_limit == pytest.approx(wm.force_limit)
+    assert gm.backstop_height == pytest.approx(wm.backstop_height, abs=1e-15)
+    assert list(gm.walls) == list(wm.walls)
+    assert list(gm.phase_names) == list(wm.phase_names)
+    assert _close(gm.phase_ends, wm.phase_ends)
+
+
+# ----------------------------------------------------------------------------------------------------
+# 2. run outputs
+# ----------------------------------------------------------------------------------------------------
+def _quat_dot(a, b) -> float:
+    """Dot product of two Gf quaternions (1 for equal unit rotations)."""
+    ia, ib = a.GetImaginary(), b.GetImaginary()
+    return a.GetReal() * b.GetReal() + ia[0] * ib[0] + ia[1] * ib[1] + ia[2] * ib[2]
+
+
+@pytest.mark.parametrize("rig", RIG_NAMES)
+def test_run_outputs(rig, rig_run):
+    """A smoke run writes metrics.json, result.usdc, pile.png and final.npz; result.usdc holds every wall as a
+    UsdGeom.Mesh with a time-sampled translate (moving walls really move, static ones stay at the origin),
+    an impactCount primvar with one value per triangle, and /World/Spheres (UsdGeom.Points) with one points
+    sample per frame whose last count is the number of active loose spheres of world 0 (final.npz; the smoke
+    rigs use spheres only, so no sphere belongs to a clump). The funnel's dynamic factory starts with no
+    particle and has released all 300 by the last frame."""
+    run = rig_run(rig)
+    out, spec = run["out"], run["spec"]
+    for name in ("metrics.json", "result.usdc", "pile.png", "final.npz"):
+        assert (out / name).is_file(), name
+    info = run["metrics"]["info"]
+    frames = int(info["files"]["frames"])
+    assert frames >= 2
+    assert info["clumps"] == 0
+
+    stage = Usd.Stage.Open(str(out / "result.usdc"))
+    assert stage is not None
+    last = frames - 1
+    for wall in spec.walls:
+        prim = stage.GetPrimAtPath(f"/World/Walls/{wall.name}")
+        assert prim and prim.IsA(UsdGeom.Mesh), wall.name
+        mesh = UsdGeom.Mesh(prim)
+        translate = prim.GetAttribute("xformOp:translate")
+        orient = prim.GetAttribute("xformOp:orient")
+        assert translate and orient, wall.name
+        if wall.name in MOVING_WALLS:
+            assert translate.GetNumTimeSamples() >= 2, wall.name
+            moved = (np.linalg.norm(np.subtract(translate.Get(last), translate.Get(0))) > 1e-6
+                     or abs(float(_quat_dot(orient.Get(last), orient.Get(0)))) < 1 - 1e-9)
+            assert moved, f"{wall.name} did not move between the first and the last frame"
+        else:
+            for code in (0, last):
+                assert np.allclose(translate.Get(code), (0, 0, 0), atol=1e-12), wall.name
+        n_tri = len(mesh.GetFaceVertexCountsAttr().Get())
+        assert n_tri == len(wall.triangles), wall.name
+        pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("impactCount")
+        assert pv and pv.GetInterpolation() == UsdGeom.Tokens.uniform, wall.name
+        counts = pv.Get(last)
+        assert counts is not None and len(counts) == n_tri, wall.name
+
+    sp = stage.GetPrimAtPath("/World/Spheres")
+    assert sp and sp.IsA(UsdGeom.Points)
+    points = UsdGeom.Points(sp).GetPointsAttr()
+    assert points.GetNumTimeSamples() == frames
+    final = np.load(out / "final.npz")
+    n_last = len(points.Get(last))
+    assert n_last == len(final["sphere_r"])
+    assert n_last <= info["spheres"]
+    if rig == "funnel":
+        assert len(points.Get(0)) == 0
+        assert n_last == 300
+
+
+# ----------------------------------------------------------------------------------------------------
+# 3. physics and measurement sanity
+# ----------------------------------------------------------------------------------------------------
+def test_funnel_pile(rig_run):
+    """Funnel: a pile of non-adhesive spheres with rolling resistance stands at a slope well above 3 deg (a flat
+    spread would be ~0) and below 45 deg (above any static angle of rolling-resisted spheres with mu_s 0.51,
+    mu_r 0.21); the dynamic factory released all 300 particles and all are still active."""
+    run = rig_run("funnel")
+    m = run["metrics"]["metrics"][0]
+    assert "angle_error" not in m, m.get("angle_error")
+    assert 3.0 < m["angle_fit_deg"] < 45.0
+    assert run["metrics"]["info"]["spheres"] == 300
+    assert len(np.load(run["out"] / "final.npz")["sphere_r"]) == 300
+
+
+def test_lifting_cylinder_lift_and_angle(rig_run):
+    """Lifting cylinder: the cylinder follows its keyframes exactly, so after the lift its translate z is the
+    lift height (cylinder height 0.06 m + 0.02 m) to 1e-6 m (float32 pose); the slumped heap of rolling-
+    resisted, frictional (mu_s 0.7) spheres slopes between 5 deg (not spread flat) and 60 deg (not still
+    standing as the cylinder's column)."""
+    run = rig_run("lifting_cylinder")
+    p = rigs.params("lifting_cylinder", rigs.SMOKE["lifting_cylinder"])
+    lift = p.height + 0.02
+    stage = Usd.Stage.Open(str(run["out"] / "result.usdc"))
+    last = int(run["metrics"]["info"]["files"]["frames"]) - 1
+    z = stage.GetPrimAtPath("/World/Walls/Cylinder").GetAttribute("xformOp:translate").Get(last)[2]
+    assert abs(z - lift) <= 1e-6, (z, lift)
+    m = run["metrics"]["metrics"][0]
+    assert "angle_error" not in m, m.get("angle_error")
+    assert 5.0 < m["angle_fit_deg"] < 60.0
+
+
+def test_die_press_compaction(rig_run):
+    """Die press: the bar stops at the force limit (10 N, reached within 1 % as the stop test fires on the
+    first output at or above it); the bed is compressed but not crushed (ratio in (0, 0.8)); the measured
+    fill height is the rig's settled fill (0.01 m) within 25 % (packing varies in a die a dozen particles
+    wide)."""
+    run = rig_run("die_press")
+    m = run["metrics"]["metrics"][0]
+    p = rigs.params("die_press", rigs.SMOKE["die_press"])
+    assert "press_error" not in m, m.get("press_error")
+    assert m["stop"] == "force_limit"
+    assert 0.0 < m["compression_ratio"] < 0.8
+    assert m["fill_height_m"] == pytest.approx(p.fill_height, rel=0.25)
+    assert m["max_force_n"] >= p.force_limit * 0.99
+
+
+def test_truck_tipper_impacts(rig_run):
+    """Truck tipper: loading and discharge impacts are recorded on the Body and the Tailgate. During loading,
+    particles pour from the bucket lip 0.16 m above the floor, so the fastest impact on the body is at least
+    half the free-fall speed sqrt(2 g 0.16) and at most twice the free-fall speed from the lip plus the
+    bucket height (0.26 m) plus 1 m/s for the bucket's own rotation; the body was hit during loading."""
+    run = rig_run("truck_tipper")
+    phases = run["metrics"]["metrics"][0]["phases"]
+    for phase in ("loading", "discharge"):
+        assert phase in phases
+        for wall in ("Body", "Tailgate"):
+            assert wall in phases[phase], (phase, wall)
+    body = phases["loading"]["Body"]
+    g = 9.81
+    assert 0.5 * math.sqrt(2 * g * 0.16) < body["max_speed_m_s"] < 2.0 * math.sqrt(2 * g * (0.16 + 0.1)) + 1.0
+    assert body["total_count"] > 0
+
+
+# ----------------------------------------------------------------------------------------------------
+# 4. stage validation
+# ----------------------------------------------------------------------------------------------------
+@pytest.fixture
+def funnel_stage(tmp_path):
+    """A smoke funnel stage on disk, opened for editing: yields (path, stage); save before reading."""
+    path = tmp_path / "funnel.usda"
+    rigs.new("funnel", path, smoke=True)
+    stage = Usd.Stage.Open(str(path))
+    yield path, stage
+
+
+def _read_error(path, stage) -> str:
+    stage.GetRootLayer().Save()
+    with pytest.raises(StageError) as exc:
+        read_stage(str(path))
+    return str(exc.value)
+
+
+def test_stage_missing_attribute(funnel_stage):
+    """A missing required attribute (run duration) names /World, the attribute and says it is missing."""
+    path, stage = funnel_stage
+    assert stage.GetPrimAtPath("/World").RemoveProperty("warpdem:run:duration")
+    msg = _read_error(path, stage)
+    assert "/World" in msg and "warpdem:run:duration" in msg and "missing" in msg
+
+
+def test_stage_misspelt_attribute(funnel_stage):
+    """An unknown warpdem: attribute (warpdem:run:durration) is an error that suggests the right name."""
+    path, stage = funnel_stage
+    stage.GetPrimAtPath("/World").CreateAttribute("warpdem:run:durration", Sdf.ValueTypeNames.Double,
+                                                  custom=True).Set(1.0)
+    msg = _read_error(path, stage)
+    assert "/World" in msg and "durration" in msg and "warpdem:run:duration" in msg
+
+
+def test_stage_wrong_type(funnel_stage):
+    """A pair's staticFriction authored as a string names the pair prim, the attribute and its type."""
+    path, stage = funnel_stage
+    pair = "/World/Materials/Pairs/grain__grain"
+    prim = stage.GetPrimAtPath(pair)
+    assert prim
+    assert prim.RemoveProperty("warpdem:pair:staticFriction")
+    prim.CreateAttribute("warpdem:pair:staticFriction", Sdf.ValueTypeNames.String, custom=True).Set("0.5")
+    msg = _read_error(path, stage)
+    assert pair in msg and "warpdem:pair:staticFriction" in msg and "type" in msg
+
+
+def test_stage_negative_friction(funnel_stage):
+    """A negative static friction on a pair is refused by the Interaction check, naming the prim."""
+    path, stage = funnel_stage
+    pair = "/World/Materials/Pairs/grain__steel"
+    stage.GetPrimAtPath(pair).GetAttribute("warpdem:pair:staticFriction").Set(-0.1)
+    msg = _read_error(path, stage)
+    assert "static_friction" in msg and pair in msg
+
+
+def test_stage_shear_modulus_above_half_e(funnel_stage):
+    """G = 2.5 MPa with E = 1 MPa (G > E/2, impossible for nu >= 0) is refused, naming shear_modulus."""
+    path, stage = funnel_stage
+    prim = stage.GetPrimAtPath("/World/Materials/grain")
+    prim.CreateAttribute("warpdem:youngsModulus", Sdf.ValueTypeNames.Double).Set(1e6)
+    prim.CreateAttribute("warpdem:shearModulus", Sdf.ValueTypeNames.Double).Set(2.5e6)
+    msg = _read_error(path, stage)
+    assert "shear_modulus" in msg and "/World/Materials/grain" in msg
+
+
+def test_stage_factory_without_count_or_mass(funnel_stage):
+    """A factory with neither count nor mass is an error naming the factory prim."""
+    path, stage = funnel_stage
+    prim = stage.GetPrimAtPath("/World/Factories/pour")
+    assert prim
+    assert prim.RemoveProperty("warpdem:factory:count")
+    assert not prim.GetAttribute("warpdem:factory:mass")
+    msg = _read_error(path, stage)
+    assert "/World/Factories/pour" in msg and "count" in msg
+
+
+# ----------------------------------------------------------------------------------------------------
+# 5. rig parameters
+# ----------------------------------------------------------------------------------------------------
+def test_params_unknown_name():
+    """An unknown rig parameter is a StageError that lists the rig's parameters."""
+    with pytest.raises(StageError) as exc:
+        rigs.params("funnel", {"outlet_diamter": 0.02})
+    msg = str(exc.value)
+    assert "outlet_diamter" in msg and "parameters" in msg
+    assert "outlet_diameter" in msg and "top_diameter" in msg
+
+
+def test_params_outlet_wider_than_top():
+    """An outlet wider than the funnel's top is refused as a StageError."""
+    with pytest.raises(StageError, match="outlet_diameter"):
+        rigs.spec("funnel", {"outlet_diameter": 0.2, "top_diameter": 0.1})
+
+
+def test_load_regenerates_from_rig_parameter(tmp_path):
+    """rigs.load with a rig parameter (as a string) regenerates the scene from the stage's recorded
+    parameters: the funnel's outlet (its lowest vertex) moves to 0.03 m, the other smoke settings stay."""
+    path = tmp_path / "funnel.usda"
+    rigs.new("funnel", path, smoke=True)
+    before = rigs.load(path)
+    assert before.wall("Funnel").vertices[:, 2].min() == pytest.approx(rigs.SMOKE["funnel"]["outlet_height"])
+    spec = rigs.load(path, {"outlet_height": "0.03"})
+    assert spec.wall("Funnel").vertices[:, 2].min() == pytest.approx(0.03, abs=1e-12)
+    assert spec.factories[0].count == rigs.SMOKE["funnel"]["count"]
+    assert spec.authoring["outlet_height"] == pytest.approx(0.03)
+
+
+# ----------------------------------------------------------------------------------------------------
+# 6. geometry
+# ----------------------------------------------------------------------------------------------------
+def _normals(v, t):
+    a, b, c = (v[t[:, k]] for k in range(3))
+    n = np.cross(b - a, c - a)
+    return n / np.linalg.norm(n, axis=1)[:, None], (a + b + c) / 3
+
+
+@pytest.mark.parametrize("open_sides", [(), ("top",), ("top", "rear")])
+def test_open_box_normals_inward(open_sides):
+    """Every triangle of an open box (offset origin, unequal sides) has its normal pointing to the box centre,
+    and only the named sides are left out (no face lies on an open side's plane)."""
+    L, W, H, origin = 0.5, 0.3, 0.2, (0.1, -0.2, 0.05)
+    v, t = geometry.open_box(L, W, H, 0.07, open_sides=open_sides, origin=origin)
+    n, c = _normals(v, t)
+    centre = np.array([origin[0] + L / 2, origin[1], origin[2] + H / 2])
+    assert np.all(np.einsum("ij,ij->i", n, centre - c) > 0)
+    assert np.all(geometry.face_areas(v, t) > 0)
+    top = np.isclose(c[:, 2], origin[2] + H)
+    rear = np.isclose(c[:, 0], origin[0] + L)
+    assert top.any() == ("top" not in open_sides)
+    assert rear.any() == ("rear" not in open_sides)
+    # the closed faces tile the box's surface exactly
+    sides = {"bottom": L * W, "top": L * W, "front": W * H, "rear": W * H, "left": L * H, "right": L * H}
+    assert geometry.face_areas(v, t).sum() == pytest.approx(
+        sum(a for s, a in sides.items() if s not in open_sides), rel=1e-12)
+
+
+@pytest.mark.parametrize("r_bottom, r_top", [(0.1, 0.1), (0.02, 0.08), (0.08, 0.03)])
+def test_frustum_normals_inward(r_bottom, r_top):
+    """A frustum's triangle normals point towards the z axis when inward (the default) and away from it
+    with inward=False."""
+    v, t = geometry.frustum(r_bottom, r_top, 0.1, 0.25, 0.02)
+    n, c = _normals(v, t)
+    radial = c[:, :2] / np.linalg.norm(c[:, :2], axis=1)[:, None]
+    assert np.all(np.einsum("ij,ij->i", n[:, :2], radial) < 0)
+    v2, t2 = geometry.frustum(r_bottom, r_top, 0.1, 0.25, 0.02, inward=False)
+    n2, c2 = _normals(v2, t2)
+    assert np.all(np.einsum("ij,ij->i", n2[:, :2], c2[:, :2]) > 0)
+
+
+@pytest.mark.parametrize("radius, cell", [(0.05, 0.01), (0.003, 0.002), (1.0, 0.05)])
+def test_disc_area(radius, cell):
+    """A disc is a regular n-gon (n >= 16 segments on its rim): its triangles sum to the polygon area
+    n/2 sin(2 pi/n) r^2 exactly (to rounding). That is within 1 % of pi r^2 once n >= 26 (n = 16, the
+    minimum, is 2.6 % short), so the 1 % check applies to the finely divided discs only. Normals are +z
+    (up) or -z."""
+    v, t = geometry.disc(radius, cell, z=0.2)
+    rim = np.isclose(np.hypot(v[:, 0], v[:, 1]), radius, rtol=1e-12)
+    n = int(rim.sum())
+    assert n >= 16
+    polygon = n / 2 * math.sin(2 * math.pi / n) * radius**2
+    area = geometry.face_areas(v, t).sum()
+    assert area == pytest.approx(polygon, rel=1e-12)
+    # n/2 sin(2 pi/n) >= 0.99 pi exactly when n >= 26
+    assert (abs(area / (math.pi * radius**2) - 1) <= 0.01) == (n >= 26)
+    if n >= 26:
+        assert area == pytest.approx(math.pi * radius**2, rel=0.01)
+    assert np.allclose(v[:, 2], 0.2)
+    nrm, _ = _normals(v, t)
+    assert np.allclose(nrm[:, 2], 1.0)
+    v2, t2 = geometry.disc(radius, cell, z=0.2, up=False)
+    assert np.allclose(_normals(v2, t2)[0][:, 2], -1.0)
+
+
+@pytest.mark.parametrize("sx, sy, cell", [(0.4, 0.4, 0.01), (0.16, 0.07, 0.03), (18.6, 6.3, 0.5)])
+def test_grid_plate_area(sx, sy, cell):
+    """A grid plate's triangles tile the rectangle: total area sx * sy (to rounding), normals +z when up,
+    -z when not, all at height z and centred on ``center``."""
+    v, t = geometry.grid_plate(sx, sy, cell, z=-0.2, center=(0.3, -0.1))
+    assert geometry.face_areas(v, t).sum() == pytest.approx(sx * sy, rel=1e-12)
+    assert np.allclose(v[:, 2], -0.2)
+    assert np.allclose(v[:, :2].min(axis=0), (0.3 - sx / 2, -0.1 - sy / 2))
+    assert np.allclose(v[:, :2].max(axis=0), (0.3 + sx / 2, -0.1 + sy / 2))
+    assert np.allclose(_normals(v, t)[0][:, 2], 1.0)
+    v2, t2 = geometry.grid_plate(sx, sy, cell, up=False)
+    assert np.allclose(_normals(v2, t2)[0][:, 2], -1.0)

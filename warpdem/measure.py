@@ -1,0 +1,855 @@
+"""Post-processing of DEM results: angle of repose, die-press curves, wall impacts, settling.
+
+Pure NumPy/SciPy (no Warp): every function takes plain arrays copied off the device, so results from
+any run, saved file or synthetic test pile can be measured the same way. SI units throughout
+(m, N, J, s); angles are returned in degrees.
+
+Pile conventions: ``x`` are sphere centres [m], shape (n, 3), ``r`` radii [m], shape (n,); z is up,
+the pile stands on the base plane z = ``base_z`` and its axis is the vertical line through
+``center = (cx, cy)``. ``center=None`` estimates the axis as the mean xy of the highest 5 % of the
+spheres (by the height of their tops).
+
+Angle-of-repose methods (after the seed papers):
+
+* :func:`angle_surface_fit`: line fits of the highest sphere tops per radial bin in azimuthal sectors
+  (seed 000 averages front/rear/left/right flank angles; any number of sectors is allowed here).
+* :func:`angle_cone`: the cone formula atan(2h/d) (seed 002).
+* :func:`angle_image`: the photographic method (silhouette -> binary image -> top boundary -> line
+  fit per flank) done with orthographic projections instead of photos.
+
+:func:`synthetic_cone` builds piles of known slope to check them.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+__all__ = [
+    "SettleMonitor",
+    "angle_cone",
+    "angle_image",
+    "angle_surface_fit",
+    "impact_phases",
+    "impact_summary",
+    "plot_angles",
+    "plot_press",
+    "press_curve",
+    "press_summary",
+    "silhouette",
+    "synthetic_cone",
+]
+
+# A radial bin must be wide enough to hold at least one sphere of the outermost layer in every sector;
+# otherwise its highest top comes from a buried sphere and drags the fitted line down unevenly.
+MIN_BIN_DIAMETERS = 2.5
+# Spheres whose centre is this many (largest) radii or less above the base form the bottom layer.
+BASE_LAYER_RADII = 2.5
+# Percentile of the base radius: ignores a few spheres that rolled away from the toe.
+BASE_PERCENTILE = 98.0
+# Fraction of the spheres (highest tops) whose mean xy estimates the pile axis when center=None.
+APEX_FRACTION = 0.05
+# Pairs (sphere, image column) rasterised per chunk: bounds the temporary memory of angle_image.
+_RASTER_CHUNK = 1 << 21
+# (radial, along-arc) offsets of the cell grids of angle_surface_fit, in cells.
+_GRID_SHIFTS = ((0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.5, 0.5))
+# Turn of the synthetic_cone lattice [rad] against the x axis (see there).
+_LATTICE_TURN = math.atan(1.0 / ((1.0 + math.sqrt(5.0)) / 2.0) ** 2)
+
+
+# --------------------------------------------------------------------------------------------------
+# input checks
+# --------------------------------------------------------------------------------------------------
+
+def _bad(name: str, value, allowed: str):
+    raise ValueError(f"{name} = {value!r} is not allowed; expected {allowed}")
+
+
+def _short(a: np.ndarray) -> str:
+    """A short description of an array for error messages (the array itself may be huge)."""
+    return f"array of shape {a.shape}"
+
+
+def _int_at_least(name: str, value, low: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
+        _bad(name, value, f"an integer >= {low}")
+    return int(value)
+
+
+def _positive(name: str, value, unit: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not (math.isfinite(value) and value > 0):
+        _bad(name, value, f"a finite number > 0 {unit}".rstrip())
+    return float(value)
+
+
+def _finite(name: str, value, unit: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        _bad(name, value, f"a finite number {unit}".rstrip())
+    return float(value)
+
+
+def _spheres(x, r) -> tuple[np.ndarray, np.ndarray]:
+    x = np.asarray(x, dtype=float)
+    r = np.asarray(r, dtype=float)
+    if x.ndim != 2 or x.shape[1] != 3 or x.shape[0] == 0:
+        _bad("x", _short(x), "sphere centres [m] of shape (n, 3) with n >= 1")
+    if r.shape != (x.shape[0],):
+        _bad("r", _short(r), f"radii [m] of shape ({x.shape[0]},), one per row of x")
+    if not np.all(np.isfinite(x)):
+        _bad("x", _short(x), "finite coordinates (found NaN or inf)")
+    if not np.all(np.isfinite(r) & (r > 0)):
+        _bad("r", _short(r), "finite radii > 0 m")
+    return x, r
+
+
+def _zones(inner, outer) -> tuple[float, float]:
+    inner = _finite("inner", inner, "")
+    outer = _finite("outer", outer, "")
+    if not 0 <= inner < 1:
+        _bad("inner", inner, "a fraction of the pile extent in [0, 1)")
+    if not inner < outer <= 1:
+        _bad("outer", outer, f"a fraction of the pile extent in (inner = {inner}, 1]")
+    return inner, outer
+
+
+def _axis(x: np.ndarray, r: np.ndarray, center) -> tuple[float, float]:
+    """The pile axis (cx, cy) [m]: as given, or the mean xy of the highest spheres for center=None."""
+    if center is None:
+        top = x[:, 2] + r
+        k = max(1, int(math.ceil(APEX_FRACTION * len(top))))
+        idx = np.argpartition(-top, k - 1)[:k]
+        return float(x[idx, 0].mean()), float(x[idx, 1].mean())
+    try:
+        cx, cy = (float(c) for c in center)
+    except (TypeError, ValueError):
+        _bad("center", center, "(cx, cy) in m, or None to estimate the axis from the apex")
+    if not (math.isfinite(cx) and math.isfinite(cy)):
+        _bad("center", center, "finite (cx, cy) in m, or None")
+    return cx, cy
+
+
+def _base_layer(x: np.ndarray, r: np.ndarray, base_z: float) -> np.ndarray:
+    """Mask of the spheres touching or near the base plane."""
+    top = x[:, 2] + r
+    if top.max() <= base_z:
+        _bad("base_z", base_z, f"a base plane under the pile (the highest sphere top is at z = {top.max():.6g} m)")
+    # spheres wholly under the base fell through it: not part of the pile
+    near = (top > base_z) & ((x[:, 2] - base_z) < BASE_LAYER_RADII * r.max())
+    if not near.any():
+        _bad("x", _short(x), f"a pile with spheres on the base plane z = base_z = {base_z} m "
+                             f"(none has its centre within {BASE_LAYER_RADII} radii of it)")
+    return near
+
+
+# --------------------------------------------------------------------------------------------------
+# angle of repose
+# --------------------------------------------------------------------------------------------------
+
+def angle_surface_fit(x, r, slices: int = 8, bins: int = 12, base_z: float = 0.0, center=(0.0, 0.0),
+                      inner: float = 0.2, outer: float = 0.8) -> dict:
+    """Angle of repose [deg] by straight-line fits of the pile surface in azimuthal sectors.
+
+    The pile is cut into ``slices`` equal sectors around its axis. In each sector the radial range
+    0..extent is divided into bins, and each bin along the arc into cells as long as the bin is wide;
+    the highest sphere top (z + r) of each cell is a surface point, taken at that sphere's own
+    horizontal distance rho from the axis. Bins whose centre lies in the apex zone
+    (< ``inner`` * extent) or the toe zone (> ``outer`` * extent) are dropped, a line z(rho) is
+    fitted to the points of the sector and the sector angle is atan(-slope). The cells of three more
+    grids, shifted by half a cell radially and/or along the arc, add points (each sphere once).
+
+    Why this is unbiased: the tops of the surface spheres lie on a surface parallel to the pile
+    surface, so the slope is right as long as every cell holds a surface sphere and the roughness
+    lifts the highest top of every cell alike. Hence (1) cells are at least 2.5 mean sphere diameters
+    wide (fewer bins than ``bins`` when needed); (2) all cells have the same area, so the same number
+    of candidates: the maximum of more rough tops sits higher, and whole sector bins, whose arc grows
+    with rho, would flatten the line; (3) a point sits at its sphere's rho, not at the bin centre
+    (the highest top of a bin is near its inner edge).
+
+    Args:
+        x: sphere centres [m], shape (n, 3).
+        r: sphere radii [m], shape (n,).
+        slices: number of azimuthal sectors, >= 2.
+        bins: requested number of radial bins over 0..extent, >= 3 (widened if narrower than 2.5
+            mean diameters).
+        base_z: height of the base plane [m].
+        center: pile axis (cx, cy) [m], or None to estimate it from the highest spheres.
+        inner, outer: apex and toe limits as fractions of the extent, 0 <= inner < outer <= 1.
+
+    The extent [m] is the 98th percentile of rho + r over the spheres of the bottom layer (centre
+    less than 2.5 largest radii above the base).
+
+    Returns:
+        dict with ``mean_deg`` (mean over the sectors used), ``sd_deg`` (sample SD, ddof=1),
+        ``per_slice_deg`` (list, one angle per sector used), ``slices`` (number of sectors used),
+        ``extent_m``, ``bin_width_m`` and ``center`` (the axis used, m).
+
+    Raises:
+        ValueError: bad arguments, or fewer than 2 sectors with 3 or more surface points (the pile is
+        too small for the bin width, or too few spheres).
+    """
+    x, r = _spheres(x, r)
+    slices = _int_at_least("slices", slices, 2)
+    bins = _int_at_least("bins", bins, 3)
+    base_z = _finite("base_z", base_z, "m")
+    inner, outer = _zones(inner, outer)
+    cx, cy = _axis(x, r, center)
+
+    dx, dy = x[:, 0] - cx, x[:, 1] - cy
+    rho = np.hypot(dx, dy)
+    top = x[:, 2] + r - base_z
+    base = _base_layer(x, r, base_z)
+    extent = float(np.percentile(rho[base] + r[base], BASE_PERCENTILE))
+
+    width = max(extent / bins, MIN_BIN_DIAMETERS * 2.0 * float(r.mean()))
+    width = extent / max(1, int(extent // width))
+
+    turn = (np.arctan2(dy, dx) + math.pi) / (2 * math.pi) * slices  # sector units, 0..slices
+    sector = np.minimum(turn.astype(int), slices - 1)
+    # Cell maxima of a grid and of grids shifted by half a cell: about 2-4 times more surface points
+    # for the same cell size, so less scatter; a sphere found twice counts once.
+    picks = [_cell_maxima(rho, turn - sector, sector, top, width, extent, inner, outer, slices, shift)
+             for shift in _GRID_SHIFTS]
+    best = np.unique(np.concatenate(picks))
+    best_sector = sector[best]
+
+    angles = []
+    for s in range(slices):
+        pick = best[best_sector == s]
+        if len(pick) < 3:
+            continue
+        slope = np.polyfit(rho[pick], top[pick], 1)[0]
+        angles.append(math.degrees(math.atan(-slope)))
+    if len(angles) < 2:
+        raise ValueError(
+            f"angle_surface_fit: only {len(angles)} of slices = {slices} sectors have >= 3 surface points "
+            f"between inner = {inner} and outer = {outer} of the extent {extent:.4g} m with bins "
+            f"{width:.4g} m wide (>= {MIN_BIN_DIAMETERS} sphere diameters); the pile is too small or too "
+            f"sparse: need >= 2 sectors with >= 3 points (use fewer slices or a larger pile)")
+    a = np.array(angles)
+    return {"mean_deg": float(a.mean()), "sd_deg": float(a.std(ddof=1)), "per_slice_deg": a.tolist(),
+            "slices": len(a), "extent_m": extent, "bin_width_m": width, "center": (cx, cy)}
+
+
+def _cell_maxima(rho, frac, sector, top, width, extent, inner, outer, slices, shift) -> np.ndarray:
+    """Indices of the highest top in each cell of the grid of angle_surface_fit.
+
+    Radial bins of ``width`` start at ``shift[0] * width``; only bins whose centre lies between
+    ``inner`` and ``outer`` of ``extent`` are used. ``frac`` is each sphere's position across its
+    sector (0..1).
+    """
+    # The highest of N rough tops sits higher the larger N, and a bin's arc (so N) grows with rho:
+    # whole sector bins would lift the outer points and flatten the line. Each bin is therefore cut
+    # along the arc into cells exactly as long as the bin is wide (equal areas, so the same N
+    # everywhere), centred in the sector; the leftover ends of the arc are not used. A bin whose arc
+    # is shorter than its width is one cell.
+    rb = np.floor(rho / width - shift[0]).astype(np.int64)
+    centre = (rb + shift[0] + 0.5) * width
+    idx = np.flatnonzero((rb >= 0) & (centre > 0) & (centre >= inner * extent) & (centre <= outer * extent))
+    rb, centre = rb[idx], centre[idx]
+    arc = centre * 2 * math.pi / slices
+    full = np.maximum(1, np.floor(arc / width)).astype(np.int64)
+    cell_len = np.minimum(width, arc)
+    start = 0.5 * (arc - full * cell_len) + shift[1] * cell_len
+    # the shifted grid loses the cell that would stick out of the centred span
+    cells = full - (1 if shift[1] else 0)
+    sub = np.floor((frac[idx] * arc - start) / cell_len).astype(np.int64)
+    ok = (sub >= 0) & (sub < cells)
+    idx, rb, sub, cells = idx[ok], rb[ok], sub[ok], cells[ok]
+    if idx.size == 0:
+        return idx
+    # one integer key per (sector, bin, cell); sort by key, then top, and keep the last of each key
+    nb = int(rb.max()) + 1
+    nc = int(cells.max()) + 1
+    key = (sector[idx] * nb + rb) * nc + sub
+    order = np.lexsort((top[idx], key))
+    k = key[order]
+    return idx[order[np.flatnonzero(np.r_[k[1:] != k[:-1], True])]]
+
+
+def angle_cone(x, r, base_z: float = 0.0, center=(0.0, 0.0), toe_correction: bool = False) -> float:
+    """Angle of repose [deg] from the cone formula atan(2h/d) of seed 002.
+
+    h [m] is the highest sphere top above the base; d [m] is twice the 98th percentile of rho + r over
+    the bottom layer (centres less than 2.5 largest radii above the base), rho being the horizontal
+    distance from the axis.
+
+    Known bias (why the formula reads steeper than the flanks of a sphere pile): the flank line
+    through the sphere tops reaches the height of one diameter at the outermost bottom sphere, and
+    no sphere can sit further out under it, so the base is short by about 2r/tan(angle) - r. For
+    r / base radius = 1/30 this is +3 deg at 20 deg, +2 deg at 30 deg, +1 deg at 45 deg, and it
+    shrinks in proportion to r / base radius.
+
+    Args:
+        x: sphere centres [m], shape (n, 3).
+        r: sphere radii [m], shape (n,).
+        base_z: height of the base plane [m].
+        center: pile axis (cx, cy) [m], or None to estimate it from the highest spheres.
+        toe_correction: False (default) is the seed formula above. True uses the cone through the
+            sphere tops instead: atan((h - 2 r_b) / rho_b) with rho_b the 98th percentile of the
+            bottom-layer centres' rho and r_b their mean radius (the top of the bottom layer is the
+            foot of the flank line), which removes the toe bias.
+
+    Returns:
+        the angle in degrees.
+    """
+    x, r = _spheres(x, r)
+    base_z = _finite("base_z", base_z, "m")
+    cx, cy = _axis(x, r, center)
+    if not isinstance(toe_correction, (bool, np.bool_)):
+        _bad("toe_correction", toe_correction, "True or False")
+    base = _base_layer(x, r, base_z)
+    h = float((x[:, 2] + r).max()) - base_z
+    rho = np.hypot(x[base, 0] - cx, x[base, 1] - cy)
+    if toe_correction:
+        rb = float(np.percentile(rho, BASE_PERCENTILE))
+        hb = h - 2.0 * float(r[base].mean())
+        if rb <= 0 or hb <= 0:
+            _bad("x", _short(x), "a pile wider and higher than its bottom layer for toe_correction=True")
+        return math.degrees(math.atan2(hb, rb))
+    d = 2.0 * float(np.percentile(rho + r[base], BASE_PERCENTILE))
+    return math.degrees(math.atan2(2.0 * h, d))
+
+
+def silhouette(x, r, azimuth_deg: float = 0.0, pixel: float | None = None, base_z: float = 0.0,
+               center=(0.0, 0.0)) -> dict:
+    """Binary side view of a sphere pile: every sphere projected orthographically as a filled disc.
+
+    The camera looks horizontally at the axis from azimuth ``azimuth_deg`` (0 = from +x, 90 = from +y).
+    The image coordinate u [m] runs along (-sin az, cos az, 0) from the axis (left to right in the
+    picture), rows run top to bottom. A pixel is filled when its centre lies inside a disc. Column
+    centres sit at whole multiples of ``pixel`` from the axis, so the axis is one column.
+
+    Args:
+        x: sphere centres [m], shape (n, 3).
+        r: sphere radii [m], shape (n,).
+        azimuth_deg: viewing direction [deg].
+        pixel: pixel size [m]; None = smallest radius / 4.
+        base_z: base plane [m]; the image reaches down to it (or to the lowest sphere bottom).
+        center: pile axis (cx, cy) [m], or None to estimate it.
+
+    Returns:
+        dict with ``image`` (bool, shape (rows, cols), row 0 at the top), ``pixel_m``, ``u0_m`` (u of
+        column 0's centre), ``z0_m`` (absolute z of row 0's centre), ``axis_column`` (column of u = 0)
+        and ``center``.
+    """
+    x, r = _spheres(x, r)
+    az = _finite("azimuth_deg", azimuth_deg, "deg")
+    base_z = _finite("base_z", base_z, "m")
+    p = float(r.min()) / 4.0 if pixel is None else _positive("pixel", pixel, "m")
+    cx, cy = _axis(x, r, center)
+    t = math.radians(az)
+    u = -(x[:, 0] - cx) * math.sin(t) + (x[:, 1] - cy) * math.cos(t)
+    return _raster(u, x[:, 2], r, p, base_z) | {"center": (cx, cy)}
+
+
+def _raster(u: np.ndarray, z: np.ndarray, r: np.ndarray, p: float, base_z: float) -> dict:
+    """Union of discs (u, z, r) on a grid of pixel p, by per-column run-length fills.
+
+    Each disc covers, in each column it spans, one run of rows; the runs go into a difference image
+    (+1 at the first row, -1 after the last) whose cumulative sum down the columns is > 0 exactly on
+    the filled pixels. That is O(spheres x columns per sphere) rather than O(pixels per sphere).
+    """
+    c_lo = np.floor((u - r) / p).astype(np.int64)
+    c_hi = np.ceil((u + r) / p).astype(np.int64)
+    axis_col = int(max(0, -c_lo.min())) + 1
+    ncols = int(max(c_hi.max(), 0)) + axis_col + 2
+    z_top = float((z + r).max()) + p
+    z_bot = min(base_z, float((z - r).min()))
+    nrows = int(math.ceil((z_top - z_bot) / p)) + 1
+    z0 = z_top - 0.5 * p  # centre of row 0
+
+    span = int((c_hi - c_lo).max()) + 1
+    offs = np.arange(span)
+    diff = np.zeros((nrows + 1) * ncols, dtype=np.int64)
+    chunk = max(1, _RASTER_CHUNK // span)
+    for i in range(0, len(u), chunk):
+        sl = slice(i, i + chunk)
+        cols = c_lo[sl, None] + offs[None, :]
+        du = cols * p - u[sl, None]
+        h2 = r[sl, None] ** 2 - du * du
+        ok = h2 > 0
+        hh = np.sqrt(np.where(ok, h2, 0.0))
+        zs = z[sl, None]
+        # rows whose centre z0 - j p lies in [z - hh, z + hh]
+        j_lo = np.ceil((z0 - (zs + hh)) / p - 1e-9).astype(np.int64)
+        j_hi = np.floor((z0 - (zs - hh)) / p + 1e-9).astype(np.int64)
+        j_lo = np.maximum(j_lo, 0)
+        j_hi = np.minimum(j_hi, nrows - 1)
+        ok &= j_lo <= j_hi
+        c = (cols + axis_col)[ok]
+        diff += np.bincount(j_lo[ok] * ncols + c, minlength=diff.size)
+        diff -= np.bincount((j_hi[ok] + 1) * ncols + c, minlength=diff.size)
+    image = np.cumsum(diff.reshape(nrows + 1, ncols), axis=0)[:nrows] > 0
+    return {"image": image, "pixel_m": p, "u0_m": -axis_col * p, "z0_m": z0, "axis_column": axis_col}
+
+
+def _top_boundary(image: np.ndarray) -> np.ndarray:
+    """Row of the top-most filled pixel in each column, -1 for empty columns."""
+    filled = image.any(axis=0)
+    return np.where(filled, np.argmax(image, axis=0), -1)
+
+
+def angle_image(x, r, views: int = 4, pixel: float | None = None, base_z: float = 0.0, center=(0.0, 0.0),
+                inner: float = 0.2, outer: float = 0.8, return_images: bool = False) -> dict:
+    """Angle of repose [deg] by the seeds' image method on orthographic side views of the pile.
+
+    For each of ``views`` viewing directions evenly spaced in azimuth (4 = front, right, rear, left)
+    the spheres are drawn as filled discs into a binary image (the silhouette, see :func:`silhouette`),
+    the boundary is the top-most filled pixel of every column, and it is split at the axis column
+    into a left and a right flank. On each flank the columns between ``inner`` and ``outer`` of the
+    flank width (axis to outermost filled column) are kept, a line z(u) is fitted and the flank angle
+    is atan(|slope|).
+
+    Orthographic views from opposite sides are mirror images, so with an even number of views each
+    silhouette is measured twice (as in photographing front and rear); only views/2 are independent.
+
+    Args:
+        x: sphere centres [m], shape (n, 3).
+        r: sphere radii [m], shape (n,).
+        views: number of viewing directions, >= 1.
+        pixel: pixel size [m]; None = smallest radius / 4.
+        base_z: base plane [m].
+        center: pile axis (cx, cy) [m], or None to estimate it from the highest spheres.
+        inner, outer: kept part of each flank as fractions of its width, 0 <= inner < outer <= 1.
+        return_images: also return the binary images.
+
+    Returns:
+        dict with ``mean_deg``, ``sd_deg`` (ddof=1), ``per_side_deg`` (list of 2 * views angles: left,
+        right of view 0, then view 1, ...), ``views``, ``pixel_m``, ``center``; with
+        ``return_images=True`` also ``images`` (list of bool arrays, shape (rows, cols), row 0 at the
+        top) and ``geometry`` (per view: ``u0_m``, ``z0_m``, ``axis_column``, see :func:`silhouette`).
+
+    Raises:
+        ValueError: bad arguments, or a flank with fewer than 3 columns in the fit zone.
+    """
+    x, r = _spheres(x, r)
+    views = _int_at_least("views", views, 1)
+    base_z = _finite("base_z", base_z, "m")
+    inner, outer = _zones(inner, outer)
+    p = float(r.min()) / 4.0 if pixel is None else _positive("pixel", pixel, "m")
+    cx, cy = _axis(x, r, center)
+    dx, dy, z = x[:, 0] - cx, x[:, 1] - cy, x[:, 2]
+
+    angles, images, geometry = [], [], []
+    for k in range(views):
+        t = 2.0 * math.pi * k / views
+        u = -dx * math.sin(t) + dy * math.cos(t)
+        sil = _raster(u, z, r, p, base_z)
+        img = sil["image"]
+        rows = _top_boundary(img)
+        cols = np.flatnonzero(rows >= 0)
+        height = sil["z0_m"] - rows[cols] * p
+        uc = (cols - sil["axis_column"]) * p
+        for side in (-1.0, 1.0):
+            on = side * uc > 0
+            if not on.any():
+                raise ValueError(f"angle_image: view {k} has no silhouette on the "
+                                 f"{'left' if side < 0 else 'right'} of the axis center = {(cx, cy)}; "
+                                 f"expected a pile around the axis")
+            w = float((side * uc[on]).max())
+            keep = on & (side * uc >= inner * w) & (side * uc <= outer * w)
+            if keep.sum() < 3:
+                raise ValueError(f"angle_image: view {k}, {'left' if side < 0 else 'right'} flank has "
+                                 f"{int(keep.sum())} columns between inner = {inner} and outer = {outer} of its "
+                                 f"width {w:.4g} m at pixel = {p:.4g} m; expected >= 3 (use a smaller pixel)")
+            slope = np.polyfit(uc[keep], height[keep], 1)[0]
+            angles.append(math.degrees(math.atan(abs(slope))))
+        if return_images:
+            images.append(img)
+            geometry.append({"u0_m": sil["u0_m"], "z0_m": sil["z0_m"], "axis_column": sil["axis_column"]})
+    a = np.array(angles)
+    out = {"mean_deg": float(a.mean()), "sd_deg": float(a.std(ddof=1)), "per_side_deg": a.tolist(),
+           "views": views, "pixel_m": p, "center": (cx, cy)}
+    if return_images:
+        out["images"] = images
+        out["geometry"] = geometry
+    return out
+
+
+def synthetic_cone(angle_deg: float, base_radius: float, sphere_radius: float, seed: int = 0,
+                   polydispersity: float = 0.0, base_z: float = 0.0, center=(0.0, 0.0)):
+    """A sphere pile of known slope, for testing the angle-of-repose measures.
+
+    The cone has slope ``angle_deg``, base radius ``base_radius`` [m] and apex height
+    base_radius * tan(angle) above ``base_z``, axis through ``center``. Spheres sit on a square
+    lattice of columns (spacing 2.2 largest radii, one column on the axis, turned by 20.9 deg about
+    it so that no lattice row lines up with a side view, jittered by up to 0.1 largest radius along
+    each lattice axis and in z, so no two spheres overlap), stacked from the base (the bottom layer touches it) while their tops
+    stay below the cone. The top sphere of every column is then lifted so that its top lies
+    0..0.3 r below the cone surface: the outermost layer follows the surface closely, as the
+    surface spheres of a real pile do. Each sphere's top is below the cone surface above its centre.
+
+    Near the toe no sphere fits under a surface lower than one diameter, so the pile ends at
+    rho = base_radius - 2r/tan(angle) (the flank line through the tops still meets the base at
+    base_radius).
+
+    Args:
+        angle_deg: cone slope [deg], in (0, 90).
+        base_radius: cone base radius [m].
+        sphere_radius: mean sphere radius r [m].
+        seed: seed of ``np.random.default_rng``.
+        polydispersity: radii uniform in r * (1 +- polydispersity), in [0, 1).
+        base_z: base plane [m].
+        center: cone axis (cx, cy) [m].
+
+    Returns:
+        (x, r): centres [m], shape (n, 3), and radii [m], shape (n,).
+    """
+    a = _finite("angle_deg", angle_deg, "deg")
+    if not 0 < a < 90:
+        _bad("angle_deg", angle_deg, "a slope in (0, 90) deg")
+    big_r = _positive("base_radius", base_radius, "m")
+    r0 = _positive("sphere_radius", sphere_radius, "m")
+    pd = _finite("polydispersity", polydispersity, "")
+    if not 0 <= pd < 1:
+        _bad("polydispersity", polydispersity, "a fraction in [0, 1)")
+    base_z = _finite("base_z", base_z, "m")
+    if center is None:
+        _bad("center", center, "(cx, cy) in m")
+    cx, cy = _axis(np.zeros((1, 3)), np.ones(1), center)
+    tan_a = math.tan(math.radians(a))
+    height = big_r * tan_a
+    r_max = r0 * (1 + pd)
+    if height < 2 * r_max:
+        _bad("base_radius", base_radius, f"a cone at least one largest sphere diameter ({2 * r_max:.4g} m) high; "
+                                         f"base_radius * tan(angle_deg) = {height:.4g} m")
+    rng = np.random.default_rng(seed)
+    spacing = 2.2 * r_max
+    jit = 0.1 * r_max
+    n = int(math.ceil(math.sqrt(2.0) * big_r / spacing)) + 1
+    i, j = (m.ravel() * spacing for m in np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij"))
+    # jitter along the lattice axes, before turning, keeps neighbouring columns >= 2 r_max apart
+    i = i + rng.uniform(-jit, jit, i.size)
+    j = j + rng.uniform(-jit, jit, j.size)
+    # A lattice row seen end-on puts all its columns at the same image positions, leaving see-through
+    # gaps in side views; turned by atan(1/phi^2) (phi the golden ratio) the rows near any view's
+    # mid-plane fall at well-spread offsets for views 0, 45, 90, ... deg.
+    c, s = math.cos(_LATTICE_TURN), math.sin(_LATTICE_TURN)
+    gx, gy = c * i - s * j, s * i + c * j
+    inside = np.hypot(gx, gy) <= big_r
+    gx, gy = gx[inside], gy[inside]
+    surface = height - tan_a * np.hypot(gx, gy)  # cone height above the base over each column
+    layers = int(math.ceil(height / spacing)) + 1
+
+    col = np.repeat(np.arange(gx.size), layers)
+    k = np.tile(np.arange(layers), gx.size)
+    rad = r0 * (1 + pd * rng.uniform(-1.0, 1.0, col.size))
+    # bottom layer rests on the base; above it the layers keep >= 2 r_max centre spacing despite jitter
+    z = np.where(k == 0, rad, r_max + k * spacing + rng.uniform(-jit, jit, col.size))
+    keep = z + rad <= surface[col]
+    col, z, rad = col[keep], z[keep], rad[keep]
+
+    # the highest sphere of each column goes up to just under the surface
+    top_of_col = np.r_[col[1:] != col[:-1], True]
+    lifted = surface[col] - rad - rng.uniform(0.0, 0.3, col.size) * rad
+    z = np.where(top_of_col, np.maximum(z, lifted), z)
+    x = np.column_stack([gx[col] + cx, gy[col] + cy, z + base_z])
+    return x, rad
+
+
+# --------------------------------------------------------------------------------------------------
+# die press
+# --------------------------------------------------------------------------------------------------
+
+def _press_arrays(piston_z, piston_force) -> tuple[np.ndarray, np.ndarray]:
+    z = np.asarray(piston_z, dtype=float)
+    f = np.asarray(piston_force, dtype=float)
+    if z.ndim != 1 or z.size < 2:
+        _bad("piston_z", _short(z), "piston face heights [m] of shape (k,) with k >= 2")
+    if f.shape != z.shape:
+        _bad("piston_force", _short(f), f"axial forces [N] of shape {z.shape}, one per piston_z sample")
+    if not np.all(np.isfinite(z)):
+        _bad("piston_z", _short(z), "finite heights (found NaN or inf)")
+    if not np.all(np.isfinite(f)):
+        _bad("piston_force", _short(f), "finite forces (found NaN or inf)")
+    # the stroke is a loading curve: an upward step means unloading or mixed-up samples
+    tol = 1e-9 * max(float(np.ptp(z)), 1e-300)
+    up = np.flatnonzero(np.diff(z) > tol)
+    if up.size:
+        _bad("piston_z", _short(z), f"a monotonic downward stroke (it rises after sample {int(up[0])})")
+    return z, f
+
+
+def press_curve(piston_z, piston_force, contact_z: float | None = None) -> dict:
+    """Force-displacement curve of a die press from first contact.
+
+    Args:
+        piston_z: piston face height [m] over time, shape (k,), non-increasing (loading stroke).
+        piston_force: axial force on the piston [N], shape (k,).
+        contact_z: piston height at first contact [m]; None = the first sample whose force exceeds
+            1 % of the maximum force.
+
+    Returns:
+        dict with ``displacement_m`` (travel since contact [m], shape (m,), from 0 at the contact
+        sample), ``force_n`` (shape (m,)), ``contact_z_m`` and ``contact_index`` (first sample kept).
+    """
+    z, f = _press_arrays(piston_z, piston_force)
+    if contact_z is None:
+        fmax = float(f.max())
+        if fmax <= 0:
+            _bad("piston_force", _short(f), "some positive force (the piston never touched the bed); "
+                                            "or give contact_z")
+        i0 = int(np.argmax(f > 0.01 * fmax))
+        zc = float(z[i0])
+    else:
+        zc = _finite("contact_z", contact_z, "m")
+        below = np.flatnonzero(z <= zc)
+        if below.size == 0:
+            _bad("contact_z", contact_z, f"a height reached by the piston (lowest piston_z = {z.min():.6g} m)")
+        i0 = int(below[0])
+    return {"displacement_m": zc - z[i0:], "force_n": f[i0:].copy(), "contact_z_m": zc, "contact_index": i0}
+
+
+def press_summary(piston_z, piston_force, fill_height: float, force_limit: float | None = None,
+                  backstop_z: float = 0.0) -> dict:
+    """Key numbers of a die-press stroke (seed 001 reports max displacement and compression ratio).
+
+    The loose bed fills the die from the backstop at ``backstop_z`` to ``backstop_z + fill_height``.
+    The stroke ends at the lowest piston position, or, with ``force_limit``, where the force first
+    reaches that limit (interpolated linearly between samples).
+
+    Args:
+        piston_z: piston face height [m], shape (k,), non-increasing, same frame as ``backstop_z``.
+        piston_force: axial force on the piston [N], shape (k,).
+        fill_height: initial (loose) bed height above the backstop [m], > 0.
+        force_limit: force [N] at which the press stops, > 0, or None.
+        backstop_z: height of the backstop (die bottom) [m].
+
+    Returns:
+        dict with ``max_displacement_m`` (piston travel from the top of the loose fill to the end of
+        the stroke, >= 0), ``compression_ratio`` (max_displacement / fill_height), ``max_force_n``
+        (up to the end of the stroke), ``final_height_m`` (bed height at the end, piston face above the
+        backstop) and ``limit_reached`` (bool, False when no force_limit is given).
+    """
+    z, f = _press_arrays(piston_z, piston_force)
+    fill = _positive("fill_height", fill_height, "m")
+    backstop_z = _finite("backstop_z", backstop_z, "m")
+    reached = False
+    if force_limit is None:
+        z_end, f_max = float(z.min()), float(f.max())
+    else:
+        lim = _positive("force_limit", force_limit, "N")
+        hit = np.flatnonzero(f >= lim)
+        if hit.size == 0:
+            z_end, f_max = float(z.min()), float(f.max())
+        else:
+            reached = True
+            i = int(hit[0])
+            if i == 0:
+                z_end = float(z[0])
+            else:
+                w = (lim - f[i - 1]) / (f[i] - f[i - 1])
+                z_end = float(z[i - 1] + w * (z[i] - z[i - 1]))
+            f_max = lim
+    disp = max(0.0, backstop_z + fill - z_end)
+    return {"max_displacement_m": disp, "compression_ratio": disp / fill, "max_force_n": f_max,
+            "final_height_m": z_end - backstop_z, "limit_reached": reached}
+
+
+# --------------------------------------------------------------------------------------------------
+# impacts on wall faces
+# --------------------------------------------------------------------------------------------------
+
+def _impact_arrays(face_count, face_energy, face_max_speed, face_area):
+    c = np.asarray(face_count)
+    if c.ndim != 1 or c.size == 0:
+        _bad("face_count", _short(c), "impact counts of shape (F,) with F >= 1")
+    if not (np.issubdtype(c.dtype, np.integer) or
+            (np.issubdtype(c.dtype, np.floating) and np.all(np.isfinite(c)) and np.all(c == np.round(c)))):
+        _bad("face_count", _short(c), "whole-number impact counts")
+    c = c.astype(np.int64)
+    if np.any(c < 0):
+        _bad("face_count", _short(c), "counts >= 0")
+    e = np.asarray(face_energy, dtype=float)
+    v = np.asarray(face_max_speed, dtype=float)
+    for name, a, unit in (("face_energy", e, "J"), ("face_max_speed", v, "m/s")):
+        if a.shape != c.shape:
+            _bad(name, _short(a), f"shape {c.shape} like face_count")
+        if not np.all(np.isfinite(a) & (a >= 0)):
+            _bad(name, _short(a), f"finite values >= 0 {unit}")
+    area = None
+    if face_area is not None:
+        area = np.asarray(face_area, dtype=float)
+        if area.shape != c.shape:
+            _bad("face_area", _short(area), f"shape {c.shape} like face_count")
+        if not np.all(np.isfinite(area) & (area > 0)):
+            _bad("face_area", _short(area), "finite face areas > 0 m^2")
+    return c, e, v, area
+
+
+def impact_summary(face_count, face_energy, face_max_speed, face_area=None, hot: int = 10) -> dict:
+    """Totals of the per-face wall impact records (``State.face_impact_*``).
+
+    Args:
+        face_count: impacts per wall face, integers, shape (F,).
+        face_energy: impact kinetic energy summed per face [J], shape (F,).
+        face_max_speed: highest impact speed per face [m/s], shape (F,).
+        face_area: face areas [m^2], shape (F,), or None.
+        hot: how many of the most-hit faces to list, >= 1.
+
+    Returns:
+        dict with ``total_count``, ``total_energy_j``, ``max_speed_m_s``, ``max_speed_face`` (index, the
+        first on ties), ``mean_energy_per_impact_j`` (total energy / total count, i.e. the count-weighted
+        mean of the per-face means; NaN without impacts), ``hot_faces`` (indices of up to ``hot`` faces
+        with the most impacts, most first, faces without impacts left out) and, with ``face_area``,
+        ``energy_per_area_j_m2`` (total energy / total area) and ``face_energy_per_area_j_m2`` (shape (F,)).
+    """
+    c, e, v, area = _impact_arrays(face_count, face_energy, face_max_speed, face_area)
+    hot = _int_at_least("hot", hot, 1)
+    total = int(c.sum())
+    energy = float(e.sum())
+    order = np.argsort(-c, kind="stable")
+    hot_faces = [int(i) for i in order[:hot] if c[i] > 0]
+    out = {"total_count": total, "total_energy_j": energy, "max_speed_m_s": float(v.max()),
+           "max_speed_face": int(np.argmax(v)),
+           "mean_energy_per_impact_j": energy / total if total > 0 else float("nan"),
+           "hot_faces": hot_faces}
+    if area is not None:
+        out["energy_per_area_j_m2"] = energy / float(area.sum())
+        out["face_energy_per_area_j_m2"] = e / area
+    return out
+
+
+def impact_phases(snapshots: Mapping[str, Sequence], face_area=None) -> dict:
+    """Per-phase impact summaries from cumulative snapshots taken at the end of each phase.
+
+    Counts and energies are cumulative over the run, so a phase's own values are the differences of
+    consecutive snapshots (the first phase is its snapshot). The per-face maximum speed is reset at
+    each phase start by the caller, so it is taken as given.
+
+    Args:
+        snapshots: phase name -> (face_count (F,), face_energy [J] (F,), face_max_speed [m/s] (F,)),
+            in phase order (dict insertion order), at least one phase.
+        face_area: face areas [m^2], shape (F,), or None.
+
+    Returns:
+        dict phase name -> :func:`impact_summary` of that phase.
+    """
+    if not isinstance(snapshots, Mapping) or len(snapshots) == 0:
+        _bad("snapshots", type(snapshots).__name__ if not isinstance(snapshots, Mapping) else snapshots,
+             "a non-empty dict phase name -> (face_count, face_energy, face_max_speed)")
+    out = {}
+    prev_c = prev_e = None
+    for name, snap in snapshots.items():
+        try:
+            count, energy, speed = snap
+        except (TypeError, ValueError):
+            _bad(f"snapshots[{name!r}]", type(snap).__name__, "a tuple (face_count, face_energy, face_max_speed)")
+        c, e, v, _ = _impact_arrays(count, energy, speed, None)
+        if prev_c is None:
+            dc, de = c, e
+        else:
+            if c.shape != prev_c.shape:
+                _bad(f"snapshots[{name!r}]", _short(c), f"the same face count {prev_c.shape} as the previous phase")
+            dc, de = c - prev_c, e - prev_e
+            if np.any(dc < 0):
+                _bad(f"snapshots[{name!r}]", _short(c), "cumulative face counts (not below the previous snapshot)")
+            # float sums accumulate rounding; only a real decrease is an error
+            if np.any(de < -1e-9 * max(float(prev_e.max()), 1e-300)):
+                _bad(f"snapshots[{name!r}]", _short(e), "cumulative face energies (not below the previous snapshot)")
+            de = np.maximum(de, 0.0)
+        out[name] = impact_summary(dc, de, v, face_area)
+        prev_c, prev_e = c, e
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# settling
+# --------------------------------------------------------------------------------------------------
+
+class SettleMonitor:
+    """Decides when a packing has settled: kinetic energy per particle below a threshold for a while.
+
+    Args:
+        threshold: kinetic energy per particle [J], > 0.
+        window: consecutive updates that must all be below the threshold, >= 1.
+
+    Attributes:
+        history: list of (time [s], kinetic energy per particle [J]), one per update.
+        settled_time: time [s] of the update at which the monitor first reported settled, or None.
+    """
+
+    def __init__(self, threshold: float, window: int = 3):
+        self.threshold = _positive("threshold", threshold, "J")
+        self.window = _int_at_least("window", window, 1)
+        self.history: list[tuple[float, float]] = []
+        self.settled_time: float | None = None
+        self._streak = 0
+
+    def update(self, time: float, kinetic_energy_per_particle: float) -> bool:
+        """Record one sample (time [s], kinetic energy per particle [J]).
+
+        Returns True when the last ``window`` samples were all below the threshold; a sample at or
+        above it starts the count again.
+        """
+        t = _finite("time", time, "s")
+        ke = _finite("kinetic_energy_per_particle", kinetic_energy_per_particle, "J")
+        if ke < 0:
+            _bad("kinetic_energy_per_particle", kinetic_energy_per_particle, "an energy >= 0 J")
+        if self.history and t < self.history[-1][0]:
+            _bad("time", time, f"a time >= the previous update's {self.history[-1][0]!r} s")
+        self.history.append((t, ke))
+        self._streak = self._streak + 1 if ke < self.threshold else 0
+        if self.settled and self.settled_time is None:
+            self.settled_time = t
+        return self.settled
+
+    @property
+    def settled(self) -> bool:
+        """Whether the last ``window`` updates were all below the threshold."""
+        return self._streak >= self.window
+
+
+# --------------------------------------------------------------------------------------------------
+# plots
+# --------------------------------------------------------------------------------------------------
+
+def _pyplot():
+    import matplotlib
+
+    # files only: no display is needed (or present on the cluster)
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_press(curve: dict, path) -> str:
+    """Write the force-displacement curve of :func:`press_curve` as a PNG (mm vs kN) to ``path``."""
+    if not isinstance(curve, Mapping) or "displacement_m" not in curve or "force_n" not in curve:
+        _bad("curve", type(curve).__name__, "the dict of press_curve (displacement_m, force_n)")
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5, 3.5), dpi=120)
+    ax.plot(1e3 * np.asarray(curve["displacement_m"]), 1e-3 * np.asarray(curve["force_n"]), lw=1.5)
+    ax.set_xlabel("piston displacement since contact [mm]")
+    ax.set_ylabel("piston force [kN]")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return str(path)
+
+
+def plot_angles(result: dict, path) -> str:
+    """Write the per-sector (:func:`angle_surface_fit`) or per-flank (:func:`angle_image`) angles as a
+    bar chart PNG with the mean +- SD to ``path``."""
+    key = next((k for k in ("per_slice_deg", "per_side_deg") if isinstance(result, Mapping) and k in result), None)
+    if key is None:
+        _bad("result", type(result).__name__, "the dict of angle_surface_fit or angle_image")
+    vals = np.asarray(result[key], dtype=float)
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5, 3.5), dpi=120)
+    ax.bar(np.arange(len(vals)), vals, color="tab:blue", alpha=0.7)
+    mean, sd = float(result["mean_deg"]), float(result["sd_deg"])
+    ax.axhline(mean, color="k", lw=1.2, label=f"mean {mean:.2f} deg (SD {sd:.2f})")
+    ax.axhspan(mean - sd, mean + sd, color="k", alpha=0.1)
+    ax.set_xlabel("sector" if key == "per_slice_deg" else "flank (left, right per view)")
+    ax.set_ylabel("angle of repose [deg]")
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return str(path)

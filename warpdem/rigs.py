@@ -1,0 +1,574 @@
+"""The four test rigs of the seed papers, generated as scenes from a few parameters.
+
+Each rig is a frozen dataclass of parameters (SI units; defaults are the full-size rig) whose ``spec()``
+returns a :class:`warpdem.scene.SceneSpec`; :func:`new` writes it as a USD stage. ``SMOKE`` holds, per rig,
+the overrides of a CPU-sized version (a few hundred particles) used by the tests and the main job.
+
+* funnel (seeds 000, 001): ISO 4324:1977 funnel method -- outlet 10 mm, 75 mm above the base plate; a
+  standard 60 deg laboratory funnel. ISO's 10 mm outlet suits powders (seed 001); pellets of seed 000 (6.3 mm)
+  would jam it, so the default outlet is 40 mm (about six pellet sizes, Beverloo's free-flow range).
+* lifting_cylinder (seed 002): 200 mm inner diameter, 300 mm high, lifted at 0.05 m/s, optional coating of
+  glued particles on the cylinder and the base (seed 002 glues ore grains on both).
+* die_press (seed 001): single pellet press -- die hole, feeding inlet, pressure bar (piston), backstop.
+* truck_tipper (seed 002): dump body loaded by a bucket, then tilted about its rear hinge to discharge.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import geometry as geo
+from .materials import Interaction, Material
+from .scene import FactorySpec, MeasureSpec, RunSpec, SceneSpec, ShapeSpec, StageError, WallSpec
+from .types import ContactLaw, RollingModel
+
+
+# ----------------------------------------------------------------------------------------------------
+def _check_params(p) -> None:
+    """Numbers must be finite; lengths, times and counts that name a size must be positive."""
+    for f in dataclasses.fields(p):
+        v = getattr(p, f.name)
+        if isinstance(v, bool) or isinstance(v, str):
+            continue
+        if not math.isfinite(v):
+            raise ValueError(f"{type(p).__name__}: {f.name} = {v!r} is not allowed; expected a finite number")
+        if f.name in getattr(p, "_may_be_negative", ()):
+            continue
+        if v < 0 or (v == 0 and f.name not in p._may_be_zero):
+            raise ValueError(f"{type(p).__name__}: {f.name} = {v!r} is not allowed; expected a value > 0"
+                             + (" (0 allowed)" if f.name in p._may_be_zero else ""))
+
+
+def _bound3(shape: ShapeSpec) -> float:
+    """(bounding radius / equivalent radius)^3 of a shape: a static fill places clumps by their bounding
+    spheres, so a fill region needs this much more room than the particles' own volume suggests."""
+    if shape.kind == "sphere":
+        return 1.0
+    t = shape.template()
+    return (t.bounding_radius / t.equivalent_radius) ** 3
+
+
+def _shape(kind: str, where: str) -> tuple[ShapeSpec, float]:
+    """Shape spec and its volume-equivalent radius at template scale [m]."""
+    from .clumps import pellet_template, phosphate_template
+
+    if kind == "sphere":
+        return ShapeSpec("sphere", "sphere"), 1.0
+    templates = {"pellet": pellet_template, "phosphate": phosphate_template}
+    if kind not in templates:
+        raise ValueError(f"{where}: particle = {kind!r} is not allowed; expected sphere, "
+                         + ", ".join(templates))
+    t = templates[kind]()
+    return ShapeSpec(kind, "clump", np.asarray(t.sphere_offset), np.asarray(t.sphere_radius)), t.equivalent_radius
+
+
+def _sizes(radius: float, spread: float) -> dict:
+    """Radius normally distributed with relative SD ``spread``, truncated at +-2 SD (fixed when 0)."""
+    if spread == 0:
+        return {"distribution": "fixed", "radius": radius}
+    return {"distribution": "normal", "mean": radius, "std": spread * radius, "low": radius * (1 - 2 * spread),
+            "high": radius * (1 + 2 * spread)}
+
+
+def _settle_energy(material: Material, radius: float) -> float:
+    """Kinetic energy per particle [J] below which a bed counts as settled: m g r / 1000, a thousandth of the
+    work to lift the particle by its own radius."""
+    return material.density * 4.0 / 3.0 * math.pi * radius**3 * 9.81 * radius * 1e-3
+
+
+def _pose_samples(times, pose_fn):
+    """Keyframes (times, translations (K, 3), rotations (K, 4) x,y,z,w) of ``pose_fn(t) -> (R 3x3, p 3)``."""
+    tr, rot = [], []
+    for t in times:
+        R, p = pose_fn(float(t))
+        tr.append(p)
+        rot.append(_quat_from_matrix(R))
+    rot = np.asarray(rot)
+    # keep consecutive quaternions in one hemisphere so interpolation takes the short way
+    for k in range(1, len(rot)):
+        if np.dot(rot[k], rot[k - 1]) < 0:
+            rot[k] = -rot[k]
+    return np.asarray(times, dtype=np.float64), np.asarray(tr, dtype=np.float64), rot
+
+
+def _quat_from_matrix(R: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(R).as_quat()  # (x, y, z, w)
+
+
+def _rot_y(angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _about(R: np.ndarray, pivot) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation R about the point ``pivot``: x -> R (x - pivot) + pivot."""
+    pivot = np.asarray(pivot, dtype=float)
+    return R, pivot - R @ pivot
+
+
+def _compose(a, b):
+    """Pose a after pose b: x -> Ra (Rb x + pb) + pa."""
+    return a[0] @ b[0], a[0] @ b[1] + a[1]
+
+
+def _smooth(s: float) -> float:
+    """Smoothstep on [0, 1] (zero speed at both ends: no jolt to the particles)."""
+    s = min(max(s, 0.0), 1.0)
+    return s * s * (3 - 2 * s)
+
+
+LOOSE_PACKING = 0.25
+"""Volume fraction a static (random sequential) fill reaches comfortably, walls included; fill regions are
+sized with it and the particles settle to ~0.6."""
+
+STEEL = Material("steel", density=7930.0, poisson_ratio=0.3, shear_modulus=7.7e10)
+"""304 stainless steel of seed 000 (G = 77 GPa, nu = 0.3, 7930 kg/m^3)."""
+
+
+# ----------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Funnel:
+    """Funnel angle of repose onto a 304 stainless plate (seeds 000 and 001).
+
+    Geometry from ISO 4324:1977 (outlet 75 mm above the plate) with a 60 deg laboratory funnel; the outlet
+    (10 mm in ISO, for powders) is 40 mm by default for the 6.3 mm pellets of seed 000. Particles (``count``
+    of them at ``rate`` per second) rain into the funnel from above and pile on the plate; the run stops when
+    the pile has settled. Materials and pairs are seed 000's calibrated values (Hertz-Mindlin with
+    constant-torque rolling friction); ``particle`` sphere | pellet (141-sphere clump of seed 000) |
+    phosphate; ``particle_radius`` 0 keeps the clump's true size (a sphere needs one).
+    """
+
+    particle: str = "pellet"
+    particle_radius: float = 0.0
+    radius_spread: float = 0.03
+    material: str = "pellet"
+    surface_energy: float = 0.0
+    count: int = 1500
+    rate: float = 2000.0
+    top_diameter: float = 0.15
+    outlet_diameter: float = 0.04
+    cone_angle: float = 60.0
+    stem_length: float = 0.03
+    outlet_height: float = 0.075
+    plate_size: float = 0.4
+    cell: float = 0.01
+    duration: float = 2.5
+    dt_fraction: float = 0.2
+    seed: int = 1
+    _may_be_zero = ("particle_radius", "radius_spread", "stem_length", "seed", "surface_energy")
+
+    def __post_init__(self):
+        _check_params(self)
+        if self.material not in ("pellet", "feed"):
+            raise ValueError(f"Funnel: material = {self.material!r} is not allowed; expected pellet or feed")
+        if self.outlet_diameter >= self.top_diameter:
+            raise ValueError(f"Funnel: outlet_diameter = {self.outlet_diameter} is not allowed; expected less than "
+                             f"top_diameter = {self.top_diameter}")
+        if not 0 < self.cone_angle < 180:
+            raise ValueError(f"Funnel: cone_angle = {self.cone_angle} is not allowed; expected (0, 180) degrees")
+
+    def spec(self) -> SceneSpec:
+        shape, r_eq = _shape(self.particle, "Funnel")
+        radius = self.particle_radius or (r_eq if shape.kind == "clump" else 0.0)
+        if radius <= 0:
+            raise ValueError("Funnel: particle_radius = 0 is not allowed for spheres; expected a radius > 0 m")
+        ct = RollingModel.CONSTANT_TORQUE
+        if self.material == "pellet":
+            # seed 000: feed pellets, calibrated (Hertz-Mindlin)
+            grain = Material("grain", density=1330.0, poisson_ratio=0.35, shear_modulus=1.45e6)
+            pp = Interaction(restitution=0.37, static_friction=0.55, rolling_friction=0.05, rolling_model=ct)
+            pw = Interaction(restitution=0.45, static_friction=0.52, rolling_friction=0.03, rolling_model=ct)
+        else:
+            # seed 001: wet-sticky feed as spheres, calibrated optimum; JKR when surface_energy > 0
+            grain = Material("grain", density=440.0, poisson_ratio=0.25, shear_modulus=10.0e6)
+            # spheres need the elastic-plastic spring-dashpot rolling model to rest in a pile
+            law = ContactLaw.JKR if self.surface_energy > 0 else ContactLaw.HERTZ_MINDLIN
+            epsd = RollingModel.EPSD
+            pp = Interaction(restitution=0.15, static_friction=0.51, rolling_friction=0.21, rolling_model=epsd,
+                             law=law, surface_energy=self.surface_energy)
+            pw = Interaction(restitution=0.1, static_friction=0.45, rolling_friction=0.2, rolling_model=epsd)
+        pairs = [("grain", "grain", pp), ("grain", "steel", pw),
+                 ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3))]
+        cone_h = geo.funnel_height(self.top_diameter, self.outlet_diameter, self.cone_angle)
+        top_z = self.outlet_height + self.stem_length + cone_h
+        fv, ft = geo.funnel(self.top_diameter, self.outlet_diameter, self.cone_angle, self.stem_length,
+                            self.outlet_height, min(self.cell, self.outlet_diameter / 4))
+        pv, pt = geo.grid_plate(self.plate_size, self.plate_size, max(self.cell, self.plate_size / 40))
+        bound = radius * (1 + 2 * self.radius_spread) * (1.42 if shape.kind == "clump" else 1.0)
+        region = ("cylinder", (0.0, 0.0, top_z + 2 * bound), 0.4 * self.top_diameter, max(8 * bound, 0.02), None)
+        fac = FactorySpec("pour", "dynamic", region, "grain", shape.name, _sizes(radius, self.radius_spread),
+                          count=int(self.count), rate=self.rate, seed=int(self.seed))
+        return SceneSpec(
+            rig="funnel", materials=[grain, STEEL], pairs=pairs, shapes=[shape],
+            walls=[WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "steel")],
+            factories=[fac],
+            run=RunSpec(duration=self.duration, dt_fraction=self.dt_fraction,
+                        settle_energy=_settle_energy(grain, radius), settle_after=self.count / self.rate,
+                        output_interval=0.05),
+            measure=MeasureSpec("angle_of_repose", base_height=0.0, center=(0.0, 0.0)),
+        )
+
+
+@dataclass(frozen=True)
+class LiftingCylinder:
+    """Lifting-cylinder angle of repose (seed 002): 200 mm inner diameter, 300 mm high, lifted at 0.05 m/s.
+
+    The cylinder stands on a base plate, is filled (static fill, then ``settle_time`` of settling), and is
+    lifted by ``lift_height`` (default: its height + 20 mm) at ``lift_speed``. With ``coated`` the cylinder's
+    inside and the base carry glued particles of the ore (seed 002 glues grains on both). Ore: seed 002's
+    phosphate (2404 kg/m^3, G = 2.5 MPa, nu = 0.25; printed E = 1 MPa conflicts with G, so G is kept), EEPA
+    between particles at seed 002's optimum (mu_s 0.7, mu_r 0.3, surface energy 1.0 J/m^2), 15-sphere clumps
+    coarse-grained to ``particle_radius`` (seed: 0.39 mm mean). A monodisperse coarse bed packs near 0.6, so
+    the 300 mm cylinder holds about 13 kg of it, not the seed's 15 kg: ``mass`` defaults to 11 kg.
+    """
+
+    particle: str = "phosphate"
+    particle_radius: float = 0.005
+    radius_spread: float = 0.1
+    mass: float = 11.0
+    count: int = 0
+    inner_diameter: float = 0.2
+    height: float = 0.3
+    lift_speed: float = 0.05
+    lift_height: float = 0.0
+    surface_energy: float = 1.0
+    pull_off_force: float = -0.009
+    coated: bool = True
+    coat_radius: float = 0.0
+    base_size: float = 0.6
+    settle_time: float = 1.0
+    after_lift: float = 2.0
+    cell: float = 0.02
+    dt_fraction: float = 0.2
+    seed: int = 1
+    _may_be_zero = ("count", "mass", "lift_height", "coat_radius", "radius_spread", "seed", "surface_energy")
+    _may_be_negative = ("pull_off_force",)
+
+    def __post_init__(self):
+        _check_params(self)
+        if (self.count == 0) == (self.mass == 0):
+            raise ValueError(f"LiftingCylinder: count = {self.count}, mass = {self.mass}: expected exactly one > 0")
+
+    def spec(self) -> SceneSpec:
+        shape, _ = _shape(self.particle, "LiftingCylinder")
+        r = self.particle_radius
+        ore = Material("ore", density=2404.0, poisson_ratio=0.25, shear_modulus=2.5e6)
+        eepa = Interaction(restitution=0.15, static_friction=0.7, rolling_friction=0.3, law=ContactLaw.EEPA,
+                           surface_energy=self.surface_energy, pull_off_force=self.pull_off_force,
+                           rolling_model=RollingModel.CONSTANT_TORQUE)
+        pairs = [("ore", "ore", eepa),
+                 ("ore", "steel", Interaction(restitution=0.15, static_friction=0.5, rolling_friction=0.1)),
+                 ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3))]
+        R, H = self.inner_diameter / 2, self.height
+        lift = self.lift_height or H + 0.02
+        cv, ct = geo.frustum(R, R, 0.0, H, self.cell)
+        bv, bt = geo.grid_plate(self.base_size, self.base_size, max(self.cell, self.base_size / 30))
+        t0, t1 = self.settle_time, self.settle_time + lift / self.lift_speed
+        times = np.array([0.0, t0, t1])
+        cyl = WallSpec("Cylinder", cv, ct, "steel", times, np.array([[0, 0, 0], [0, 0, 0], [0, 0, lift]], float),
+                       np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)))
+        base = WallSpec("Base", bv, bt, "steel")
+        coat_r = self.coat_radius or r
+        if self.coated:
+            cyl.coat = {"radius": coat_r, "material": "ore", "side": 1, "seed": self.seed}
+            base.coat = {"radius": coat_r, "material": "ore", "side": 1, "seed": self.seed + 1}
+        margin = (2 * coat_r if self.coated else 0.0) + r * (1 + 2 * self.radius_spread) * 1.45
+        bed = (self.mass / ore.density if self.mass else self.count * 4.19 * r**3) / LOOSE_PACKING * _bound3(shape)
+        region = ("cylinder", (0.0, 0.0, margin), R - margin, bed / (math.pi * (R - margin) ** 2), None)
+        fac = FactorySpec("fill", "fill", region, "ore", shape.name, _sizes(r, self.radius_spread),
+                          count=self.count or None, mass=self.mass or None, seed=self.seed)
+        return SceneSpec(
+            rig="lifting_cylinder", materials=[ore, STEEL], pairs=pairs, shapes=[shape], walls=[cyl, base],
+            factories=[fac],
+            run=RunSpec(duration=t1 + self.after_lift, dt_fraction=self.dt_fraction,
+                        settle_energy=_settle_energy(ore, r), settle_after=t1, output_interval=0.05),
+            measure=MeasureSpec("angle_of_repose", base_height=2 * coat_r if self.coated else 0.0),
+        )
+
+
+@dataclass(frozen=True)
+class DiePress:
+    """Single pellet press (seed 001): die hole with a feeding inlet, a backstop under the die and a pressure
+    bar (piston) driven down at ``piston_speed`` until the force reaches ``force_limit`` or the bar has
+    travelled ``max_travel`` x the fill height.
+
+    Wet feed of seed 001 (440 kg/m^3, G = 10 MPa, nu = 0.25, JKR at the calibrated optimum mu_s 0.51,
+    mu_r 0.21, surface energy 0.65 J/m^2); the 0.1 mm particles are coarse-grained to ``particle_radius``.
+    Speed-up: the seed presses at 20 mm/min; we press at ``piston_speed`` (0.1 m/s by default) and report the
+    inertial number I = (v / H) d / sqrt(p / rho) of the compaction, which must stay below 1e-3 for
+    quasi-static flow. The fill (``fill_height`` of settled bed) is made by a static fill of the die and
+    ``settle_time`` of settling with the bar parked above the inlet; the bar then approaches at 5 x
+    ``piston_speed`` to ``gap`` above the expected bed top and presses.
+    """
+
+    particle_radius: float = 0.00025
+    radius_spread: float = 0.05
+    die_diameter: float = 0.008
+    fill_height: float = 0.08
+    inlet_diameter: float = 0.016
+    inlet_height: float = 0.01
+    piston_speed: float = 0.1
+    gap: float = 0.004
+    force_limit: float = 300.0
+    max_travel: float = 0.8
+    settle_time: float = 0.4
+    cell: float = 0.002
+    dt_fraction: float = 0.2
+    seed: int = 1
+    _may_be_zero = ("radius_spread", "seed")
+
+    def __post_init__(self):
+        _check_params(self)
+        if self.inlet_diameter <= self.die_diameter:
+            raise ValueError(f"DiePress: inlet_diameter = {self.inlet_diameter} is not allowed; expected more than "
+                             f"die_diameter = {self.die_diameter}")
+        if not 0 < self.max_travel < 1:
+            raise ValueError(f"DiePress: max_travel = {self.max_travel} is not allowed; expected a fraction in (0, 1)")
+
+    def spec(self) -> SceneSpec:
+        r = self.particle_radius
+        feed = Material("feed", density=440.0, poisson_ratio=0.25, shear_modulus=10.0e6)
+        steel = Material("steel", density=7850.0, poisson_ratio=0.3, shear_modulus=7.0e10)
+        pairs = [("feed", "feed", Interaction(restitution=0.15, static_friction=0.51, rolling_friction=0.21,
+                                              law=ContactLaw.JKR, surface_energy=0.65,
+                                              rolling_model=RollingModel.CONSTANT_TORQUE)),
+                 ("feed", "steel", Interaction(restitution=0.1, static_friction=0.45, rolling_friction=0.2,
+                                               rolling_model=RollingModel.CONSTANT_TORQUE)),
+                 ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3))]
+        R = self.die_diameter / 2
+        # a die a few particles wide packs a static fill more loosely still (wall effect)
+        packing_loose, packing_bed = 0.6 * LOOSE_PACKING, 0.58
+        count = int(packing_bed * math.pi * R**2 * self.fill_height / (4.0 / 3.0 * math.pi * r**3))
+        fill_region_h = self.fill_height * packing_bed / packing_loose
+        die_h = fill_region_h + 2 * r
+        dv, dt_ = geo.frustum(R, R, 0.0, die_h, self.cell)
+        iv, it = geo.frustum(R, self.inlet_diameter / 2, die_h, die_h + self.inlet_height, self.cell)
+        bv, bt = geo.disc(1.5 * R, self.cell, 0.0)
+        pr = R - 0.25 * r  # clearance below a quarter radius: no particle slips past the bar
+        pv, pt = geo.disc(pr, self.cell, 0.0, up=False)
+        park = die_h + self.inlet_height + 2 * r
+        start = self.fill_height + self.gap
+        t_a = self.settle_time
+        t_b = t_a + (park - start) / (5 * self.piston_speed)
+        travel = self.max_travel * self.fill_height + self.gap
+        t_c = t_b + travel / self.piston_speed
+        ident = np.tile([0.0, 0.0, 0.0, 1.0], (4, 1))
+        piston = WallSpec("Piston", pv, pt, "steel", np.array([0.0, t_a, t_b, t_c]),
+                          np.array([[0, 0, park], [0, 0, park], [0, 0, start], [0, 0, start - travel]]), ident)
+        fac = FactorySpec("fill", "fill", ("cylinder", (0.0, 0.0, 0.0), R - 1.1 * r * (1 + 2 * self.radius_spread),
+                                           fill_region_h, None),
+                          "feed", "sphere", _sizes(r, self.radius_spread), count=count, seed=self.seed)
+        return SceneSpec(
+            rig="die_press", materials=[feed, steel], pairs=pairs, shapes=[ShapeSpec("sphere", "sphere")],
+            walls=[WallSpec("Die", np.concatenate([dv, iv]), np.concatenate([dt_, it + len(dv)]), "steel"),
+                   WallSpec("Backstop", bv, bt, "steel"), piston],
+            factories=[fac],
+            run=RunSpec(duration=t_c, dt_fraction=self.dt_fraction, output_interval=self.gap / self.piston_speed / 8),
+            measure=MeasureSpec("press", piston="Piston", force_limit=self.force_limit, backstop_height=0.0),
+        )
+
+
+@dataclass(frozen=True)
+class TruckTipper:
+    """Truck tipper (seed 002): a dump body (open top, tailgate) loaded by a bucket that pours ore from
+    ``lip_height`` above the floor (seed 002's first impacts at 3.92 m/s mean a 0.78 m drop), then tilted
+    by ``tilt_angle`` about its rear hinge while the tailgate swings open. Full-size geometry; the ore
+    (seed 002's phosphate, EEPA between particles, JKR against the steel as in the seed) is coarse-grained
+    to ``particle_radius`` (seed: 0.39 mm mean). Impacts on the body and the tailgate are counted per face,
+    separately for loading and discharge.
+    """
+
+    particle: str = "phosphate"
+    particle_radius: float = 0.02
+    radius_spread: float = 0.1
+    body_length: float = 5.5
+    body_width: float = 2.3
+    body_height: float = 1.2
+    bucket_width: float = 2.0
+    bucket_depth: float = 1.0
+    bucket_height: float = 0.6
+    bucket_x: float = 0.6
+    lip_height: float = 0.78
+    fill_fraction: float = 0.85
+    dump_start: float = 1.2
+    dump_duration: float = 1.5
+    dump_angle: float = 135.0
+    load_settle: float = 1.5
+    tilt_angle: float = 50.0
+    tilt_duration: float = 6.0
+    after_tilt: float = 2.0
+    chassis_height: float = 1.2
+    cell: float = 0.25
+    dt_fraction: float = 0.2
+    seed: int = 1
+    _may_be_zero = ("radius_spread", "seed", "bucket_x")
+
+    def __post_init__(self):
+        _check_params(self)
+        if self.bucket_width >= self.body_width:
+            raise ValueError(f"TruckTipper: bucket_width = {self.bucket_width} is not allowed; expected less than "
+                             f"body_width = {self.body_width}")
+        if self.lip_height >= self.body_height + self.bucket_height:
+            raise ValueError(f"TruckTipper: lip_height = {self.lip_height} is not allowed; expected below "
+                             f"body_height + bucket_height = {self.body_height + self.bucket_height}")
+
+    def spec(self) -> SceneSpec:
+        shape, _ = _shape(self.particle, "TruckTipper")
+        r = self.particle_radius
+        ore = Material("ore", density=2404.0, poisson_ratio=0.25, shear_modulus=2.5e6)
+        pairs = [("ore", "ore", Interaction(restitution=0.15, static_friction=0.7, rolling_friction=0.3,
+                                            law=ContactLaw.EEPA, surface_energy=1.0, pull_off_force=-0.009,
+                                            rolling_model=RollingModel.CONSTANT_TORQUE)),
+                 ("ore", "steel", Interaction(restitution=0.3, static_friction=0.5, rolling_friction=0.1,
+                                              law=ContactLaw.JKR, surface_energy=0.1,
+                                              rolling_model=RollingModel.CONSTANT_TORQUE)),
+                 ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3))]
+        L, W, H = self.body_length, self.body_width, self.body_height
+        body_v, body_t = geo.open_box(L, W, H, self.cell, open_sides=("top", "rear"))
+        gate_v, gate_t = geo.open_box(L, W, H, self.cell, open_sides=("top", "bottom", "front", "left", "right"))
+        gd = max(self.cell, 0.5)
+        ground_v, ground_t = geo.grid_plate(L + 12.0, W + 4.0, gd, z=-self.chassis_height, center=(L / 2 + 4.0, 0.0))
+        # bucket: open box, pour edge (front top) at x = bucket_x + depth, z = lip_height
+        bd, bw, bh = self.bucket_depth, self.bucket_width, self.bucket_height
+        bx0 = self.bucket_x
+        buck_v, buck_t = geo.open_box(bd, bw, bh, self.cell / 2, open_sides=("top",),
+                                      origin=(bx0, 0.0, self.lip_height - bh))
+        edge = (bx0 + bd, 0.0, self.lip_height)
+        t_dump0, t_dump1 = self.dump_start, self.dump_start + self.dump_duration
+        t_load = t_dump1 + self.load_settle
+        t_tilt1 = t_load + self.tilt_duration
+        end = t_tilt1 + self.after_tilt
+        step = 0.05
+
+        def bucket_pose(t):
+            a = math.radians(self.dump_angle) * _smooth((t - t_dump0) / self.dump_duration)
+            R_, p = _about(_rot_y(a), edge)
+            # once empty, the bucket backs away upward, clear of the tilting body
+            lift = 3.0 * _smooth((t - t_dump1 - 0.3) / 0.7)
+            return R_, p + (0.0, 0.0, lift)
+
+        def body_pose(t):
+            a = math.radians(self.tilt_angle) * _smooth((t - t_load) / self.tilt_duration)
+            return _about(_rot_y(a), (L, 0.0, 0.0))
+
+        def gate_pose(t):
+            # the tailgate hangs from its top edge and swings open (outward, 100 deg) in the first second
+            phi = math.radians(100.0) * _smooth((t - t_load) / 1.0)
+            return _compose(body_pose(t), _about(_rot_y(-phi), (L, 0.0, H)))
+
+        tb = np.unique(np.r_[np.arange(0.0, t_dump1 + 1.0 + step, step), t_dump1 + 1.0])
+        tt = np.unique(np.r_[0.0, np.arange(t_load, t_tilt1 + step, step), t_tilt1])
+        bucket = WallSpec("Bucket", buck_v, buck_t, "steel", *_pose_samples(tb, bucket_pose))
+        body = WallSpec("Body", body_v, body_t, "steel", *_pose_samples(tt, body_pose))
+        gate = WallSpec("Tailgate", gate_v, gate_t, "steel", *_pose_samples(tt, gate_pose))
+        ground = WallSpec("Ground", ground_v, ground_t, "steel")
+        margin = r * (1 + 2 * self.radius_spread) * 1.45
+        z0 = self.lip_height - bh + margin
+        area = (bd - 2 * margin) * (bw - 2 * margin)
+        volume = area * self.fill_fraction * (bh - margin)
+        count = int(0.58 * volume / (4.0 / 3.0 * math.pi * r**3))
+        # a loose static fill is sparse, so the region reaches above the bucket; the surplus falls in
+        region = ("box", (bx0 + margin, -bw / 2 + margin, z0),
+                  (bx0 + bd - margin, bw / 2 - margin, z0 + volume * 0.58 / LOOSE_PACKING * _bound3(shape) / area))
+        fac = FactorySpec("load", "fill", region, "ore", shape.name, _sizes(r, self.radius_spread), count=count,
+                          seed=self.seed)
+        return SceneSpec(
+            rig="truck_tipper", materials=[ore, STEEL], pairs=pairs, shapes=[shape],
+            walls=[body, gate, bucket, ground], factories=[fac],
+            run=RunSpec(duration=end, dt_fraction=self.dt_fraction, output_interval=0.1),
+            measure=MeasureSpec("impacts", walls=["Body", "Tailgate"], phase_names=["loading", "discharge"],
+                                phase_ends=[t_load, end]),
+        )
+
+
+RIGS = {"funnel": Funnel, "lifting_cylinder": LiftingCylinder, "die_press": DiePress, "truck_tipper": TruckTipper}
+
+SMOKE = {
+    "funnel": {"particle": "sphere", "material": "feed", "particle_radius": 0.002, "count": 300, "rate": 1500.0, "top_diameter": 0.07,
+               "outlet_diameter": 0.02, "stem_length": 0.01, "outlet_height": 0.025, "plate_size": 0.16,
+               "cell": 0.01, "duration": 1.6},
+    "lifting_cylinder": {"particle": "sphere", "particle_radius": 0.0025, "mass": 0.0, "count": 450,
+                         "inner_diameter": 0.06, "height": 0.06, "lift_speed": 0.1, "base_size": 0.16,
+                         "settle_time": 0.25, "after_lift": 0.6, "cell": 0.01, "surface_energy": 0.0,
+                         "pull_off_force": 0.0},
+    "die_press": {"particle_radius": 0.0005, "die_diameter": 0.006, "fill_height": 0.01, "inlet_diameter": 0.01,
+                  "inlet_height": 0.003, "piston_speed": 0.2, "gap": 0.002, "force_limit": 10.0, "settle_time": 0.1,
+                  "cell": 0.002},
+    "truck_tipper": {"particle": "sphere", "particle_radius": 0.012, "body_length": 0.6, "body_width": 0.34,
+                     "body_height": 0.2, "bucket_width": 0.24, "bucket_depth": 0.14, "bucket_height": 0.1,
+                     "bucket_x": 0.08, "lip_height": 0.16, "dump_start": 0.3, "dump_duration": 0.5, "load_settle": 0.5,
+                     "tilt_duration": 1.0, "after_tilt": 0.5, "chassis_height": 0.2, "cell": 0.05},
+}
+"""Overrides that make each rig a CPU smoke test with a few hundred particles."""
+
+
+def params(rig: str, values: dict | None = None):
+    """The rig's parameter dataclass with ``values`` (strings are parsed: numbers, true/false)."""
+    if rig not in RIGS:
+        raise StageError(f"rig = {rig!r} is not allowed; expected one of {', '.join(RIGS)}")
+    cls = RIGS[rig]
+    names = {f.name: f for f in dataclasses.fields(cls)}
+    kw = {}
+    for k, v in (values or {}).items():
+        if k not in names:
+            raise StageError(f"{rig}: parameter {k!r} is not defined; parameters: {', '.join(names)}")
+        default = names[k].default
+        if isinstance(v, str):
+            if isinstance(default, bool):
+                if v.lower() not in ("true", "false", "1", "0"):
+                    raise StageError(f"{rig}: {k} = {v!r} is not allowed; expected true or false")
+                v = v.lower() in ("true", "1")
+            elif isinstance(default, (int, float)):
+                try:
+                    v = json.loads(v)
+                except ValueError:
+                    raise StageError(f"{rig}: {k} = {v!r} is not allowed; expected a number") from None
+        if isinstance(default, int) and not isinstance(default, bool):
+            if float(v) != int(float(v)):
+                raise StageError(f"{rig}: {k} = {v!r} is not allowed; expected an integer")
+            v = int(v)
+        kw[k] = v
+    try:
+        return cls(**kw)
+    except ValueError as e:
+        raise StageError(str(e)) from None
+
+
+def spec(rig: str, values: dict | None = None, smoke: bool = False) -> SceneSpec:
+    """SceneSpec of ``rig`` from parameter ``values`` (over the SMOKE set when ``smoke``)."""
+    merged = dict(SMOKE[rig]) if smoke else {}
+    merged.update(values or {})
+    p = params(rig, merged)
+    s = p.spec()
+    s.authoring = {k: getattr(p, k) for k in merged}
+    return s
+
+
+def new(rig: str, path, values: dict | None = None, smoke: bool = False):
+    """Write the stage of ``rig`` with parameter ``values`` to ``path``; returns the stage."""
+    from .scene import write_stage
+
+    return write_stage(spec(rig, values, smoke), path)
+
+
+def load(path, overrides: dict | None = None) -> SceneSpec:
+    """Read a stage and apply ``--set`` overrides. A rig parameter among them regenerates the scene from
+    the parameters recorded in the stage (``warpdem:authoring``) before the other overrides apply."""
+    from .scene import apply_overrides, read_stage
+
+    spec_ = read_stage(path)
+    overrides = dict(overrides or {})
+    prefixes = ("material.", "interaction.", "run.", "measure.", "factory.")
+    rig_keys = {k: v for k, v in overrides.items() if not k.startswith(prefixes)}
+    if rig_keys:
+        values = dict(spec_.authoring)
+        values.update(rig_keys)
+        spec_ = spec(spec_.rig, values)
+    return apply_overrides(spec_, {k: v for k, v in overrides.items() if k not in rig_keys})

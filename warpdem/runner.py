@@ -1,0 +1,377 @@
+"""Run a scene: build the model, step it in output intervals, record what the rig measures, write results.
+
+``run_scene`` is what ``warpdem run`` calls and what the study runner calls with several worlds (one design
+point each). Between output ticks the solver runs captured steps with no host synchronisation; at a tick
+the host reads positions, velocities and the walls' running impulses once.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import measure as ms
+from .scene import SceneSpec, StageError, build
+
+
+@dataclass
+class RunResult:
+    """Outcome of :func:`run_scene`: ``metrics`` per world (list of dicts) and the run's facts."""
+
+    metrics: list
+    info: dict = field(default_factory=dict)
+    series: dict = field(default_factory=dict)
+
+
+def _host(model):
+    """Host copies of the static arrays the recorder needs."""
+    h = {
+        "radius": model.sphere_radius.numpy().astype(np.float64),
+        "world": model.sphere_world.numpy(),
+        "clump": model.sphere_clump.numpy(),
+        "glued": model.sphere_wall.numpy(),
+        "material": model.sphere_material.numpy(),
+    }
+    dens = model.material_density.numpy()
+    w_of = h["world"] % dens.shape[0]
+    h["mass"] = dens[w_of, h["material"]] * model.sphere_body_volume.numpy()
+    h["free"] = (h["clump"] < 0) & (h["glued"] < 0)
+    if model.clump_count:
+        cd = dens[model.clump_world.numpy() % dens.shape[0], model.clump_material.numpy()]
+        h["clump_mass"] = cd * model.clump_volume.numpy()
+        h["clump_world"] = model.clump_world.numpy()
+    return h
+
+
+def _kinetic_energy(model, state, h) -> np.ndarray:
+    """Mean translational kinetic energy per active particle [J] in each world, shape (world_count,)."""
+    W = model.world_count
+    act = state.sphere_active.numpy().astype(bool)
+    v = state.sphere_v.numpy()
+    sel = act & h["free"]
+    e = np.zeros(W)
+    n = np.zeros(W)
+    np.add.at(e, h["world"][sel], 0.5 * h["mass"][sel] * np.sum(v[sel] ** 2, axis=1))
+    np.add.at(n, h["world"][sel], 1)
+    if model.clump_count:
+        cv = state.clump_v.numpy()
+        first = model.clump_sphere_start.numpy()
+        cact = act[first]
+        np.add.at(e, h["clump_world"][cact], 0.5 * h["clump_mass"][cact] * np.sum(cv[cact] ** 2, axis=1))
+        np.add.at(n, h["clump_world"][cact], 1)
+    return e / np.maximum(n, 1)
+
+
+def _particles(model, state, h, world: int):
+    """Centres (n, 3) and radii (n,) of the active particle spheres (glued ones excluded) of ``world``."""
+    act = state.sphere_active.numpy().astype(bool)
+    sel = act & (h["glued"] < 0) & (h["world"] == world)
+    return state.sphere_x.numpy()[sel].astype(np.float64), h["radius"][sel]
+
+
+def _frame(writer, model, state, h, spec, t):
+    """Hand world 0 of ``state`` to the results writer."""
+    act = state.sphere_active.numpy().astype(bool)
+    x, v = state.sphere_x.numpy(), state.sphere_v.numpy()
+    loose = act & (h["clump"] < 0) & (h["world"] == 0)
+    kw = dict(sphere_x=x[loose], sphere_r=h["radius"][loose], sphere_id=np.flatnonzero(loose), sphere_v=v[loose])
+    if model.clump_count:
+        first = model.clump_sphere_start.numpy()
+        sel = act[first] & (h["clump_world"] == 0)
+        ids = np.flatnonzero(sel)
+        kw.update(clump_x=state.clump_x.numpy()[sel], clump_q=state.clump_q.numpy()[sel],
+                  clump_shape=np.asarray(model.clump_template)[sel], clump_scale=np.asarray(model.clump_scale)[sel],
+                  clump_id=ids, clump_v=state.clump_v.numpy()[sel])
+    if model.wall_count:
+        kw["wall_pose"] = state.wall_pose.numpy()[: model.wall_count]
+        counts = state.face_impact_count.numpy()[0]
+        energy = state.face_impact_energy.numpy()[0]
+        start = model.wall_face_start.numpy()
+        kw["face_impacts"] = [counts[start[k]:start[k + 1]] for k in range(model.wall_count)]
+        kw["face_energy"] = [energy[start[k]:start[k + 1]].astype(np.float32) for k in range(model.wall_count)]
+    writer.add_frame(t, **kw)
+
+
+def _world_walls(model, state):
+    """Wall meshes moved to their current pose: list of (vertices (V, 3), triangles (F, 3))."""
+    from .export import quat_to_matrix
+
+    out = []
+    poses = state.wall_pose.numpy()
+    for k, mesh in enumerate(model.wall_meshes):
+        v = mesh.points.numpy().astype(np.float64)
+        t = mesh.indices.numpy().reshape(-1, 3)
+        R = quat_to_matrix(poses[k, 3:7][None, :])[0]
+        out.append((v @ R.T + poses[k, :3], t))
+    return out
+
+
+def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: int = 1,
+              variations: dict | None = None, frames: bool = True, progress=None, quiet: bool = False) -> RunResult:
+    """Run ``spec`` on ``device``; with ``out_dir`` write metrics.json, result.usdc (+ VTK series), pile.png.
+
+    Args:
+        world_count: batched worlds; ``variations`` maps ``material.NAME.FIELD`` / ``interaction.A.B.FIELD``
+            to one value per world (a design point per world; all worlds share geometry and walls).
+        frames: write the time-sampled USD / VTK of world 0 (every ``run.output_interval``).
+        progress: callable(fraction in [0, 1], message) called at each output tick.
+    Returns:
+        RunResult with one metrics dict per world.
+    """
+    import warp as wp
+
+    from .solver import Solver, SolverOptions
+
+    t_wall0 = time.perf_counter()
+    builder = build(spec, world_count, variations)
+    model = builder.finalize(device)
+    run = spec.run
+    # rig meshes have fans and seams where one sphere may touch many triangles
+    options = SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min, mesh_capacity=32)
+    # a compacted bed (die press) or glued layers hold more partners per sphere than a loose packing
+    neighbors = max(32, Solver(model, options).default_neighbor_capacity())
+    solver = Solver(model, SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min,
+                                         mesh_capacity=32, neighbor_capacity=neighbors))
+    state, contacts = model.state(), solver.contacts()
+    h = _host(model)
+    W = model.world_count
+    names = list(model.wall_names)
+    planes = model.plane_count
+    out = Path(out_dir) if out_dir else None
+    writer = None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    if out is not None and frames:
+        from .export import ResultWriter, ShapeGeometry, WallGeometry
+
+        walls = [WallGeometry(n, m.points.numpy(), m.indices.numpy().reshape(-1, 3))
+                 for n, m in zip(names, model.wall_meshes)]
+        shapes = [ShapeGeometry.from_template(t) for t in model.clump_templates]
+        writer = ResultWriter(out, walls, shapes, usd_name="result.usdc")
+
+    m = spec.measure
+    piston = names.index(m.piston) if m.kind == "press" else None
+    phase_ends = list(m.phase_ends) if m.kind == "impacts" else []
+    phase_snap = []
+    series = {"time": [], "kinetic_energy": [], "wall_force": []}
+    if piston is not None:
+        series.update(piston_z=[], piston_force=[], bed_top=[])
+    impulse_prev = state.wall_impulse.numpy().copy()
+    t_prev = 0.0
+    stop_reason = "duration"
+    settled_since = 0
+    settle_needed = 3
+    eps = 0.5 * solver.dt
+    if writer is not None:
+        _frame(writer, model, state, h, spec, 0.0)
+    while state.time < run.duration - eps:
+        t_next = min(state.time + run.output_interval, run.duration)
+        for te in phase_ends:
+            if state.time + eps < te < t_next - eps:
+                t_next = te
+        state = solver.advance(state, contacts, t_next - state.time)
+        t = state.time
+        imp = state.wall_impulse.numpy()
+        force = (imp - impulse_prev) / max(t - t_prev, 1e-300)
+        impulse_prev, t_prev = imp.copy(), t
+        ke = _kinetic_energy(model, state, h)
+        series["time"].append(t)
+        series["kinetic_energy"].append(ke.tolist())
+        series["wall_force"].append(force[:, 2].tolist())
+        if piston is not None:
+            series["piston_z"].append(float(state.wall_pose.numpy()[piston, 2]))
+            series["piston_force"].append(float(force[planes + piston, 2]))
+            xb, rb = _particles(model, state, h, 0)
+            series["bed_top"].append(float(np.percentile(xb[:, 2] + rb, 99)) if len(rb) else 0.0)
+        for te in phase_ends:
+            if abs(t - te) <= eps and len(phase_snap) < len(phase_ends):
+                phase_snap.append({"count": state.face_impact_count.numpy().copy(),
+                                   "energy": state.face_impact_energy.numpy().copy(),
+                                   "speed": state.face_impact_speed.numpy().copy()})
+                state.reset_impacts()
+        if writer is not None:
+            _frame(writer, model, state, h, spec, t)
+        if progress:
+            progress(min(t / run.duration, 1.0), f"t = {t:.3f} s")
+        if piston is not None and m.force_limit > 0 and series["piston_force"][-1] >= m.force_limit:
+            stop_reason = "force_limit"
+            break
+        factories_done = all(state.released.get(f, {}).get("count", 0) >= rec["count"]
+                             for f, rec in enumerate(model.factories))
+        if run.settle_energy > 0 and t >= run.settle_after and factories_done:
+            settled_since = settled_since + 1 if np.all(ke < run.settle_energy) else 0
+            if settled_since >= settle_needed:
+                stop_reason = "settled"
+                break
+    wall_s = time.perf_counter() - t_wall0
+
+    metrics = []
+    for w in range(W):
+        mw = {"world": w, "time_s": state.time, "stop": stop_reason}
+        if m.kind == "angle_of_repose":
+            x, r = _particles(model, state, h, w)
+            # what rolled off the base is not part of the pile
+            keep = x[:, 2] - r > m.base_height - 2 * r.max()
+            x, r = x[keep], r[keep]
+            mw["particles"] = int(len(r))
+            try:
+                fit = ms.angle_surface_fit(x, r, base_z=m.base_height, center=m.center)
+                img = ms.angle_image(x, r, base_z=m.base_height, center=m.center)
+                mw.update(angle_fit_deg=fit["mean_deg"], angle_fit_sd_deg=fit["sd_deg"],
+                          angle_fit_slices_deg=list(map(float, fit["per_slice_deg"])),
+                          angle_image_deg=img["mean_deg"], angle_image_sd_deg=img["sd_deg"],
+                          angle_cone_deg=float(ms.angle_cone(x, r, base_z=m.base_height, center=m.center)),
+                          pile_height_m=float((x[:, 2] + r).max() - m.base_height))
+            except ValueError as e:
+                mw["angle_error"] = str(e)
+        elif m.kind == "press":
+            z = np.asarray(series["piston_z"])
+            f = np.asarray(series["piston_force"])
+            mw.update(_press_metrics(spec, model, state, h, w, z, f, series))
+        elif m.kind == "impacts":
+            mw["phases"] = _impact_metrics(model, names, m, phase_snap, w)
+        metrics.append(mw)
+    info = {"rig": spec.rig, "device": str(device), "worlds": W, "spheres": model.sphere_count,
+            "clumps": model.clump_count, "glued_spheres": model.attached_count, "dt_s": solver.dt,
+            "steps": state.step, "simulated_s": state.time, "wall_s": wall_s, "stop": stop_reason}
+    result = RunResult(metrics, info, series)
+    if out is not None:
+        files = {}
+        if writer is not None:
+            files.update(writer.close())
+        files.update(_final_npz(out, model, state, h))
+        try:
+            files.update(_pictures(out, spec, model, state, h, result))
+        except ImportError as e:  # a machine without matplotlib still gets metrics and final.npz
+            info["pictures_skipped"] = str(e)
+        faces = {}
+        for mw in metrics:
+            for phase, walls in mw.get("phases", {}).items():
+                for wall, summ in walls.items():
+                    for key, arr in summ.pop("faces").items():
+                        faces[f"world{mw['world']}/{phase}/{wall}/{key}"] = arr
+        if faces:
+            np.savez_compressed(out / "impacts.npz", **faces)
+            files["impacts_npz"] = str(out / "impacts.npz")
+        info["files"] = files
+        with open(out / "metrics.json", "w") as fh:
+            json.dump({"info": info, "metrics": metrics}, fh, indent=1, default=_json_default)
+    return result
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
+    """Force-displacement of the bar, fill height and compression ratio, and the inertial number."""
+    m = spec.measure
+    # the bed top just before the bar first pushes with 5 % of the force limit (a settling particle that
+    # grazes the approaching bar stays below that); its own particles' 99th-percentile top
+    limit = m.force_limit if m.force_limit > 0 else f.max()
+    pressing = np.flatnonzero(f > 0.05 * limit)
+    if len(pressing) == 0:
+        return {"press_error": "the bar never pressed the bed"}
+    k = max(int(pressing[0]) - 1, 0)
+    fill = float(series["bed_top"][k] - m.backstop_height)
+    summ = ms.press_summary(z - m.backstop_height, f, fill_height=fill, force_limit=m.force_limit or None)
+    curve = ms.press_curve(z - m.backstop_height, f)
+    mat = model.materials[int(h["material"][h["world"] == w][0])]
+    d = 2.0 * float(np.mean(h["radius"][(h["world"] == w) & h["free"]]))
+    area = math.pi * _piston_radius(model, m.piston) ** 2
+    t = np.asarray(series["time"])
+    speed = np.abs(np.gradient(z, t)) if len(z) > 2 else np.zeros_like(z)
+    height = np.maximum(z - m.backstop_height, 1e-9)
+    p = np.maximum(f, 0) / area
+    pressing = p > 0.01 * p.max()
+    inertial = speed[pressing] / height[pressing] * d / np.sqrt(p[pressing] / mat.density)
+    out = {k: (float(v) if np.isscalar(v) else v) for k, v in summ.items()}
+    out.update(fill_height_m=fill, inertial_number_max=float(inertial.max()) if inertial.size else None,
+               displacement_m=list(map(float, curve["displacement_m"])), force_n=list(map(float, curve["force_n"])))
+    return out
+
+
+def _piston_radius(model, name) -> float:
+    k = list(model.wall_names).index(name)
+    v = model.wall_meshes[k].points.numpy()
+    return float(np.hypot(v[:, 0], v[:, 1]).max())
+
+
+def _impact_metrics(model, names, m, snaps, w) -> dict:
+    """Per phase and wall: impact summary from the snapshots taken at each phase end."""
+    from .geometry import face_areas
+
+    start = model.wall_face_start.numpy()
+    out = {}
+    for name, snap in zip(m.phase_names, snaps):
+        phase = {}
+        for wall in m.walls:
+            k = names.index(wall)
+            sl = slice(start[k], start[k + 1])
+            mesh = model.wall_meshes[k]
+            area = face_areas(mesh.points.numpy().astype(np.float64), mesh.indices.numpy().reshape(-1, 3))
+            s = ms.impact_summary(snap["count"][w, sl], snap["energy"][w, sl], snap["speed"][w, sl], face_area=area)
+            # per-face arrays live in the USD primvars and impacts.npz; metrics.json keeps the summary
+            phase[wall] = {k: v for k, v in s.items() if not (isinstance(v, (list, np.ndarray)) and len(v) > 10)}
+            phase[wall]["faces"] = {"count": snap["count"][w, sl], "energy_j": snap["energy"][w, sl],
+                                    "max_speed_m_s": snap["speed"][w, sl]}
+        out[name] = phase
+    return out
+
+
+def _final_npz(out: Path, model, state, h) -> dict:
+    """final.npz: world 0's particle spheres (glued ones flagged) and the walls at the end, enough to redraw
+    the pile and re-measure it without rerunning."""
+    act = state.sphere_active.numpy().astype(bool)
+    sel = act & (h["world"] == 0)
+    walls = _world_walls(model, state)
+    arrays = {"sphere_x": state.sphere_x.numpy()[sel], "sphere_r": h["radius"][sel], "sphere_glued": h["glued"][sel]}
+    for k, (v, t) in enumerate(walls):
+        arrays[f"wall{k}_vertices"] = v
+        arrays[f"wall{k}_triangles"] = t
+    arrays["wall_names"] = np.asarray(model.wall_names)
+    arrays["wall_pose"] = state.wall_pose.numpy()
+    np.savez_compressed(out / "final.npz", **arrays)
+    return {"final_npz": str(out / "final.npz")}
+
+
+def _pictures(out: Path, spec, model, state, h, result) -> dict:
+    """pile.png (side view of world 0 at the end, like the seeds' photos) and rig plots."""
+    from .export import side_view_png
+
+    files = {}
+    x, r = _particles(model, state, h, 0)
+    act = state.sphere_active.numpy().astype(bool)
+    # a coating is drawn where it stayed: on a wall that moved (a lifted cylinder) it would hide the pile
+    poses = state.wall_pose.numpy()
+    still = np.all(np.abs(poses[:, :6]) < 1e-9, axis=1) if model.wall_count else np.zeros(0, bool)
+    glued = act & (h["glued"] >= 0) & (h["world"] == 0)
+    glued &= np.isin(h["glued"], np.flatnonzero(still))
+    xs = np.concatenate([x, state.sphere_x.numpy()[glued]])
+    rs = np.concatenate([r, h["radius"][glued]])
+    walls = _world_walls(model, state)
+    m0 = result.metrics[0]
+    title = spec.rig.replace("_", " ")
+    if "angle_fit_deg" in m0:
+        title += f": angle of repose {m0['angle_fit_deg']:.1f} deg (fit), {m0['angle_image_deg']:.1f} deg (image)"
+    files["pile_png"] = side_view_png(str(out / "pile.png"), xs, rs, walls_world=walls, axis="y", title=title)
+    if spec.measure.kind == "press" and "force_n" in m0:
+        ms.plot_press({"displacement_m": np.asarray(m0["displacement_m"]), "force_n": np.asarray(m0["force_n"])},
+                      str(out / "press.png"))
+        files["press_png"] = str(out / "press.png")
+    return files
+
+
+def check_run_inputs(spec: SceneSpec) -> None:
+    """Raise StageError for settings the runner cannot honour."""
+    if spec.measure.kind == "press" and not spec.measure.piston:
+        raise StageError("measure.kind = press needs a piston wall (warpdem:measure:piston)")

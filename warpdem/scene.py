@@ -1,0 +1,865 @@
+"""Scenes as USD stages: a :class:`SceneSpec` written to and read back from a stage, then built into a model.
+
+Stage conventions (every attribute in the ``warpdem:`` namespace is checked: a missing, misspelt or
+wrong-typed one is an error that names the prim and the attribute):
+
+* ``/World`` (Xform, the default prim): ``warpdem:rig`` (token), ``warpdem:authoring`` (string, JSON of the
+  rig parameters the stage was generated from), run settings ``warpdem:run:*`` and measurement settings
+  ``warpdem:measure:*`` (see :class:`RunSpec`, :class:`MeasureSpec`).
+* ``/World/PhysicsScene``: ``UsdPhysics.Scene`` (gravity direction and magnitude).
+* ``/World/Materials/<name>``: ``UsdShade.Material`` with ``UsdPhysics.MaterialAPI`` (``physics:density``,
+  ``physics:staticFriction``, ``physics:dynamicFriction``, ``physics:restitution`` of the material against
+  itself) plus ``warpdem:youngsModulus`` or ``warpdem:shearModulus`` [Pa] and ``warpdem:poissonRatio``.
+* ``/World/Materials/Pairs/<a>__<b>``: Scope with ``rel warpdem:pair:materials`` (two materials) and the
+  contact law of that pair: ``warpdem:pair:law`` (hertz_mindlin | jkr | eepa), restitution, staticFriction,
+  rollingFriction, rollingModel, rollingDamping, surfaceEnergy, pullOffForce, slopeExponent,
+  plasticityRatio, tensileExponent, tangentialStiffnessMultiplier (what UsdPhysics lacks).
+* ``/World/Shapes/<name>``: Xform, ``warpdem:shape:kind`` = sphere | clump; a clump's spheres are child
+  ``UsdGeom.Sphere`` prims (``radius`` and ``xformOp:translate`` in the body frame [m]).
+* ``/World/Walls/<name>``: ``UsdGeom.Mesh`` in its own frame, its physics material bound with
+  ``material:binding:physics``; motion as time-sampled ``xformOp:translate`` / ``xformOp:orient`` (the engine
+  follows the samples: linear translation, slerped rotation); optional particle coating ``warpdem:coat:*``.
+* ``/World/Factories/<name>``: ``UsdGeom.Cube`` (a box: ``size`` 1 scaled by ``xformOp:scale``) or
+  ``UsdGeom.Cylinder`` (axis Z; with ``warpdem:factory:topRadius`` a frustum), ``xformOp:translate`` at its
+  centre, purpose ``guide``, and ``warpdem:factory:*`` (mode fill | dynamic, material and shape
+  relationships, count or mass, rate or massRate, start time, size distribution, seed, initial velocity).
+
+Time codes: ``timeCodesPerSecond`` = :data:`TIME_CODES_PER_SECOND`, so time code = 100 x time [s].
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import json
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .materials import Interaction, Material
+from .types import ContactLaw, RollingModel
+
+TIME_CODES_PER_SECOND = 100.0
+NS = "warpdem:"
+
+
+class StageError(ValueError):
+    """A stage is missing something the engine needs, or holds a value it cannot use."""
+
+
+# ----------------------------------------------------------------------------------------------------
+# the scene description
+# ----------------------------------------------------------------------------------------------------
+@dataclass
+class ShapeSpec:
+    """Particle shape: ``kind`` "sphere", or "clump" with spheres ``sphere_offset`` (s, 3) [m] and
+    ``sphere_radius`` (s,) [m] in the body frame (a factory's size distribution scales the clump so that its
+    volume-equivalent radius is the drawn size)."""
+
+    name: str
+    kind: str = "sphere"
+    sphere_offset: np.ndarray | None = None
+    sphere_radius: np.ndarray | None = None
+
+    def template(self):
+        """The ClumpTemplate of a clump shape (None for spheres)."""
+        if self.kind == "sphere":
+            return None
+        from .clumps import ClumpTemplate
+
+        return ClumpTemplate.from_spheres(self.name, self.sphere_offset, self.sphere_radius)
+
+
+@dataclass
+class WallSpec:
+    """Mesh wall: ``vertices`` (V, 3) [m] in its own frame, ``triangles`` (F, 3); motion keyframes ``times``
+    (K,) [s], ``translations`` (K, 3) [m], ``rotations`` (K, 4) quaternions (x, y, z, w), or none (static at
+    the identity pose); ``coat``: None or {"radius" [m], "material", "side" (+1/-1), "seed", "spacing" [m]}."""
+
+    name: str
+    vertices: np.ndarray
+    triangles: np.ndarray
+    material: str
+    times: np.ndarray | None = None
+    translations: np.ndarray | None = None
+    rotations: np.ndarray | None = None
+    coat: dict | None = None
+
+
+@dataclass
+class FactorySpec:
+    """Particle factory over a region: ``region`` is ("box", lo (3,), hi (3,)) or ("cylinder", base_center (3,),
+    radius, height, top_radius) (axis +z; top_radius None for a cylinder). ``sizes``: {"distribution": fixed |
+    normal | lognormal, "radius" | "mean", "std", "low", "high" | "median", "sigma_log"} [m]."""
+
+    name: str
+    mode: str
+    region: tuple
+    material: str
+    shape: str
+    sizes: dict
+    count: int | None = None
+    mass: float | None = None
+    rate: float | None = None
+    mass_rate: float | None = None
+    start_time: float = 0.0
+    seed: int = 0
+    initial_velocity: tuple = (0.0, 0.0, 0.0)
+    interval: float | None = None
+
+
+@dataclass
+class RunSpec:
+    """Run settings: ``duration`` [s]; ``dt_fraction`` of the Rayleigh time; a run stops early once the mean
+    kinetic energy per particle stays below ``settle_energy`` [J] (0: never) for three outputs after
+    ``settle_after`` [s] with every factory done; ``output_interval`` [s] between frames;
+    ``impact_speed_min`` [m/s] (SolverOptions)."""
+
+    duration: float = 1.0
+    dt_fraction: float = 0.2
+    settle_energy: float = 0.0
+    settle_after: float = 0.0
+    output_interval: float = 0.05
+    impact_speed_min: float = 0.05
+
+
+@dataclass
+class MeasureSpec:
+    """What the run measures: ``kind`` angle_of_repose | press | impacts. Angle of repose: the base height
+    ``base_height`` [m] and pile axis ``center`` (x, y) [m]. Press: the ``piston`` wall, ``force_limit`` [N]
+    (the run stops there) and ``backstop_height`` [m]. Impacts: the ``walls`` whose faces are counted and the
+    phases (``phase_names``, ``phase_ends`` [s])."""
+
+    kind: str = "angle_of_repose"
+    base_height: float = 0.0
+    center: tuple = (0.0, 0.0)
+    piston: str = ""
+    force_limit: float = 0.0
+    backstop_height: float = 0.0
+    walls: list = field(default_factory=list)
+    phase_names: list = field(default_factory=list)
+    phase_ends: list = field(default_factory=list)
+
+
+@dataclass
+class SceneSpec:
+    """Everything a stage describes; :func:`write_stage` and :func:`read_stage` convert both ways."""
+
+    rig: str
+    materials: list
+    pairs: list  # (material a, material b, Interaction)
+    shapes: list
+    walls: list
+    factories: list
+    run: RunSpec
+    measure: MeasureSpec
+    gravity: tuple = (0.0, 0.0, -9.81)
+    authoring: dict = field(default_factory=dict)
+
+    def material(self, name: str) -> Material:
+        for m in self.materials:
+            if m.name == name:
+                return m
+        raise StageError(f"material {name!r} is not defined; defined: {', '.join(m.name for m in self.materials)}")
+
+    def shape(self, name: str) -> ShapeSpec:
+        for s in self.shapes:
+            if s.name == name:
+                return s
+        raise StageError(f"shape {name!r} is not defined; defined: {', '.join(s.name for s in self.shapes)}")
+
+    def wall(self, name: str) -> WallSpec:
+        for w in self.walls:
+            if w.name == name:
+                return w
+        raise StageError(f"wall {name!r} is not defined; defined: {', '.join(w.name for w in self.walls)}")
+
+
+# ----------------------------------------------------------------------------------------------------
+# names: Python field <-> USD attribute
+# ----------------------------------------------------------------------------------------------------
+def _camel(name: str) -> str:
+    head, *rest = name.split("_")
+    return head + "".join(p.capitalize() for p in rest)
+
+
+PAIR_FIELDS = [f.name for f in dataclasses.fields(Interaction)]
+RUN_FIELDS = [f.name for f in dataclasses.fields(RunSpec)]
+MEASURE_SCALARS = ["kind", "base_height", "center", "piston", "force_limit", "backstop_height", "walls",
+                   "phase_names", "phase_ends"]
+FACTORY_FIELDS = ["mode", "material", "shape", "count", "mass", "rate", "mass_rate", "start_time", "seed",
+                  "initial_velocity", "interval", "top_radius", "size_distribution", "size_radius", "size_mean",
+                  "size_std", "size_low", "size_high", "size_median", "size_sigma_log"]
+COAT_FIELDS = ["radius", "material", "side", "seed", "spacing"]
+
+KNOWN = {
+    "world": {NS + "rig", NS + "authoring"} | {NS + "run:" + _camel(f) for f in RUN_FIELDS}
+    | {NS + "measure:" + _camel(f) for f in MEASURE_SCALARS},
+    "material": {NS + "youngsModulus", NS + "shearModulus", NS + "poissonRatio"},
+    "pair": {NS + "pair:materials"} | {NS + "pair:" + _camel(f) for f in PAIR_FIELDS},
+    "shape": {NS + "shape:kind"},
+    "wall": {NS + "coat:" + _camel(f) for f in COAT_FIELDS},
+    "factory": {NS + "factory:" + _camel(f) for f in FACTORY_FIELDS},
+}
+
+
+# ----------------------------------------------------------------------------------------------------
+# writing
+# ----------------------------------------------------------------------------------------------------
+def _ident(name: str) -> str:
+    from pxr import Tf
+
+    return Tf.MakeValidIdentifier(name)
+
+
+def write_stage(spec: SceneSpec, path=None):
+    """Author ``spec`` as a USD stage; saved to ``path`` (.usda / .usdc / .usd) when given. Returns the stage."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
+
+    stage = Usd.Stage.CreateNew(str(path)) if path else Usd.Stage.CreateInMemory()
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    stage.SetTimeCodesPerSecond(TIME_CODES_PER_SECOND)
+    end = max([float(w.times[-1]) for w in spec.walls if w.times is not None] + [spec.run.duration])
+    stage.SetStartTimeCode(0.0)
+    stage.SetEndTimeCode(end * TIME_CODES_PER_SECOND)
+    world = UsdGeom.Xform.Define(stage, "/World")
+    stage.SetDefaultPrim(world.GetPrim())
+    wp_ = world.GetPrim()
+    wp_.CreateAttribute(NS + "rig", Sdf.ValueTypeNames.Token).Set(spec.rig)
+    wp_.CreateAttribute(NS + "authoring", Sdf.ValueTypeNames.String).Set(json.dumps(spec.authoring, sort_keys=True))
+    for f in RUN_FIELDS:
+        wp_.CreateAttribute(NS + "run:" + _camel(f), Sdf.ValueTypeNames.Double).Set(float(getattr(spec.run, f)))
+    m = spec.measure
+    wp_.CreateAttribute(NS + "measure:kind", Sdf.ValueTypeNames.Token).Set(m.kind)
+    wp_.CreateAttribute(NS + "measure:baseHeight", Sdf.ValueTypeNames.Double).Set(float(m.base_height))
+    wp_.CreateAttribute(NS + "measure:center", Sdf.ValueTypeNames.Double2).Set(Gf.Vec2d(*m.center))
+    wp_.CreateAttribute(NS + "measure:forceLimit", Sdf.ValueTypeNames.Double).Set(float(m.force_limit))
+    wp_.CreateAttribute(NS + "measure:backstopHeight", Sdf.ValueTypeNames.Double).Set(float(m.backstop_height))
+    if m.piston:
+        wp_.CreateRelationship(NS + "measure:piston").SetTargets([Sdf.Path(f"/World/Walls/{_ident(m.piston)}")])
+    if m.walls:
+        wp_.CreateRelationship(NS + "measure:walls").SetTargets([Sdf.Path(f"/World/Walls/{_ident(w)}") for w in m.walls])
+    if m.phase_names:
+        wp_.CreateAttribute(NS + "measure:phaseNames", Sdf.ValueTypeNames.StringArray).Set(list(m.phase_names))
+        wp_.CreateAttribute(NS + "measure:phaseEnds", Sdf.ValueTypeNames.DoubleArray).Set([float(t) for t in m.phase_ends])
+
+    scene = UsdPhysics.Scene.Define(stage, "/World/PhysicsScene")
+    g = np.asarray(spec.gravity, dtype=float)
+    gm = float(np.linalg.norm(g))
+    scene.CreateGravityDirectionAttr(Gf.Vec3f(*(g / gm if gm > 0 else (0.0, 0.0, -1.0))))
+    scene.CreateGravityMagnitudeAttr(gm)
+
+    UsdGeom.Scope.Define(stage, "/World/Materials")
+    self_pair = {(a, b): ia for a, b, ia in spec.pairs if a == b}
+    for mat in spec.materials:
+        p = f"/World/Materials/{_ident(mat.name)}"
+        shade = UsdShade.Material.Define(stage, p)
+        api = UsdPhysics.MaterialAPI.Apply(shade.GetPrim())
+        api.CreateDensityAttr(float(mat.density))
+        ia = self_pair.get((mat.name, mat.name))
+        if ia is not None:
+            api.CreateStaticFrictionAttr(float(ia.static_friction))
+            api.CreateDynamicFrictionAttr(float(ia.static_friction))
+            api.CreateRestitutionAttr(float(ia.restitution))
+        prim = shade.GetPrim()
+        if mat.youngs_modulus is not None and mat.shear_modulus is None:
+            prim.CreateAttribute(NS + "youngsModulus", Sdf.ValueTypeNames.Double).Set(float(mat.youngs_modulus))
+        else:
+            prim.CreateAttribute(NS + "shearModulus", Sdf.ValueTypeNames.Double).Set(float(mat.shear_modulus))
+        prim.CreateAttribute(NS + "poissonRatio", Sdf.ValueTypeNames.Double).Set(float(mat.poisson_ratio))
+    UsdGeom.Scope.Define(stage, "/World/Materials/Pairs")
+    for a, b, ia in spec.pairs:
+        prim = UsdGeom.Scope.Define(stage, f"/World/Materials/Pairs/{_ident(a)}__{_ident(b)}").GetPrim()
+        prim.CreateRelationship(NS + "pair:materials").SetTargets(
+            [Sdf.Path(f"/World/Materials/{_ident(a)}"), Sdf.Path(f"/World/Materials/{_ident(b)}")])
+        for f in PAIR_FIELDS:
+            v = getattr(ia, f)
+            if f == "law":
+                prim.CreateAttribute(NS + "pair:law", Sdf.ValueTypeNames.Token).Set(ContactLaw(v).name.lower())
+            elif f == "rolling_model":
+                prim.CreateAttribute(NS + "pair:rollingModel", Sdf.ValueTypeNames.Token).Set(RollingModel(v).name.lower())
+            else:
+                prim.CreateAttribute(NS + "pair:" + _camel(f), Sdf.ValueTypeNames.Double).Set(float(v))
+
+    UsdGeom.Scope.Define(stage, "/World/Shapes")
+    for sh in spec.shapes:
+        x = UsdGeom.Xform.Define(stage, f"/World/Shapes/{_ident(sh.name)}")
+        x.GetPrim().CreateAttribute(NS + "shape:kind", Sdf.ValueTypeNames.Token).Set(sh.kind)
+        # shapes are definitions, not scene content: viewers draw them only through instancing
+        UsdGeom.Imageable(x).CreatePurposeAttr(UsdGeom.Tokens.guide)
+        if sh.kind == "clump":
+            for k, (c, r) in enumerate(zip(np.asarray(sh.sphere_offset), np.asarray(sh.sphere_radius))):
+                s = UsdGeom.Sphere.Define(stage, f"/World/Shapes/{_ident(sh.name)}/s{k}")
+                s.CreateRadiusAttr(float(r))
+                s.AddTranslateOp().Set(Gf.Vec3d(*map(float, c)))
+
+    UsdGeom.Scope.Define(stage, "/World/Walls")
+    for w in spec.walls:
+        mesh = UsdGeom.Mesh.Define(stage, f"/World/Walls/{_ident(w.name)}")
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.asarray(w.vertices, dtype=np.float32)))
+        tri = np.asarray(w.triangles, dtype=np.int32)
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(tri), 3, dtype=np.int32)))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(tri.reshape(-1)))
+        mesh.CreateDoubleSidedAttr(True)
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        prim = mesh.GetPrim()
+        UsdPhysics.CollisionAPI.Apply(prim)
+        UsdShade.MaterialBindingAPI.Apply(prim).Bind(
+            UsdShade.Material(stage.GetPrimAtPath(f"/World/Materials/{_ident(w.material)}")),
+            UsdShade.Tokens.weakerThanDescendants, "physics")
+        t_op = mesh.AddTranslateOp()
+        o_op = mesh.AddOrientOp()
+        if w.times is None:
+            t_op.Set(Gf.Vec3d(0, 0, 0))
+            o_op.Set(Gf.Quatf(1, 0, 0, 0))
+        else:
+            for t, p, q in zip(w.times, w.translations, w.rotations):
+                code = float(t) * TIME_CODES_PER_SECOND
+                t_op.Set(Gf.Vec3d(*map(float, p)), code)
+                o_op.Set(Gf.Quatf(float(q[3]), float(q[0]), float(q[1]), float(q[2])), code)
+        if w.coat:
+            c = w.coat
+            prim.CreateAttribute(NS + "coat:radius", Sdf.ValueTypeNames.Double).Set(float(c["radius"]))
+            prim.CreateRelationship(NS + "coat:material").SetTargets(
+                [Sdf.Path(f"/World/Materials/{_ident(c['material'])}")])
+            prim.CreateAttribute(NS + "coat:side", Sdf.ValueTypeNames.Int).Set(int(c.get("side", 1)))
+            prim.CreateAttribute(NS + "coat:seed", Sdf.ValueTypeNames.Int).Set(int(c.get("seed", 0)))
+            prim.CreateAttribute(NS + "coat:spacing", Sdf.ValueTypeNames.Double).Set(
+                float(c.get("spacing") or 2.0 * c["radius"]))
+
+    UsdGeom.Scope.Define(stage, "/World/Factories")
+    for fac in spec.factories:
+        p = f"/World/Factories/{_ident(fac.name)}"
+        kind = fac.region[0]
+        if kind == "box":
+            lo, hi = np.asarray(fac.region[1], float), np.asarray(fac.region[2], float)
+            g = UsdGeom.Cube.Define(stage, p)
+            g.CreateSizeAttr(1.0)
+            g.AddTranslateOp().Set(Gf.Vec3d(*((lo + hi) / 2)))
+            g.AddScaleOp().Set(Gf.Vec3f(*(hi - lo)))
+        else:
+            base, radius, height, top = fac.region[1:5]
+            g = UsdGeom.Cylinder.Define(stage, p)
+            g.CreateAxisAttr(UsdGeom.Tokens.z)
+            g.CreateRadiusAttr(float(radius))
+            g.CreateHeightAttr(float(height))
+            base = np.asarray(base, float)
+            g.AddTranslateOp().Set(Gf.Vec3d(base[0], base[1], base[2] + height / 2))
+        g.CreatePurposeAttr(UsdGeom.Tokens.guide)
+        prim = g.GetPrim()
+
+        def fa(name, tname, value):
+            prim.CreateAttribute(NS + "factory:" + name, getattr(Sdf.ValueTypeNames, tname)).Set(value)
+
+        fa("mode", "Token", fac.mode)
+        prim.CreateRelationship(NS + "factory:material").SetTargets([Sdf.Path(f"/World/Materials/{_ident(fac.material)}")])
+        prim.CreateRelationship(NS + "factory:shape").SetTargets([Sdf.Path(f"/World/Shapes/{_ident(fac.shape)}")])
+        if kind == "cylinder" and fac.region[4] is not None:
+            fa("topRadius", "Double", float(fac.region[4]))
+        for name, value in (("count", fac.count), ("seed", fac.seed)):
+            if value is not None:
+                fa(name, "Int", int(value))
+        for name, value in (("mass", fac.mass), ("rate", fac.rate), ("massRate", fac.mass_rate),
+                            ("startTime", fac.start_time), ("interval", fac.interval)):
+            if value is not None:
+                fa(name, "Double", float(value))
+        fa("initialVelocity", "Double3", Gf.Vec3d(*map(float, fac.initial_velocity)))
+        sz = dict(fac.sizes)
+        fa("sizeDistribution", "Token", sz.pop("distribution"))
+        for k, v in sz.items():
+            fa("size" + k[0].upper() + _camel(k)[1:], "Double", float(v))
+    if path:
+        stage.GetRootLayer().Save()
+    return stage
+
+
+# ----------------------------------------------------------------------------------------------------
+# reading
+# ----------------------------------------------------------------------------------------------------
+_NUMBER = {"double", "float", "half"}
+
+
+class _Reader:
+    def __init__(self, stage, where: str):
+        self.stage = stage
+        self.where = where
+
+    def fail(self, prim, attr: str, msg: str):
+        raise StageError(f"{self.where}: prim {prim.GetPath()}: attribute {attr!r} {msg}")
+
+    def check_names(self, prim, role: str, also=()):
+        """Every authored warpdem: attribute of ``prim`` must be known for its ``role`` (catches misspellings)."""
+        known = KNOWN[role] | set(also)
+        for prop in prim.GetAuthoredProperties():
+            name = prop.GetName()
+            if name.startswith(NS) and name not in known:
+                near = difflib.get_close_matches(name, sorted(known), n=1)
+                hint = f"; did you mean {near[0]!r}?" if near else f"; known: {', '.join(sorted(known))}"
+                self.fail(prim, name, f"is not a warpdem attribute here{hint}")
+
+    def get(self, prim, name: str, kind: str = "number", required: bool = True, default=None, time=None):
+        attr = prim.GetAttribute(name)
+        if not attr or not attr.HasAuthoredValue():
+            if required:
+                self.fail(prim, name, f"is missing; expected a {kind}")
+            return default
+        tname = str(attr.GetTypeName())
+        value = attr.Get() if time is None else attr.Get(time)
+        if kind == "number":
+            if tname not in _NUMBER:
+                self.fail(prim, name, f"has type {tname}; expected double")
+            value = float(value)
+            if not math.isfinite(value):
+                self.fail(prim, name, f"= {value!r} is not finite")
+            return value
+        if kind == "int":
+            if tname not in ("int", "int64", "uint"):
+                self.fail(prim, name, f"has type {tname}; expected int")
+            return int(value)
+        if kind == "token":
+            if tname not in ("token", "string"):
+                self.fail(prim, name, f"has type {tname}; expected token")
+            return str(value)
+        if kind == "string":
+            if tname != "string":
+                self.fail(prim, name, f"has type {tname}; expected string")
+            return str(value)
+        if kind == "vec3":
+            if tname not in ("double3", "float3", "vector3d", "vector3f", "point3d", "point3f"):
+                self.fail(prim, name, f"has type {tname}; expected double3")
+            return tuple(float(v) for v in value)
+        if kind == "vec2":
+            if tname not in ("double2", "float2"):
+                self.fail(prim, name, f"has type {tname}; expected double2")
+            return tuple(float(v) for v in value)
+        if kind == "string[]":
+            if tname not in ("string[]", "token[]"):
+                self.fail(prim, name, f"has type {tname}; expected string[]")
+            return [str(v) for v in value]
+        if kind == "double[]":
+            if tname not in ("double[]", "float[]"):
+                self.fail(prim, name, f"has type {tname}; expected double[]")
+            return [float(v) for v in value]
+        raise AssertionError(kind)
+
+    def target(self, prim, name: str, required: bool = True, many: bool = False):
+        rel = prim.GetRelationship(name)
+        targets = rel.GetTargets() if rel else []
+        if not targets:
+            if required:
+                self.fail(prim, name, "is missing; expected a relationship to a prim")
+            return [] if many else None
+        for t in targets:
+            if not self.stage.GetPrimAtPath(t):
+                self.fail(prim, name, f"targets {t}, which does not exist")
+        return [self.stage.GetPrimAtPath(t) for t in targets] if many else self.stage.GetPrimAtPath(targets[0])
+
+
+def _prim_name(prim) -> str:
+    return prim.GetName()
+
+
+def read_stage(path_or_stage) -> SceneSpec:
+    """Read a stage written by :func:`write_stage` (or by hand, following the module's conventions)."""
+    from pxr import Usd, UsdGeom, UsdPhysics, UsdShade
+
+    if isinstance(path_or_stage, Usd.Stage):
+        stage, where = path_or_stage, "stage"
+    else:
+        where = str(path_or_stage)
+        stage = Usd.Stage.Open(where)
+        if stage is None:
+            raise StageError(f"{where}: cannot open as a USD stage")
+    r = _Reader(stage, where)
+    world = stage.GetPrimAtPath("/World")
+    if not world:
+        raise StageError(f"{where}: no /World prim (the default prim holding the scene)")
+    r.check_names(world, "world")
+    rig = r.get(world, NS + "rig", "token")
+    authoring = json.loads(r.get(world, NS + "authoring", "string", required=False, default="{}") or "{}")
+    run = RunSpec(**{f: r.get(world, NS + "run:" + _camel(f), required=(f == "duration"),
+                              default=getattr(RunSpec, f)) for f in RUN_FIELDS})
+    if run.duration <= 0:
+        r.fail(world, NS + "run:duration", f"= {run.duration} is not allowed; expected a duration > 0 s")
+    if not 0 < run.dt_fraction <= 1:
+        r.fail(world, NS + "run:dtFraction", f"= {run.dt_fraction} is not allowed; expected a fraction in (0, 1]")
+    if run.output_interval <= 0:
+        r.fail(world, NS + "run:outputInterval", f"= {run.output_interval} is not allowed; expected > 0 s")
+
+    kind = r.get(world, NS + "measure:kind", "token", required=False, default="none")
+    measure = MeasureSpec(
+        kind=kind,
+        base_height=r.get(world, NS + "measure:baseHeight", required=False, default=0.0),
+        center=r.get(world, NS + "measure:center", "vec2", required=False, default=(0.0, 0.0)),
+        force_limit=r.get(world, NS + "measure:forceLimit", required=False, default=0.0),
+        backstop_height=r.get(world, NS + "measure:backstopHeight", required=False, default=0.0),
+        phase_names=r.get(world, NS + "measure:phaseNames", "string[]", required=False, default=[]),
+        phase_ends=r.get(world, NS + "measure:phaseEnds", "double[]", required=False, default=[]),
+    )
+    if kind not in ("angle_of_repose", "press", "impacts", "none"):
+        r.fail(world, NS + "measure:kind", f"= {kind!r} is not allowed; expected angle_of_repose, press, impacts")
+    if kind == "press":
+        measure.piston = _prim_name(r.target(world, NS + "measure:piston"))
+    if kind == "impacts":
+        measure.walls = [_prim_name(p) for p in r.target(world, NS + "measure:walls", many=True)]
+        if len(measure.phase_names) != len(measure.phase_ends):
+            r.fail(world, NS + "measure:phaseEnds", f"has {len(measure.phase_ends)} values for "
+                   f"{len(measure.phase_names)} phase names; expected one end time per phase")
+
+    gravity = (0.0, 0.0, -9.81)
+    for prim in stage.Traverse():
+        if prim.IsA(UsdPhysics.Scene):
+            s = UsdPhysics.Scene(prim)
+            d = np.asarray(s.GetGravityDirectionAttr().Get() or (0, 0, -1), dtype=float)
+            mag = s.GetGravityMagnitudeAttr().Get()
+            mag = 9.81 if mag is None or (isinstance(mag, float) and math.isinf(mag)) else float(mag)
+            gravity = tuple(float(v) for v in mag * d / max(np.linalg.norm(d), 1e-300))
+
+    materials, names = [], {}
+    mroot = stage.GetPrimAtPath("/World/Materials")
+    if not mroot:
+        raise StageError(f"{where}: no /World/Materials scope; expected one UsdShade.Material per material")
+    for prim in mroot.GetChildren():
+        if not prim.IsA(UsdShade.Material):
+            continue
+        r.check_names(prim, "material")
+        if not prim.HasAPI(UsdPhysics.MaterialAPI):
+            raise StageError(f"{where}: prim {prim.GetPath()}: needs UsdPhysics.MaterialAPI (physics:density)")
+        density = r.get(prim, "physics:density")
+        kw = dict(name=prim.GetName(), density=density,
+                  poisson_ratio=r.get(prim, NS + "poissonRatio"),
+                  youngs_modulus=r.get(prim, NS + "youngsModulus", required=False),
+                  shear_modulus=r.get(prim, NS + "shearModulus", required=False))
+        if kw["youngs_modulus"] is None and kw["shear_modulus"] is None:
+            r.fail(prim, NS + "shearModulus", "is missing (and so is warpdem:youngsModulus); expected one of them [Pa]")
+        try:
+            materials.append(Material(**kw))
+        except ValueError as e:
+            raise StageError(f"{where}: prim {prim.GetPath()}: {e}") from None
+        names[prim.GetPath()] = prim.GetName()
+
+    pairs = []
+    proot = stage.GetPrimAtPath("/World/Materials/Pairs")
+    for prim in (proot.GetChildren() if proot else []):
+        r.check_names(prim, "pair")
+        mats = r.target(prim, NS + "pair:materials", many=True)
+        if len(mats) == 1:
+            mats = mats * 2  # USD keeps a target once: one target is the material against itself
+        if len(mats) != 2:
+            r.fail(prim, NS + "pair:materials", f"has {len(mats)} targets; expected two materials (one for a "
+                   "material against itself)")
+        kw = {}
+        for f in PAIR_FIELDS:
+            name = NS + "pair:" + _camel(f)
+            if f == "law":
+                v = r.get(prim, name, "token", required=False)
+                if v is not None:
+                    try:
+                        kw[f] = ContactLaw[v.upper()]
+                    except KeyError:
+                        r.fail(prim, name, f"= {v!r} is not allowed; expected hertz_mindlin, jkr or eepa")
+            elif f == "rolling_model":
+                v = r.get(prim, name, "token", required=False)
+                if v is not None:
+                    try:
+                        kw[f] = RollingModel[v.upper()]
+                    except KeyError:
+                        r.fail(prim, name, f"= {v!r} is not allowed; expected "
+                               + ", ".join(m.name.lower() for m in RollingModel))
+            else:
+                v = r.get(prim, name, required=False)
+                if v is not None:
+                    kw[f] = v
+        try:
+            ia = Interaction(**kw)
+        except ValueError as e:
+            raise StageError(f"{where}: prim {prim.GetPath()}: {e}") from None
+        pairs.append((mats[0].GetName(), mats[1].GetName(), ia))
+
+    shapes = []
+    sroot = stage.GetPrimAtPath("/World/Shapes")
+    for prim in (sroot.GetChildren() if sroot else []):
+        r.check_names(prim, "shape")
+        kind = r.get(prim, NS + "shape:kind", "token")
+        if kind == "sphere":
+            shapes.append(ShapeSpec(prim.GetName(), "sphere"))
+        elif kind == "clump":
+            off, rad = [], []
+            for child in prim.GetChildren():
+                if not child.IsA(UsdGeom.Sphere):
+                    continue
+                rad.append(r.get(child, "radius"))
+                m = UsdGeom.Xformable(child).GetLocalTransformation()
+                off.append(tuple(m.ExtractTranslation()))
+            if not rad:
+                r.fail(prim, NS + "shape:kind", "= 'clump' but the prim has no UsdGeom.Sphere children")
+            shapes.append(ShapeSpec(prim.GetName(), "clump", np.asarray(off), np.asarray(rad)))
+        else:
+            r.fail(prim, NS + "shape:kind", f"= {kind!r} is not allowed; expected sphere or clump")
+
+    walls = []
+    wroot = stage.GetPrimAtPath("/World/Walls")
+    for prim in (wroot.GetChildren() if wroot else []):
+        if not prim.IsA(UsdGeom.Mesh):
+            continue
+        walls.append(_read_wall(r, prim, names))
+
+    factories = []
+    froot = stage.GetPrimAtPath("/World/Factories")
+    for prim in (froot.GetChildren() if froot else []):
+        factories.append(_read_factory(r, prim))
+
+    spec = SceneSpec(rig=rig, materials=materials, pairs=pairs, shapes=shapes, walls=walls, factories=factories,
+                     run=run, measure=measure, gravity=gravity, authoring=authoring)
+    for w in walls:
+        spec.material(w.material)
+    if kind == "press":
+        spec.wall(measure.piston)
+    return spec
+
+
+def _read_wall(r: _Reader, prim, names) -> WallSpec:
+    from pxr import Usd, UsdGeom, UsdShade
+
+    r.check_names(prim, "wall")
+    mesh = UsdGeom.Mesh(prim)
+    pts = mesh.GetPointsAttr().Get()
+    if pts is None or len(pts) == 0:
+        r.fail(prim, "points", "is missing; expected the mesh vertices [m]")
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
+    idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
+    if counts.size == 0:
+        r.fail(prim, "faceVertexCounts", "is missing; expected the faces")
+    # polygons become fans of triangles
+    tris, at = [], 0
+    for c in counts:
+        for k in range(1, c - 1):
+            tris.append((idx[at], idx[at + k], idx[at + k + 1]))
+        at += c
+    binding = UsdShade.MaterialBindingAPI(prim).GetDirectBinding("physics")
+    mat_path = binding.GetMaterialPath()
+    if not mat_path or mat_path not in names:
+        r.fail(prim, "material:binding:physics", "is missing or not a material under /World/Materials")
+    xf = UsdGeom.Xformable(prim)
+    times = set()
+    for op in xf.GetOrderedXformOps():
+        if op.GetOpType() == UsdGeom.XformOp.TypeScale:
+            r.fail(prim, op.GetOpName(), "scales the wall; bake the scale into the points (walls move rigidly)")
+        times.update(op.GetTimeSamples())
+    spec = WallSpec(prim.GetName(), np.asarray(pts, dtype=np.float64), np.asarray(tris, dtype=np.int64),
+                    names[mat_path])
+    samples = sorted(times) or [Usd.TimeCode.Default()]
+    poses = []
+    for code in samples:
+        m = xf.ComputeLocalToWorldTransform(code)
+        q = m.ExtractRotationQuat().GetNormalized() if hasattr(m, "ExtractRotationQuat") else m.ExtractRotation().GetQuat()
+        im = q.GetImaginary()
+        poses.append((tuple(m.ExtractTranslation()), (im[0], im[1], im[2], q.GetReal())))
+    if len(samples) > 1 or poses[0] != ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)):
+        t = [0.0] if not times else [c / TIME_CODES_PER_SECOND for c in samples]
+        spec.times = np.asarray(t, dtype=np.float64)
+        spec.translations = np.asarray([p for p, _ in poses], dtype=np.float64)
+        spec.rotations = np.asarray([q for _, q in poses], dtype=np.float64)
+    if prim.GetAttribute(NS + "coat:radius"):
+        coat_mat = r.target(prim, NS + "coat:material")
+        spec.coat = {"radius": r.get(prim, NS + "coat:radius"), "material": coat_mat.GetName(),
+                     "side": r.get(prim, NS + "coat:side", "int", required=False, default=1),
+                     "seed": r.get(prim, NS + "coat:seed", "int", required=False, default=0),
+                     "spacing": r.get(prim, NS + "coat:spacing", required=False)}
+        if spec.coat["radius"] <= 0:
+            r.fail(prim, NS + "coat:radius", f"= {spec.coat['radius']} is not allowed; expected a radius > 0 m")
+        if spec.coat["side"] not in (1, -1):
+            r.fail(prim, NS + "coat:side", f"= {spec.coat['side']} is not allowed; expected 1 or -1")
+    return spec
+
+
+def _read_factory(r: _Reader, prim) -> FactorySpec:
+    from pxr import UsdGeom
+
+    r.check_names(prim, "factory")
+    P = NS + "factory:"
+    xf = UsdGeom.Xformable(prim).GetLocalTransformation()
+    center = np.asarray(xf.ExtractTranslation(), dtype=float)
+    if prim.IsA(UsdGeom.Cube):
+        size = r.get(prim, "size", required=False, default=2.0)
+        scale = np.array([np.linalg.norm(np.asarray(xf.GetRow3(k))) for k in range(3)]) * size
+        region = ("box", tuple(center - scale / 2), tuple(center + scale / 2))
+    elif prim.IsA(UsdGeom.Cylinder):
+        axis = r.get(prim, "axis", "token", required=False, default="Z")
+        if axis != "Z":
+            r.fail(prim, "axis", f"= {axis!r} is not allowed; expected Z (factories stand upright)")
+        radius, height = r.get(prim, "radius"), r.get(prim, "height")
+        top = r.get(prim, P + "topRadius", required=False)
+        region = ("cylinder", tuple(center - (0, 0, height / 2)), radius, height, top)
+    else:
+        raise StageError(f"{r.where}: prim {prim.GetPath()}: a factory must be a UsdGeom.Cube or UsdGeom.Cylinder, "
+                         f"not {prim.GetTypeName()}")
+    mode = r.get(prim, P + "mode", "token")
+    if mode not in ("fill", "dynamic"):
+        r.fail(prim, P + "mode", f"= {mode!r} is not allowed; expected fill or dynamic")
+    dist = r.get(prim, P + "sizeDistribution", "token")
+    need = {"fixed": ["radius"], "normal": ["mean", "std", "low", "high"], "lognormal": ["median", "sigma_log"]}
+    if dist not in need:
+        r.fail(prim, P + "sizeDistribution", f"= {dist!r} is not allowed; expected fixed, normal or lognormal")
+    sizes = {"distribution": dist}
+    for k in need[dist] + (["low", "high"] if dist == "lognormal" else []):
+        v = r.get(prim, P + "size" + k[0].upper() + _camel(k)[1:], required=k in need[dist])
+        if v is not None:
+            sizes[k] = v
+    fac = FactorySpec(
+        name=prim.GetName(), mode=mode, region=region,
+        material=r.target(prim, P + "material").GetName(), shape=r.target(prim, P + "shape").GetName(),
+        sizes=sizes,
+        count=r.get(prim, P + "count", "int", required=False),
+        mass=r.get(prim, P + "mass", required=False),
+        rate=r.get(prim, P + "rate", required=False),
+        mass_rate=r.get(prim, P + "massRate", required=False),
+        start_time=r.get(prim, P + "startTime", required=False, default=0.0),
+        seed=r.get(prim, P + "seed", "int", required=False, default=0),
+        initial_velocity=r.get(prim, P + "initialVelocity", "vec3", required=False, default=(0.0, 0.0, 0.0)),
+        interval=r.get(prim, P + "interval", required=False),
+    )
+    if (fac.count is None) == (fac.mass is None):
+        r.fail(prim, P + "count", "and warpdem:factory:mass: expected exactly one of them")
+    if mode == "dynamic" and (fac.rate is None) == (fac.mass_rate is None):
+        r.fail(prim, P + "rate", "and warpdem:factory:massRate: a dynamic factory needs exactly one of them")
+    return fac
+
+
+# ----------------------------------------------------------------------------------------------------
+# overrides and building
+# ----------------------------------------------------------------------------------------------------
+def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
+    """Apply ``--set`` style overrides (values as strings or numbers) to a spec, in place:
+    ``material.NAME.FIELD``, ``interaction.A.B.FIELD``, ``run.FIELD``, ``measure.FIELD``,
+    ``factory.NAME.FIELD``. Rig parameters (any other key) are handled by :func:`warpdem.rigs.load`."""
+    for key, raw in overrides.items():
+        parts = key.split(".")
+        value = _parse(raw)
+        if parts[0] == "material" and len(parts) == 3:
+            m = spec.material(parts[1])
+            if parts[2] not in ("density", "youngs_modulus", "shear_modulus", "poisson_ratio"):
+                raise StageError(f"--set {key}: field {parts[2]!r} is not a material scalar; expected density, "
+                                 "youngs_modulus, shear_modulus or poisson_ratio")
+            changes = {parts[2]: float(value)}
+            # E and G are tied through nu: a new E or nu re-derives G, a new G re-derives E
+            if parts[2] in ("youngs_modulus",):
+                changes["shear_modulus"] = None
+            elif parts[2] in ("shear_modulus", "poisson_ratio"):
+                changes["youngs_modulus"] = None
+            spec.materials[spec.materials.index(m)] = dataclasses.replace(m, **changes)
+        elif parts[0] == "interaction" and len(parts) == 4:
+            a, b, f = parts[1:]
+            spec.material(a), spec.material(b)
+            if f not in PAIR_FIELDS:
+                raise StageError(f"--set {key}: field {f!r} is not an interaction field; expected one of "
+                                 + ", ".join(PAIR_FIELDS))
+            if f == "law":
+                value = ContactLaw[str(value).upper()]
+            elif f == "rolling_model":
+                value = RollingModel[str(value).upper()]
+            for k, (pa, pb, ia) in enumerate(spec.pairs):
+                if {pa, pb} == {a, b}:
+                    spec.pairs[k] = (pa, pb, dataclasses.replace(ia, **{f: value}))
+                    break
+            else:
+                spec.pairs.append((a, b, Interaction(**{f: value})))
+        elif parts[0] == "run" and len(parts) == 2:
+            if parts[1] not in RUN_FIELDS:
+                raise StageError(f"--set {key}: {parts[1]!r} is not a run setting; expected one of {', '.join(RUN_FIELDS)}")
+            setattr(spec.run, parts[1], float(value))
+        elif parts[0] == "measure" and len(parts) == 2:
+            if parts[1] not in ("base_height", "force_limit", "backstop_height"):
+                raise StageError(f"--set {key}: expected measure.base_height, measure.force_limit or "
+                                 "measure.backstop_height")
+            setattr(spec.measure, parts[1], float(value))
+        elif parts[0] == "factory" and len(parts) == 3:
+            fac = next((f for f in spec.factories if f.name == parts[1]), None)
+            if fac is None:
+                raise StageError(f"--set {key}: no factory {parts[1]!r}; factories: "
+                                 + ", ".join(f.name for f in spec.factories))
+            if parts[2] not in ("count", "mass", "rate", "mass_rate", "start_time", "seed", "interval"):
+                raise StageError(f"--set {key}: expected count, mass, rate, mass_rate, start_time, seed or interval")
+            setattr(fac, parts[2], int(value) if parts[2] in ("count", "seed") else float(value))
+        else:
+            raise StageError(f"--set {key}: unknown setting; expected material.NAME.FIELD, interaction.A.B.FIELD, "
+                             "run.FIELD, measure.FIELD, factory.NAME.FIELD or a rig parameter")
+    return spec
+
+
+def _parse(raw):
+    if not isinstance(raw, str):
+        return raw
+    try:
+        return json.loads(raw)
+    except ValueError:
+        return raw
+
+
+def _sizes(d: dict):
+    from .factories import FixedSize, LogNormal, TruncatedNormal
+
+    dist = d["distribution"]
+    if dist == "fixed":
+        return FixedSize(d["radius"])
+    if dist == "normal":
+        return TruncatedNormal(d["mean"], d["std"], d["low"], d["high"])
+    return LogNormal(d["median"], d["sigma_log"], d.get("low"), d.get("high"))
+
+
+def _region(region):
+    from .factories import Box, Cone, Cylinder
+
+    if region[0] == "box":
+        return Box(region[1], region[2])
+    base, radius, height, top = region[1:5]
+    if top is None:
+        return Cylinder(base, (0, 0, 1), radius, height)
+    return Cone(base, (0, 0, 1), radius, top, height)
+
+
+def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None):
+    """A :class:`warpdem.ModelBuilder` holding the scene (call ``finalize(device)`` on it).
+
+    ``variations`` maps ``material.NAME.FIELD`` / ``interaction.A.B.FIELD`` to ``world_count`` values: one
+    design point per world (see :meth:`warpdem.ModelBuilder.vary`).
+    """
+    from .builder import ModelBuilder
+    from .factories import DynamicFactory
+    from .motion import WallMotion
+
+    b = ModelBuilder(gravity=spec.gravity)
+    for m in spec.materials:
+        b.add_material(m)
+    for a, c, ia in spec.pairs:
+        b.set_interaction(a, c, ia)
+    for w in spec.walls:
+        motion = None if w.times is None else WallMotion.keyframes(w.times, w.translations, w.rotations)
+        k = b.add_wall_mesh(w.vertices, w.triangles, w.material, name=w.name, motion=motion)
+        if w.coat:
+            c = w.coat
+            b.coat_wall(k, c["radius"], c["material"], spacing=c.get("spacing"), side=c.get("side", 1),
+                        seed=c.get("seed", 0))
+    for fac in spec.factories:
+        shape = spec.shape(fac.shape)
+        template = shape.template()
+        sizes = _sizes(fac.sizes)
+        region = _region(fac.region)
+        density = spec.material(fac.material).density
+        if fac.mode == "fill":
+            b.fill(region, sizes, fac.material, count=fac.count, mass=fac.mass, seed=fac.seed, template=template,
+                   velocity=fac.initial_velocity)
+        else:
+            ratio = 1.0 if template is None else template.bounding_radius / template.equivalent_radius
+            df = DynamicFactory(region, sizes, rate=fac.rate, mass_rate=fac.mass_rate, count=fac.count,
+                                mass=fac.mass, start_time=fac.start_time, density=density, seed=fac.seed,
+                                initial_velocity=fac.initial_velocity, interval=fac.interval, bounding_ratio=ratio,
+                                random_orientation=template is not None)
+            b.add_factory(df, fac.material, template)
+    if world_count > 1 or variations:
+        b.replicate(world_count)
+        for target, values in (variations or {}).items():
+            b.vary(target, values)
+    return b
