@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from . import measure as ms
-from .scene import SceneSpec, StageError, build
+from .scene import SceneSpec, build
 
 
 @dataclass
@@ -123,8 +123,6 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     Returns:
         RunResult with one metrics dict per world.
     """
-    import warp as wp
-
     from .solver import Solver, SolverOptions
 
     t_wall0 = time.perf_counter()
@@ -370,8 +368,3 @@ def _pictures(out: Path, spec, model, state, h, result) -> dict:
         files["press_png"] = str(out / "press.png")
     return files
 
-
-def check_run_inputs(spec: SceneSpec) -> None:
-    """Raise StageError for settings the runner cannot honour."""
-    if spec.measure.kind == "press" and not spec.measure.piston:
-        raise StageError("measure.kind = press needs a piston wall (warpdem:measure:piston)")
