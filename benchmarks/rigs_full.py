@@ -31,7 +31,15 @@ for rig in a.rig or list(rigs.RIGS):
             values[name] = v
     spec = rigs.spec(rig, values)
     t0 = time.perf_counter()
-    res = run_scene(spec, device=a.device, out_dir=f"{a.out}/{rig}", frames=False)
+    last = [0.0]
+
+    def progress(frac, msg, rig=rig, t0=t0, last=last):
+        # a line per tenth of the run, so a run cut off by a time limit still shows how far it got
+        if frac >= last[0] + 0.1 or frac >= 1.0:
+            last[0] = frac
+            print(f"  {rig}: {100 * frac:.0f} % {msg} after {time.perf_counter() - t0:.0f} s", flush=True)
+
+    res = run_scene(spec, device=a.device, out_dir=f"{a.out}/{rig}", frames=False, progress=progress)
     i = res.info
     m = {k: v for k, v in res.metrics[0].items() if not isinstance(v, (list, dict))}
     print(json.dumps({"rig": rig, "device": wp.get_device(a.device).name, "wall_s": round(time.perf_counter() - t0, 1),

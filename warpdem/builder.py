@@ -62,6 +62,7 @@ class ModelBuilder:
         self._factories = []
         self.world_count = 1
         self._variations = {}
+        self._world_seeds = None
 
     # materials -------------------------------------------------------------------------------
     def add_material(self, material: Material) -> int:
@@ -416,6 +417,18 @@ class ModelBuilder:
                              "interaction.A.B.FIELD or gravity")
         self._variations[target] = vals
 
+    def seed_worlds(self, seeds) -> None:
+        """Give each world its own placement seed for the dynamic factories (integers >= 0, one per world;
+        0 keeps the factory's own stream). The engine is deterministic, so repeats of one design point (centre
+        points, replicates) batched as worlds differ only through these seeds. Call after :meth:`replicate`."""
+        vals = [int(v) for v in seeds]
+        if len(vals) != self.world_count:
+            raise ValueError(f"seed_worlds: {len(vals)} seeds given; expected world_count = {self.world_count}")
+        bad = [v for v in vals if v < 0]
+        if bad:
+            raise ValueError(f"seed_worlds: seed = {bad[0]} is not allowed; expected integers >= 0")
+        self._world_seeds = vals
+
     def _world_tables(self):
         """Materials and interaction tables per world (length 1 when nothing varies)."""
         varied = [t for t in self._variations if t != "gravity"]
@@ -564,6 +577,7 @@ class ModelBuilder:
             clump_template=np.tile(tpl, W),
             clump_scale=np.tile(cscale, W),
             factories=list(self._factories),
+            world_seed=np.asarray(self._world_seeds if self._world_seeds is not None else [0] * W, dtype=np.int64),
         )
 
         def tiled(values, width):

@@ -148,6 +148,38 @@ def _base_layer(x: np.ndarray, r: np.ndarray, base_z: float) -> np.ndarray:
 # angle of repose
 # --------------------------------------------------------------------------------------------------
 
+def pile_spheres(x, r, base_z: float = 0.0, gap: float = 0.1) -> np.ndarray:
+    """Mask of the spheres that belong to the pile: connected to the base through a chain of touching spheres.
+
+    Two spheres touch when their centres are closer than (1 + ``gap``) (r_i + r_j); the chain starts at the
+    spheres within ``gap`` r of the base plane ``base_z`` [m]. Grains stuck to a lifted cylinder, carried by
+    a wall or still in flight are not part of the pile and would read as a tall column.
+
+    Args:
+        x: sphere centres [m], shape (n, 3); r: radii [m], shape (n,).
+    Returns:
+        bool mask, shape (n,).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    x, r = _spheres(x, r)
+    gap = _finite("gap", gap, "[-]")
+    n = len(r)
+    pairs = cKDTree(x).query_pairs(2.0 * (1.0 + gap) * float(r.max()), output_type="ndarray")
+    if len(pairs):
+        i, j = pairs[:, 0], pairs[:, 1]
+        near = np.linalg.norm(x[i] - x[j], axis=1) < (1.0 + gap) * (r[i] + r[j])
+        i, j = i[near], j[near]
+    else:
+        i = j = np.zeros(0, dtype=np.int64)
+    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    grounded = x[:, 2] - r <= base_z + gap * r
+    return np.isin(label, np.unique(label[grounded]))
+
+
 def angle_surface_fit(x, r, slices: int = 8, bins: int = 12, base_z: float = 0.0, center=(0.0, 0.0),
                       inner: float = 0.2, outer: float = 0.8) -> dict:
     """Angle of repose [deg] by straight-line fits of the pile surface in azimuthal sectors.

@@ -124,6 +124,21 @@ def _smooth(s: float) -> float:
     return s * s * (3 - 2 * s)
 
 
+def _pour_rate(region_volume: float, particle_volume: float, bound3: float, height: float, speed: float) -> float:
+    """Release rate [particles/s] a pour region of ``height`` [m] sustains when particles enter it at ``speed``
+    [m/s] downward: half of what it holds at LOOSE_PACKING, renewed in the time a particle takes to fall
+    through it. A faster rate would only be deferred by the factory (the region is full), so the pour's end
+    time count / rate is what the run sees."""
+    hold = region_volume * LOOSE_PACKING / bound3 / particle_volume
+    t = (-speed + math.sqrt(speed**2 + 2 * 9.81 * height)) / 9.81
+    return 0.5 * hold / t
+
+
+POUR_INTERVAL = 0.01
+"""Time between a pour's release batches [s]. Each release reads the particles back to the host to place the
+batch clear of them, so one particle per batch (the factory's default) would stall a GPU run; at 0.01 s a
+batch is a few dozen particles, which a pour region holds easily."""
+
 LOOSE_PACKING = 0.25
 """Volume fraction a static (random sequential) fill reaches comfortably, walls included; fill regions are
 sized with it and the particles settle to ~0.6."""
@@ -204,7 +219,7 @@ class Funnel:
         bound = radius * (1 + 2 * self.radius_spread) * (1.42 if shape.kind == "clump" else 1.0)
         region = ("cylinder", (0.0, 0.0, top_z + 2 * bound), 0.4 * self.top_diameter, max(8 * bound, 0.02), None)
         fac = FactorySpec("pour", "dynamic", region, "grain", shape.name, _sizes(radius, self.radius_spread),
-                          count=int(self.count), rate=self.rate, seed=int(self.seed))
+                          count=int(self.count), rate=self.rate, seed=int(self.seed), interval=POUR_INTERVAL)
         return SceneSpec(
             rig="funnel", materials=[grain, STEEL], pairs=pairs, shapes=[shape],
             walls=[WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "steel")],
@@ -220,8 +235,10 @@ class Funnel:
 class LiftingCylinder:
     """Lifting-cylinder angle of repose (seed 002): 200 mm inner diameter, 300 mm high, lifted at 0.05 m/s.
 
-    The cylinder stands on a base plate, is filled (static fill, then ``settle_time`` of settling), and is
-    lifted by ``lift_height`` (default: its height + 20 mm) at ``lift_speed``. With ``coated`` the cylinder's
+    The cylinder stands on a base plate, is filled by a pour from a region ``pour_height`` tall just above its
+    rim (particles leave it at ``pour_speed`` downward, so none falls more than the cylinder's height plus
+    that region), settles for ``settle_time``, and is lifted by ``lift_height`` (default: its height + 20 mm)
+    at ``lift_speed``. With ``coated`` the cylinder's
     inside and the base carry glued particles of the ore (seed 002 glues grains on both). Ore: seed 002's
     phosphate (2404 kg/m^3, G = 2.5 MPa, nu = 0.25; printed E = 1 MPa conflicts with G, so G is kept), EEPA
     between particles at seed 002's optimum (mu_s 0.7, mu_r 0.3, surface energy 1.0 J/m^2), 15-sphere clumps
@@ -243,12 +260,15 @@ class LiftingCylinder:
     coated: bool = True
     coat_radius: float = 0.0
     base_size: float = 0.6
-    settle_time: float = 1.0
+    pour_height: float = 0.2
+    pour_speed: float = 1.5
+    settle_time: float = 0.6
     after_lift: float = 2.0
     cell: float = 0.02
     dt_fraction: float = 0.2
     seed: int = 1
-    _may_be_zero = ("count", "mass", "lift_height", "coat_radius", "radius_spread", "seed", "surface_energy")
+    _may_be_zero = ("count", "mass", "lift_height", "coat_radius", "radius_spread", "seed", "surface_energy",
+                    "pour_speed")
     _may_be_negative = ("pull_off_force",)
 
     def __post_init__(self):
@@ -268,22 +288,28 @@ class LiftingCylinder:
                  ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3))]
         R, H = self.inner_diameter / 2, self.height
         lift = self.lift_height or H + 0.02
+        coat_r = self.coat_radius or r
+        margin = (2 * coat_r if self.coated else 0.0) + r * (1 + 2 * self.radius_spread) * 1.45
+        v_mean = 4.0 / 3.0 * math.pi * r**3 * (1 + 3 * self.radius_spread**2)
+        count = self.count or self.mass / (ore.density * v_mean)
+        pour_r = R - margin
+        rate = _pour_rate(math.pi * pour_r**2 * self.pour_height, v_mean, _bound3(shape), self.pour_height,
+                          self.pour_speed)
+        t0 = count / rate + self.settle_time
+        t1 = t0 + lift / self.lift_speed
         cv, ct = geo.frustum(R, R, 0.0, H, self.cell)
         bv, bt = geo.grid_plate(self.base_size, self.base_size, max(self.cell, self.base_size / 30))
-        t0, t1 = self.settle_time, self.settle_time + lift / self.lift_speed
         times = np.array([0.0, t0, t1])
         cyl = WallSpec("Cylinder", cv, ct, "steel", times, np.array([[0, 0, 0], [0, 0, 0], [0, 0, lift]], float),
                        np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)))
         base = WallSpec("Base", bv, bt, "steel")
-        coat_r = self.coat_radius or r
         if self.coated:
             cyl.coat = {"radius": coat_r, "material": "ore", "side": 1, "seed": self.seed}
             base.coat = {"radius": coat_r, "material": "ore", "side": 1, "seed": self.seed + 1}
-        margin = (2 * coat_r if self.coated else 0.0) + r * (1 + 2 * self.radius_spread) * 1.45
-        bed = (self.mass / ore.density if self.mass else self.count * 4.19 * r**3) / LOOSE_PACKING * _bound3(shape)
-        region = ("cylinder", (0.0, 0.0, margin), R - margin, bed / (math.pi * (R - margin) ** 2), None)
-        fac = FactorySpec("fill", "fill", region, "ore", shape.name, _sizes(r, self.radius_spread),
-                          count=self.count or None, mass=self.mass or None, seed=self.seed)
+        region = ("cylinder", (0.0, 0.0, H + r), pour_r, self.pour_height, None)
+        fac = FactorySpec("pour", "dynamic", region, "ore", shape.name, _sizes(r, self.radius_spread),
+                          count=self.count or None, mass=self.mass or None, rate=rate, seed=self.seed, interval=POUR_INTERVAL,
+                          initial_velocity=(0.0, 0.0, -self.pour_speed))
         return SceneSpec(
             rig="lifting_cylinder", materials=[ore, STEEL], pairs=pairs, shapes=[shape], walls=[cyl, base],
             factories=[fac],
@@ -304,11 +330,11 @@ class DiePress:
     Speed-up: the seed presses at 20 mm/min; we press at ``piston_speed`` (0.1 m/s by default) and report the
     inertial number I = (v / H) d / sqrt(p / rho) of the compaction, which must stay below 1e-3 for
     quasi-static flow. The fill (``fill_height`` of settled bed) is made by a static fill of the die and
-    ``settle_time`` of settling with the bar parked above the inlet; the bar then approaches at 5 x
+    ``settle_time`` of settling with the bar parked above the inlet; the bar then approaches at 10 x
     ``piston_speed`` to ``gap`` above the expected bed top and presses.
     """
 
-    particle_radius: float = 0.00025
+    particle_radius: float = 0.0004
     radius_spread: float = 0.05
     die_diameter: float = 0.008
     fill_height: float = 0.08
@@ -356,7 +382,7 @@ class DiePress:
         park = die_h + self.inlet_height + 2 * r
         start = self.fill_height + self.gap
         t_a = self.settle_time
-        t_b = t_a + (park - start) / (5 * self.piston_speed)
+        t_b = t_a + (park - start) / (10 * self.piston_speed)
         travel = self.max_travel * self.fill_height + self.gap
         t_c = t_b + travel / self.piston_speed
         ident = np.tile([0.0, 0.0, 0.0, 1.0], (4, 1))
@@ -381,7 +407,10 @@ class TruckTipper:
     ``lip_height`` above the floor (seed 002's first impacts at 3.92 m/s mean a 0.78 m drop), then tilted
     by ``tilt_angle`` about its rear hinge while the tailgate swings open. Full-size geometry; the ore
     (seed 002's phosphate, EEPA between particles, JKR against the steel as in the seed) is coarse-grained
-    to ``particle_radius`` (seed: 0.39 mm mean). Impacts on the body and the tailgate are counted per face,
+    to ``particle_radius`` (seed: 0.39 mm mean). The bucket is loaded by a pour from a region ``pour_height``
+    tall just above it (particles leave it at ``pour_speed`` downward), so nothing falls past the bucket
+    into the body before the dump; ``dump_start`` 0 starts the dump 0.5 s after the pour ends. Impacts on
+    the body and the tailgate are counted per face,
     separately for loading and discharge.
     """
 
@@ -397,7 +426,9 @@ class TruckTipper:
     bucket_x: float = 0.6
     lip_height: float = 0.78
     fill_fraction: float = 0.85
-    dump_start: float = 1.2
+    pour_height: float = 0.4
+    pour_speed: float = 1.0
+    dump_start: float = 0.0
     dump_duration: float = 1.5
     dump_angle: float = 135.0
     load_settle: float = 1.5
@@ -408,7 +439,7 @@ class TruckTipper:
     cell: float = 0.25
     dt_fraction: float = 0.2
     seed: int = 1
-    _may_be_zero = ("radius_spread", "seed", "bucket_x")
+    _may_be_zero = ("radius_spread", "seed", "bucket_x", "dump_start", "pour_speed")
 
     def __post_init__(self):
         _check_params(self)
@@ -441,7 +472,17 @@ class TruckTipper:
         buck_v, buck_t = geo.open_box(bd, bw, bh, self.cell / 2, open_sides=("top",),
                                       origin=(bx0, 0.0, self.lip_height - bh))
         edge = (bx0 + bd, 0.0, self.lip_height)
-        t_dump0, t_dump1 = self.dump_start, self.dump_start + self.dump_duration
+        margin = r * (1 + 2 * self.radius_spread) * 1.45
+        area = (bd - 2 * margin) * (bw - 2 * margin)
+        v_mean = 4.0 / 3.0 * math.pi * r**3 * (1 + 3 * self.radius_spread**2)
+        # clumps settle to about 0.5 of the space (by equivalent-sphere volume): the bed tops out at the
+        # fill fraction of the bucket and nothing spills before the dump
+        count = int(0.5 * area * self.fill_fraction * (bh - margin) / v_mean)
+        region = ("box", (bx0 + margin, -bw / 2 + margin, self.lip_height + r),
+                  (bx0 + bd - margin, bw / 2 - margin, self.lip_height + r + self.pour_height))
+        rate = _pour_rate(area * self.pour_height, v_mean, _bound3(shape), self.pour_height, self.pour_speed)
+        t_dump0 = self.dump_start or count / rate + 0.5
+        t_dump1 = t_dump0 + self.dump_duration
         t_load = t_dump1 + self.load_settle
         t_tilt1 = t_load + self.tilt_duration
         end = t_tilt1 + self.after_tilt
@@ -469,16 +510,9 @@ class TruckTipper:
         body = WallSpec("Body", body_v, body_t, "steel", *_pose_samples(tt, body_pose))
         gate = WallSpec("Tailgate", gate_v, gate_t, "steel", *_pose_samples(tt, gate_pose))
         ground = WallSpec("Ground", ground_v, ground_t, "steel")
-        margin = r * (1 + 2 * self.radius_spread) * 1.45
-        z0 = self.lip_height - bh + margin
-        area = (bd - 2 * margin) * (bw - 2 * margin)
-        volume = area * self.fill_fraction * (bh - margin)
-        count = int(0.58 * volume / (4.0 / 3.0 * math.pi * r**3))
-        # a loose static fill is sparse, so the region reaches above the bucket; the surplus falls in
-        region = ("box", (bx0 + margin, -bw / 2 + margin, z0),
-                  (bx0 + bd - margin, bw / 2 - margin, z0 + volume * 0.58 / LOOSE_PACKING * _bound3(shape) / area))
-        fac = FactorySpec("load", "fill", region, "ore", shape.name, _sizes(r, self.radius_spread), count=count,
-                          seed=self.seed)
+        fac = FactorySpec("load", "dynamic", region, "ore", shape.name, _sizes(r, self.radius_spread), count=count,
+                          rate=rate, seed=self.seed, interval=POUR_INTERVAL,
+                          initial_velocity=(0.0, 0.0, -self.pour_speed))
         return SceneSpec(
             rig="truck_tipper", materials=[ore, STEEL], pairs=pairs, shapes=[shape],
             walls=[body, gate, bucket, ground], factories=[fac],
@@ -495,7 +529,7 @@ SMOKE = {
                "outlet_diameter": 0.02, "stem_length": 0.01, "outlet_height": 0.025, "plate_size": 0.16,
                "cell": 0.01, "duration": 1.6},
     "lifting_cylinder": {"particle": "sphere", "particle_radius": 0.0025, "mass": 0.0, "count": 450,
-                         "inner_diameter": 0.06, "height": 0.06, "lift_speed": 0.1, "base_size": 0.16,
+                         "inner_diameter": 0.06, "height": 0.06, "lift_speed": 0.1, "base_size": 0.16, "pour_height": 0.04,
                          "settle_time": 0.25, "after_lift": 0.6, "cell": 0.01, "surface_energy": 0.0,
                          "pull_off_force": 0.0},
     "die_press": {"particle_radius": 0.0005, "die_diameter": 0.006, "fill_height": 0.01, "inlet_diameter": 0.01,
@@ -503,7 +537,7 @@ SMOKE = {
                   "cell": 0.002},
     "truck_tipper": {"particle": "sphere", "particle_radius": 0.012, "body_length": 0.6, "body_width": 0.34,
                      "body_height": 0.2, "bucket_width": 0.24, "bucket_depth": 0.14, "bucket_height": 0.1,
-                     "bucket_x": 0.08, "lip_height": 0.16, "dump_start": 0.3, "dump_duration": 0.5, "load_settle": 0.5,
+                     "bucket_x": 0.08, "lip_height": 0.16, "pour_height": 0.1, "dump_duration": 0.5, "load_settle": 0.5,
                      "tilt_duration": 1.0, "after_tilt": 0.5, "chassis_height": 0.2, "cell": 0.05},
 }
 """Overrides that make each rig a CPU smoke test with a few hundred particles."""

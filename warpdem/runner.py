@@ -112,12 +112,14 @@ def _world_walls(model, state):
 
 
 def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: int = 1,
-              variations: dict | None = None, frames: bool = True, progress=None, quiet: bool = False) -> RunResult:
+              variations: dict | None = None, frames: bool = True, progress=None, quiet: bool = False,
+              world_seeds=None) -> RunResult:
     """Run ``spec`` on ``device``; with ``out_dir`` write metrics.json, result.usdc (+ VTK series), pile.png.
 
     Args:
         world_count: batched worlds; ``variations`` maps ``material.NAME.FIELD`` / ``interaction.A.B.FIELD``
-            to one value per world (a design point per world; all worlds share geometry and walls).
+            to one value per world (a design point per world; all worlds share geometry and walls);
+            ``world_seeds`` one dynamic-factory placement seed per world (0: the factory's own).
         frames: write the time-sampled USD / VTK of world 0 (every ``run.output_interval``).
         progress: callable(fraction in [0, 1], message) called at each output tick.
     Returns:
@@ -126,7 +128,7 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     from .solver import Solver, SolverOptions
 
     t_wall0 = time.perf_counter()
-    builder = build(spec, world_count, variations)
+    builder = build(spec, world_count, variations, world_seeds)
     model = builder.finalize(device)
     run = spec.run
     # rig meshes have fans and seams where one sphere may touch many triangles
@@ -216,6 +218,10 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             # what rolled off the base is not part of the pile
             keep = x[:, 2] - r > m.base_height - 2 * r.max()
             x, r = x[keep], r[keep]
+            # nor is what sticks to a lifted wall or is still in the air
+            on = ms.pile_spheres(x, r, base_z=m.base_height) if len(r) else np.zeros(0, bool)
+            mw["detached"] = int(len(r) - on.sum())
+            x, r = x[on], r[on]
             mw["particles"] = int(len(r))
             try:
                 fit = ms.angle_surface_fit(x, r, base_z=m.base_height, center=m.center)

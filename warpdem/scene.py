@@ -310,15 +310,16 @@ def write_stage(spec: SceneSpec, path=None):
             UsdShade.Material(stage.GetPrimAtPath(f"/World/Materials/{_ident(w.material)}")),
             UsdShade.Tokens.weakerThanDescendants, "physics")
         t_op = mesh.AddTranslateOp()
-        o_op = mesh.AddOrientOp()
+        # double precision: a round trip through the stage returns the authored poses exactly
+        o_op = mesh.AddOrientOp(UsdGeom.XformOp.PrecisionDouble)
         if w.times is None:
             t_op.Set(Gf.Vec3d(0, 0, 0))
-            o_op.Set(Gf.Quatf(1, 0, 0, 0))
+            o_op.Set(Gf.Quatd(1, 0, 0, 0))
         else:
             for t, p, q in zip(w.times, w.translations, w.rotations):
                 code = float(t) * TIME_CODES_PER_SECOND
                 t_op.Set(Gf.Vec3d(*map(float, p)), code)
-                o_op.Set(Gf.Quatf(float(q[3]), float(q[0]), float(q[1]), float(q[2])), code)
+                o_op.Set(Gf.Quatd(float(q[3]), float(q[0]), float(q[1]), float(q[2])), code)
         if w.coat:
             c = w.coat
             prim.CreateAttribute(NS + "coat:radius", Sdf.ValueTypeNames.Double).Set(float(c["radius"]))
@@ -820,11 +821,12 @@ def _region(region):
     return Cone(base, (0, 0, 1), radius, top, height)
 
 
-def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None):
+def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None, world_seeds=None):
     """A :class:`warpdem.ModelBuilder` holding the scene (call ``finalize(device)`` on it).
 
     ``variations`` maps ``material.NAME.FIELD`` / ``interaction.A.B.FIELD`` to ``world_count`` values: one
-    design point per world (see :meth:`warpdem.ModelBuilder.vary`).
+    design point per world (see :meth:`warpdem.ModelBuilder.vary`); ``world_seeds`` gives each world's dynamic
+    factories a placement seed (see :meth:`warpdem.ModelBuilder.seed_worlds`).
     """
     from .builder import ModelBuilder
     from .factories import DynamicFactory
@@ -858,8 +860,10 @@ def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None)
                                 initial_velocity=fac.initial_velocity, interval=fac.interval, bounding_ratio=ratio,
                                 random_orientation=template is not None)
             b.add_factory(df, fac.material, template)
-    if world_count > 1 or variations:
+    if world_count > 1 or variations or world_seeds is not None:
         b.replicate(world_count)
         for target, values in (variations or {}).items():
             b.vary(target, values)
+        if world_seeds is not None:
+            b.seed_worlds(world_seeds)
     return b

@@ -461,7 +461,10 @@ class Solver:
         s_idx, s_x, s_v, c_idx, c_x, c_q, c_v = [], [], [], [], [], [], []
         for w in range(m.world_count):
             mine = active & (world_of == w)
-            x, _ = fac.place(None, want, x_all[mine], radius[mine], first=done)
+            ws = 0 if m.world_seed is None else int(m.world_seed[w])
+            # a world seed gives that world its own placement stream (repeats of a design point differ)
+            rng = None if ws == 0 else np.random.default_rng([int(fac.seed), ws, done])
+            x, _ = fac.place(rng, want, x_all[mine], radius[mine], first=done)
             placed = len(x) if placed is None else min(placed, len(x))
             k = np.arange(done, done + len(x))
             vel = np.tile(np.asarray(fac.initial_velocity, dtype=np.float64), (len(x), 1))

@@ -142,6 +142,9 @@ class Model:
     """Host array: scale of each clump relative to its template, shape (clump_count,)."""
     factories: list = field(default_factory=list)
     """Host records of the dynamic factories (see ModelBuilder.add_factory)."""
+    world_seed: object = None
+    """Host array: placement seed of each world's dynamic factories, shape (world_count,) (0: the factory's
+    own stream, the same in every world)."""
     initial: dict = field(default_factory=dict)
     """Host copies of the initial state arrays (sphere_x/v/w, sphere_active, clump_x/q/v/w)."""
 

@@ -372,3 +372,22 @@ def test_settle_monitor_time_must_not_go_back():
     m.update(1.0, 1.0)
     with pytest.raises(ValueError, match="time = 0.5"):
         m.update(0.5, 1.0)
+
+
+def test_pile_spheres_drops_grains_off_the_pile():
+    """A 30 deg cone is one connected pile (every sphere kept); a cluster held 0.2 m above it (grains stuck
+    to a lifted cylinder) and a lone sphere in flight are not connected to the base and are dropped, and the
+    surface fit of what is kept returns the cone's 30 deg within the method's 0.5 deg. The synthetic lattice
+    leaves up to 0.4 r between neighbours (its spheres never overlap), so touching is taken within 30 %."""
+    from warpdem.measure import angle_surface_fit, pile_spheres
+
+    x, r = _cone(30.0, 0.0, 0.0, (0.0, 0.0), 0)
+    assert pile_spheres(x, r, gap=0.3).all()
+    top = x[:, 2].max()
+    stuck = np.array([[0.0, 0.0, top + 0.2], [2 * R_SPHERE, 0.0, top + 0.2], [4 * R_SPHERE, 0.0, top + 0.2]])
+    flying = np.array([[0.0, 0.03, top + 0.05]])
+    xa = np.vstack([x, stuck, flying])
+    ra = np.r_[r, np.full(4, R_SPHERE)]
+    on = pile_spheres(xa, ra, gap=0.3)
+    assert on[:len(r)].all() and not on[len(r):].any()
+    assert abs(angle_surface_fit(xa[on], ra[on])["mean_deg"] - 30.0) < 0.5
