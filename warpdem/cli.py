@@ -1,4 +1,4 @@
-"""Command line: ``warpdem run | scene new | pile | verify | bench | audit``."""
+"""Command line: ``warpdem study | analyze | run | scene new | verify | bench | audit``."""
 
 from __future__ import annotations
 
@@ -64,20 +64,6 @@ def cmd_bench(args) -> int:
     return 0
 
 
-def cmd_pile(args) -> int:
-    _quiet_warp()
-    from .pile import run_pile
-
-    res = run_pile(device=args.device, count=args.count, seed=args.seed)
-    print(f"angle of repose: {res['angle_fit_deg']:.1f} deg (surface fit, mean of {res['slices']} slices, "
-          f"SD {res['angle_fit_sd_deg']:.1f}); cone formula atan(2h/d): {res['angle_cone_deg']:.1f} deg")
-    print(f"{res['spheres']} spheres, {res['simulated_s']:.2f} s simulated in {res['wall_s']:.1f} s wall")
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(res, f, indent=1)
-    return 0
-
-
 def cmd_audit(args) -> int:
     from .study.audit import main_audit
 
@@ -140,6 +126,73 @@ def cmd_run(args) -> int:
     return 0
 
 
+def _print_analysis(out, summary: dict) -> None:
+    """The ANOVA table of each response (as report.md has it) and the fit statistics."""
+    from pathlib import Path
+
+    import pandas as pd
+
+    for name, s in summary.items():
+        if not isinstance(s, dict) or "r2" not in s:
+            continue
+        path = Path(out) / "analysis" / f"anova_{name}.csv"
+        if path.exists():
+            tab = pd.read_csv(path, keep_default_na=False)
+            for col in ("Sum of Squares", "Mean Square", "F-value"):
+                tab[col] = [f"{float(v):.4g}" if v not in ("", None) else "" for v in tab[col]]
+            print(f"\nANOVA for {name} ({s.get('model', '')} model)")
+            print(tab.to_string(index=False))
+
+        def f(v):
+            return "n/a" if v is None else f"{v:.4f}"
+
+        print(f"R^2 {f(s['r2'])}, adjusted R^2 {f(s['adj_r2'])}, predicted R^2 {f(s['pred_r2'])}, "
+              f"adequate precision {f(s['adeq_precision'])}")
+        if s.get("equation_actual"):
+            print(s["equation_actual"] if "=" in s["equation_actual"] else f"{name} = {s['equation_actual']}")
+        if s.get("chosen"):
+            print("chosen settings (nearest the design centre on the target contour): "
+                  + ", ".join(f"{k} = {v:.4g}" for k, v in s["chosen"].items())
+                  + f"; predicted {s['predicted']:.4g}")
+
+
+def cmd_study(args) -> int:
+    _quiet_warp()
+    from .study.execute import run_study
+    from .study.spec import StudyError
+
+    try:
+        res = run_study(args.study, args.out, device=args.device, progress=not args.no_progress,
+                        verify=not args.no_verify)
+    except StudyError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(f"{res['runs']} runs ({res['ran']} run now in {res['batches']} batch(es), {res['skipped']} already "
+          f"finished) in {res['wall_s']:.1f} s on {args.device}; results in {res['out']}/")
+    if res["analysis"]:
+        _print_analysis(res["out"], res["analysis"])
+        print(f"report: {res['out']}/analysis/report.md")
+    v = res.get("verification")
+    if v:
+        print(f"verification: {len(v['values'])} runs, mean {v['mean']:.4g} (SD {v['sd']:.3g}), target "
+              f"{v['target']}, relative error {v['relative_error_pct']:.3g} %")
+    return 0
+
+
+def cmd_analyze(args) -> int:
+    from .study.execute import analyze
+    from .study.spec import StudyError
+
+    try:
+        summary = analyze(args.out)
+    except (StudyError, FileNotFoundError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    _print_analysis(args.out, summary)
+    print(f"report: {args.out}/analysis/report.md")
+    return 0
+
+
 def cmd_scene(args) -> int:
     from . import rigs
     from .scene import StageError
@@ -171,12 +224,6 @@ def main(argv=None) -> int:
     b.add_argument("--walls", default="planes", choices=["planes", "mesh"], help="box as planes or one mesh")
     b.add_argument("--law", default="HM", choices=["HM", "JKR", "EEPA"], help="contact law of every pair")
     b.set_defaults(fn=cmd_bench)
-    pl = sub.add_parser("pile", help="pour a small pile on a plate and print its angle of repose")
-    pl.add_argument("--device", default="cpu")
-    pl.add_argument("--count", type=int, default=800)
-    pl.add_argument("--seed", type=int, default=1)
-    pl.add_argument("--json")
-    pl.set_defaults(fn=cmd_pile)
     au = sub.add_parser("audit", help="recompute the seed papers' published statistics from their own data")
     au.add_argument("--json", help="write the records to this file ('-': JSON to stdout instead of the table)")
     au.set_defaults(fn=cmd_audit)
@@ -189,6 +236,16 @@ def main(argv=None) -> int:
     r.add_argument("--out", help="output folder (default runs/RIG)")
     r.add_argument("--no-frames", action="store_true", help="skip the time-sampled USD and VTK")
     r.set_defaults(fn=cmd_run)
+    st = sub.add_parser("study", help="run (or resume) a design of experiments, then analyse and verify it")
+    st.add_argument("study", help="study file, e.g. studies/main_funnel_pb.toml")
+    st.add_argument("--device", default="cpu")
+    st.add_argument("--out", help="output folder (default runs/NAME); rerunning resumes it")
+    st.add_argument("--no-progress", action="store_true", help="no progress bar")
+    st.add_argument("--no-verify", action="store_true", help="skip the verification runs at the optimum")
+    st.set_defaults(fn=cmd_study)
+    an = sub.add_parser("analyze", help="fit, ANOVA, plots and report.md of a study folder")
+    an.add_argument("out", help="a study's output folder")
+    an.set_defaults(fn=cmd_analyze)
     sc = sub.add_parser("scene", help="author scenes")
     scs = sc.add_subparsers(dest="scene_command", required=True)
     sn = scs.add_parser("new", help="write a rig's stage from parameters")

@@ -1013,7 +1013,7 @@ def _stream(seed: int, purpose: int, *more: int) -> np.random.Generator:
     return np.random.default_rng([int(seed), purpose, *more])
 
 
-_SIZES, _PLACE, _ORIENT = 0, 1, 2
+_SIZES, _PLACE, _ORIENT, _WORLD = 0, 1, 2, 3
 
 
 def fill_region(region, sizes, *, count: int | None = None, mass: float | None = None,
@@ -1194,6 +1194,11 @@ class DynamicFactory:
     def quaternions(self) -> np.ndarray:
         """Orientations (x, y, z, w) in release order, shape (capacity, 4), read-only."""
         return self._quats
+
+    def world_rng(self, world_seed: int, first: int) -> np.random.Generator:
+        """Placement stream of one batched world with its own seed (> 0), for particles from ``first`` on:
+        independent of the factory's own stream (world seed 0) and of every other world seed."""
+        return _stream(self.seed, _WORLD, int(world_seed), int(first))
 
     def placement_rng(self) -> np.random.Generator:
         """A fresh Generator for :meth:`place`, derived from ``seed`` (independent of the size stream)."""

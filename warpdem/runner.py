@@ -223,14 +223,14 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             mw["detached"] = int(len(r) - on.sum())
             x, r = x[on], r[on]
             mw["particles"] = int(len(r))
+            mw["pile_height_m"] = float((x[:, 2] + r).max() - m.base_height) if len(r) else 0.0
             try:
                 fit = ms.angle_surface_fit(x, r, base_z=m.base_height, center=m.center)
                 img = ms.angle_image(x, r, base_z=m.base_height, center=m.center)
                 mw.update(angle_fit_deg=fit["mean_deg"], angle_fit_sd_deg=fit["sd_deg"],
                           angle_fit_slices_deg=list(map(float, fit["per_slice_deg"])),
                           angle_image_deg=img["mean_deg"], angle_image_sd_deg=img["sd_deg"],
-                          angle_cone_deg=float(ms.angle_cone(x, r, base_z=m.base_height, center=m.center)),
-                          pile_height_m=float((x[:, 2] + r).max() - m.base_height))
+                          angle_cone_deg=float(ms.angle_cone(x, r, base_z=m.base_height, center=m.center)))
             except ValueError as e:
                 mw["angle_error"] = str(e)
         elif m.kind == "press":

@@ -463,7 +463,7 @@ class Solver:
             mine = active & (world_of == w)
             ws = 0 if m.world_seed is None else int(m.world_seed[w])
             # a world seed gives that world its own placement stream (repeats of a design point differ)
-            rng = None if ws == 0 else np.random.default_rng([int(fac.seed), ws, done])
+            rng = None if ws == 0 else fac.world_rng(ws, done)
             x, _ = fac.place(rng, want, x_all[mine], radius[mine], first=done)
             placed = len(x) if placed is None else min(placed, len(x))
             k = np.arange(done, done + len(x))

@@ -1,0 +1,166 @@
+"""Study execution: batched worlds, one result file per finished point, resume after a crash, analysis and
+verification. The scene is the smoke funnel cut to 40 spheres and 0.3 s, so each launch takes seconds."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from warpdem.study import execute
+from warpdem.study.spec import load_study
+
+pytest.importorskip("warp")
+
+STUDY = """
+[study]
+name = "tiny"
+rig = "funnel"
+smoke = true
+seed = 3
+batch = {batch}
+
+[fixed]
+count = 40
+duration = 0.3
+
+[[factors]]
+name = "A"
+parameter = "interaction.grain.grain.static_friction"
+low = 0.2
+high = 0.8
+
+[[factors]]
+name = "B"
+parameter = "interaction.grain.grain.rolling_friction"
+low = 0.05
+high = 0.3
+
+[design]
+kind = "full_factorial"
+center_points = 2
+
+[[responses]]
+name = "height"
+measure = "pile_height_m"
+unit = "m"
+target = {target}
+
+[analysis]
+model = "linear"
+
+[verification]
+replicates = {verify}
+"""
+
+
+def _study(tmp_path, batch=0, target=0.0, verify=0):
+    path = tmp_path / "tiny.toml"
+    path.write_text(STUDY.format(batch=batch, target=target, verify=verify))
+    return load_study(path)
+
+
+def _run(study, out, **kw):
+    return execute.run_study(study, out, progress=False, log=lambda *a: None, **kw)
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """The tiny study run once in one batch (6 worlds: 4 corners and 2 centre points)."""
+    tmp = tmp_path_factory.mktemp("study")
+    study = _study(tmp)
+    res = _run(study, tmp / "out", analyze_after=False)
+    return study, tmp / "out", res
+
+
+def test_one_launch_one_file_per_point(finished):
+    """All six runs share the scene, so they run as six worlds of one launch, and each finished point has
+    its own result file named by its point id, holding its overrides and a finite response."""
+    study, out, res = finished
+    assert res["runs"] == 6 and res["ran"] == 6 and res["batches"] == 1
+    table = execute.load_results(out, study)
+    for _, row in table.iterrows():
+        rec = json.loads((out / "runs" / f"{row['point_id']}.json").read_text())
+        assert rec["info"]["batch_worlds"] == 6
+        assert rec["overrides"]["interaction.grain.grain.static_friction"] == pytest.approx(row["A_actual"])
+        assert math.isfinite(rec["responses"]["height"]) and rec["responses"]["height"] > 0
+
+
+def test_centre_points_differ_by_world_seed(finished):
+    """The two centre points have the same parameters; only their world seeds differ, so their responses
+    differ (the engine is deterministic: equal seeds would give equal piles and no pure error)."""
+    study, out, _ = finished
+    table = execute.load_results(out, study)
+    centre = table[table["point_type"] == "centre"]
+    assert sorted(centre["world_seed"]) == [0, 1]
+    assert centre["height"].iloc[0] != centre["height"].iloc[1]
+
+
+def test_rerun_resumes_without_recomputing(finished):
+    """Running the same study again finds every point finished and launches nothing."""
+    study, out, _ = finished
+    before = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")}
+    res = _run(study, out, analyze_after=False)
+    assert res["ran"] == 0 and res["skipped"] == 6 and res["batches"] == 0
+    assert {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("*.json")} == before
+
+
+def test_crash_loses_nothing_finished(tmp_path, monkeypatch):
+    """With at most 2 worlds per launch the study is 3 launches; a crash in the second leaves the first
+    launch's 2 results on disk (whole files, no temporaries), and the rerun runs only the other 4."""
+    study = _study(tmp_path, batch=2)
+    out = tmp_path / "out"
+    real = execute.run_batch
+    calls = []
+
+    def crashing(*a, **kw):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt("killed")
+        return real(*a, **kw)
+
+    monkeypatch.setattr(execute, "run_batch", crashing)
+    with pytest.raises(KeyboardInterrupt):
+        _run(study, out, analyze_after=False)
+    assert len(list((out / "runs").glob("*.json"))) == 2
+    assert not list((out / "runs").glob("*.tmp"))
+    monkeypatch.setattr(execute, "run_batch", real)
+    res = _run(study, out, analyze_after=False)
+    assert res["skipped"] == 2 and res["ran"] == 4 and res["batches"] == 2
+    assert len(list((out / "runs").glob("*.json"))) == 6
+
+
+def test_another_study_in_the_folder_is_refused(finished, tmp_path):
+    study, out, _ = finished
+    other = tmp_path / "other.toml"
+    other.write_text(STUDY.format(batch=0, target=0.0, verify=0).replace('name = "tiny"', 'name = "other"'))
+    with pytest.raises(ValueError, match="holds study 'tiny', not 'other'"):
+        _run(load_study(other), out)
+
+
+def test_analysis_and_verification(finished, tmp_path):
+    """The analysis of the finished runs writes report.md and the ANOVA; with a target inside the fitted
+    range the chosen settings predict it, and the verification runs (2 replicates, world seeds 1 and 2) are
+    summarised with mean, SD and relative error against the target, in verification.json and report.md."""
+    study, out, _ = finished
+    table = execute.load_results(out, study)
+    target = float(table["height"].median())
+    path = tmp_path / "tiny.toml"
+    path.write_text(STUDY.format(batch=0, target=target, verify=2))
+    study2 = load_study(path)
+    res = _run(study2, out)  # same point ids (target and verification do not change the runs): no new design runs
+    assert res["ran"] == 0
+    s = res["analysis"]["height"]
+    assert (out / "analysis" / "report.md").exists() and (out / "analysis" / "anova_height.csv").exists()
+    assert s["reachable"] and s["predicted"] == pytest.approx(target, rel=1e-6)
+    v = res["verification"]
+    assert len(v["values"]) == 2 and v["values"][0] != v["values"][1]
+    mean = sum(v["values"]) / 2
+    assert v["mean"] == pytest.approx(mean)
+    assert v["relative_error_pct"] == pytest.approx(100 * abs(mean - target) / target)
+    report = (out / "analysis" / "report.md").read_text()
+    assert "## Verification" in report
+    # a new analysis rewrites the report and keeps the verification section
+    execute.analyze(out)
+    assert (out / "analysis" / "report.md").read_text().count("## Verification") == 1

@@ -1,0 +1,417 @@
+"""Study definitions (studies/*.toml) and their loader warpdem.study.spec: the seed papers' designs and
+levels come out of the files exactly, repeated points get distinct world seeds, run identities are
+stable, and every class of bad input is refused with a message naming the file and the field."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from warpdem.study.spec import (StudyError, batch_key, design_table, load_study, run_overrides,
+                                varies_per_world)
+
+ROOT = Path(__file__).resolve().parents[2]
+STUDIES = ROOT / "studies"
+REF = STUDIES / "reference"
+FILES = sorted(STUDIES.glob("*.toml"))
+
+COUNTS = {"pellets_pb": 12, "pellets_steepest": 6, "pellets_bbd": 17, "wetfeed_pb": 12, "wetfeed_ccd": 23,
+          "phosphate_ffd": 16, "phosphate_bbd": 15, "main_funnel_pb": 12}
+
+
+@pytest.fixture(scope="module")
+def studies():
+    return {p.stem: load_study(p) for p in FILES}
+
+
+@pytest.fixture(scope="module")
+def tables(studies):
+    return {name: design_table(s) for name, s in studies.items()}
+
+
+def _rows(df: pd.DataFrame, cols) -> list[tuple]:
+    return sorted(tuple(round(float(v), 9) for v in r) for r in df[list(cols)].to_numpy())
+
+
+def _by_actual(spec, row) -> dict:
+    return {f.name: run_overrides(spec, row)[f.parameter] for f in spec.factors}
+
+
+# --------------------------------------------------------------------------------------------------
+def test_every_study_file_is_listed_and_loads(studies, tables):
+    """Each studies/*.toml loads (scene built, fixed and extreme factor values applied), its name is its
+    file name, and its design table has the documented columns with runs 1..N."""
+    assert set(studies) == set(COUNTS), "a study file was added or removed: update COUNTS"
+    for name, spec in studies.items():
+        assert spec.name == name
+        t = tables[name]
+        names = spec.factor_names
+        assert list(t.columns) == (["run", "std_order", "point_type", "replicate", "world_seed"] + names
+                                   + [f"{n}_actual" for n in names] + ["point_id"])
+        assert list(t["run"]) == list(range(1, len(t) + 1))
+        assert sorted(t["std_order"]) == list(range(1, len(t) + 1))
+
+
+def test_design_counts_match_the_seeds(tables):
+    """Run counts: PB 12 (seeds 000 Table 6, 001 Table 3), steepest path 6 (000 Table 8), 2^(5-1) = 16
+    (002 Fig. 14), BBD 12 + 5 centre = 17 (000 Table 10), 12 + 3 = 15 (002 Fig. 18), CCD 8 + 6 + 9 = 23
+    (001 Table 6)."""
+    for name, n in COUNTS.items():
+        assert len(tables[name]) == n, name
+    pt = {name: t["point_type"].value_counts().to_dict() for name, t in tables.items()}
+    assert pt["wetfeed_ccd"] == {"factorial": 8, "axial": 6, "centre": 9}
+    assert pt["pellets_bbd"] == {"factorial": 12, "centre": 5}
+    assert pt["phosphate_bbd"] == {"factorial": 12, "centre": 3}
+    assert pt["pellets_steepest"] == {"path": 6}
+    assert pt["phosphate_ffd"] == {"factorial": 16}
+
+
+@pytest.mark.parametrize("name", ["pellets_pb", "wetfeed_pb", "pellets_bbd", "wetfeed_ccd", "phosphate_bbd"])
+def test_coded_matrix_equals_published_table(studies, tables, name):
+    """Coded design = the seed's printed run table up to row order: seed 000 Tables 6 and 10, seed 001
+    Tables 3 and 6, seed 002 Fig. 18."""
+    ref = pd.read_csv(REF / f"{name}_runs.csv")
+    names = studies[name].factor_names
+    cols = names if name != "phosphate_bbd" else ["static_friction", "rolling_friction", "surface_energy"]
+    assert _rows(tables[name], names) == _rows(ref, cols)
+
+
+def test_phosphate_ffd_actual_levels_equal_fig14(studies, tables):
+    """Seed 002 Fig. 14 (actual units) = the 2^(5-1) with E = ABCD at the Table 5 levels, row for row up
+    to order; the pull-off constant is -0.009 at coded -1 and 0 at +1."""
+    spec, t = studies["phosphate_ffd"], tables["phosphate_ffd"]
+    ref = pd.read_csv(REF / "phosphate_ffd_runs.csv")
+    cols = ["restitution", "static_friction", "rolling_friction", "surface_energy_J_m2", "pull_off_constant"]
+    ours = pd.DataFrame([_by_actual(spec, r) for _, r in t.iterrows()])
+    assert _rows(ours, spec.factor_names) == _rows(ref, cols)
+    e = t[["A", "B", "C", "D", "E"]].to_numpy()
+    np.testing.assert_array_equal(e[:, 4], np.prod(e[:, :4], axis=1))
+    assert set(t.loc[t["E"] == -1, "E_actual"]) == {-0.009} and set(t.loc[t["E"] == 1, "E_actual"]) == {0.0}
+
+
+def test_run_overrides_equal_seed_levels(studies, tables):
+    """Override values are the seeds' actual levels: seed 000 Table 5 (PB), Table 9 reversed coding
+    (-1 = 0.49, 0.75, 0.07), seed 001 Table 5 (-2..+2 = 0.1..0.5, 0.3..0.9, 0.2..0.8), and the fixed
+    non-significant factors of each later stage."""
+    spec, t = studies["pellets_pb"], tables["pellets_pb"]
+    lv = pd.read_csv(REF / "pellets_pb_levels.csv").set_index("factor")
+    for _, row in t.iterrows():
+        ov = run_overrides(spec, row)
+        for f in spec.factors:
+            expect = lv.loc[f.name, "low"] if row[f.name] == -1 else lv.loc[f.name, "high"]
+            assert ov[f.parameter] == expect
+        assert ov["particle"] == "pellet" and ov["material"] == "pellet"
+
+    spec, t = studies["pellets_bbd"], tables["pellets_bbd"]
+    lv = pd.read_csv(REF / "pellets_bbd_levels.csv").set_index("factor")
+    col = {-1: "level_minus1", 0: "level_0", 1: "level_plus1"}
+    for _, row in t.iterrows():
+        ov = run_overrides(spec, row)
+        for f in spec.factors:
+            assert ov[f.parameter] == lv.loc[f.name, col[int(row[f.name])]]
+        assert ov["interaction.grain.steel.static_friction"] == 0.52
+        assert ov["interaction.grain.steel.rolling_friction"] == 0.03
+        assert ov["interaction.grain.grain.restitution"] == 0.37
+
+    spec, t = studies["wetfeed_ccd"], tables["wetfeed_ccd"]
+    lv = pd.read_csv(REF / "wetfeed_ccd_levels.csv").set_index("factor")
+    col = {-2: "level_minus2", -1: "level_minus1", 0: "level_0", 1: "level_plus1", 2: "level_plus2"}
+    for _, row in t.iterrows():
+        ov = run_overrides(spec, row)
+        for f in spec.factors:
+            assert ov[f.parameter] == lv.loc[f.name, col[int(row[f.name])]]
+        assert ov["interaction.grain.grain.restitution"] == 0.15
+        assert ov["surface_energy"] > 0  # JKR grain-grain pair
+
+    spec, t = studies["phosphate_bbd"], tables["phosphate_bbd"]
+    ranges = {"B": (0.4, 1.0), "C": (0.0, 0.4), "D": (0.8, 1.2)}
+    for _, row in t.iterrows():
+        ov = run_overrides(spec, row)
+        for f in spec.factors:
+            lo, hi = ranges[f.name]
+            assert ov[f.parameter] == pytest.approx(lo + (row[f.name] + 1) / 2 * (hi - lo), abs=1e-12)
+        assert ov["interaction.ore.ore.pull_off_force"] == -0.009
+
+
+def test_steepest_path_is_table8(studies, tables):
+    """Seed 000 Table 8: six runs from C, D, E = 0.39, 0.45, 0.02 in steps of 0.02, 0.06, 0.01, in path
+    order (not randomised)."""
+    spec, t = studies["pellets_steepest"], tables["pellets_steepest"]
+    ref = pd.read_csv(REF / "pellets_steepest_ascent.csv")
+    ours = pd.DataFrame([_by_actual(spec, r) for _, r in t.iterrows()])
+    np.testing.assert_array_equal(ours[["C", "D", "E"]].to_numpy(), ref[["C", "D", "E"]].to_numpy())
+    assert list(t["std_order"]) == list(range(1, 7))
+
+
+def test_gradient_path_and_explicit_points(tmp_path, studies):
+    """The gradient form of steepest ascent follows designs.steepest_path: from the PB model of seed 000
+    (eq. 5 in coded units: C 1.3275, D 3.318, E 1.7925) a D step of 0.06 moves C by 0.008 and E by
+    0.00648, which is why Table 8's fixed steps are encoded as `step`. An explicit design runs the
+    given actual points as they are, and its repeats get new world seeds."""
+    text = (STUDIES / "pellets_steepest.toml").read_text().replace(
+        "step = { C = 0.02, D = 0.06, E = 0.01 }",
+        'coefficients = { C = 1.3275, D = 3.318, E = 1.7925 }\nbase = "D"\nbase_step = 0.06')
+    p = tmp_path / "grad.toml"
+    p.write_text(text)
+    t = design_table(load_study(p))
+    np.testing.assert_allclose(np.diff(t["D_actual"]), 0.06, atol=1e-12)
+    np.testing.assert_allclose(np.diff(t["C_actual"]), 0.06 * 1.3275 / 3.318 * 0.05 / 0.15, atol=1e-9)
+    np.testing.assert_allclose(np.diff(t["E_actual"]), 0.06 * 1.7925 / 3.318 * 0.03 / 0.15, atol=1e-9)
+    assert t["C_actual"].iloc[0] == 0.39
+    text = (STUDIES / "pellets_steepest.toml").read_text()
+    head = text.split("[design]")[0]
+    tail = text.split("[[responses]]")[1]
+    pts = "[{C = 0.45, D = 0.55, E = 0.05}, {C = 0.41, D = 0.51, E = 0.03}, {C = 0.45, D = 0.55, E = 0.05}]"
+    p = tmp_path / "explicit.toml"
+    p.write_text(head + f"[design]\nkind = \"explicit\"\npoints = {pts}\nrandomize = false\n[[responses]]" + tail)
+    spec = load_study(p)
+    t = design_table(spec)
+    assert list(t["point_type"]) == ["point"] * 3 and list(t["world_seed"]) == [0, 0, 1]
+    assert [_by_actual(spec, r) for _, r in t.iterrows()][1] == {"C": 0.41, "D": 0.51, "E": 0.03}
+    assert t.loc[1, "C"] == pytest.approx(-0.6)
+
+
+def test_spec_is_frozen_and_picklable(studies):
+    """A StudySpec is immutable, hashable and survives pickling (a runner may hand it to workers)."""
+    import dataclasses
+    import pickle
+
+    spec = studies["wetfeed_ccd"]
+    assert pickle.loads(pickle.dumps(spec)) == spec and hash(spec)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        spec.seed = 2
+    with pytest.raises(TypeError):
+        spec.fixed["count"] = 1
+    assert [f.name for f in spec.levels] == spec.factor_names == ["X1", "X2", "X3"]
+    assert spec.factors[0].factor.to_actual(2.0) == pytest.approx(0.5)
+
+
+def test_world_seed_distinct_for_repeated_points(tables):
+    """A deterministic simulation repeats a point exactly: the 5 (seed 000), 3 (seed 002) and 9 (seed 001)
+    centre runs get world seeds 0..n-1, every other point 0, and no (point, world_seed) pair repeats."""
+    for name, t in tables.items():
+        acts = [c for c in t.columns if c.endswith("_actual")]
+        keys = [tuple(r) for r in t[acts + ["world_seed"]].to_numpy()]
+        assert len(set(keys)) == len(keys), name
+        for _, grp in t.groupby(acts):
+            assert sorted(grp["world_seed"]) == list(range(len(grp))), name
+    centres = {"pellets_bbd": 5, "phosphate_bbd": 3, "wetfeed_ccd": 9}
+    for name, n in centres.items():
+        t = tables[name]
+        assert sorted(t.loc[t["point_type"] == "centre", "world_seed"]) == list(range(n))
+
+
+def test_point_id_unique_stable_and_order_free(tmp_path, tables):
+    """point_id is unique, equal across two loads, and follows the run, not its position: a different
+    randomisation seed reorders the runs but keeps each run's id."""
+    for name, t in tables.items():
+        assert t["point_id"].is_unique, name
+        again = design_table(load_study(STUDIES / f"{name}.toml"))
+        assert list(again["point_id"]) == list(t["point_id"]), name
+    text = (STUDIES / "pellets_bbd.toml").read_text().replace("seed = 1\n", "seed = 7\n", 1)
+    other = tmp_path / "pellets_bbd.toml"
+    other.write_text(text)
+    t2 = design_table(load_study(other))
+    t1 = tables["pellets_bbd"]
+    assert list(t2["std_order"]) != list(t1["std_order"])
+    assert dict(zip(t1["std_order"], t1["point_id"])) == dict(zip(t2["std_order"], t2["point_id"]))
+
+
+def test_replicates_get_new_world_seeds(tmp_path):
+    """Whole-design replicates repeat every point: the second copy runs with world seed 1 (the first
+    with 0), so replicates give pure error; std_order runs over both copies."""
+    text = (STUDIES / "pellets_pb.toml").read_text().replace("replicates = 1\nrandomize", "replicates = 2\nrandomize")
+    p = tmp_path / "pellets_pb.toml"
+    p.write_text(text)
+    t = design_table(load_study(p))
+    assert len(t) == 24 and sorted(t["std_order"]) == list(range(1, 25))
+    assert (t.groupby("replicate")["world_seed"].apply(set) == pd.Series({0: {0}, 1: {1}})).all()
+    assert t["point_id"].is_unique
+
+
+def test_batch_key_groups_runs(studies, tables, tmp_path):
+    """Interaction and material scalars vary per world, so each seed study is one batch; a factor on a rig
+    parameter (particle count) makes one batch per level."""
+    assert varies_per_world("interaction.grain.grain.static_friction")
+    assert varies_per_world("material.grain.density")
+    assert not varies_per_world("interaction.grain.grain.law") and not varies_per_world("count")
+    for name, spec in studies.items():
+        keys = {batch_key(spec, run_overrides(spec, r)) for _, r in tables[name].iterrows()}
+        assert len(keys) == 1, name
+    text = (STUDIES / "main_funnel_pb.toml").read_text().replace(
+        'parameter = "interaction.grain.grain.restitution"\nlow = 0.05\nhigh = 0.1',
+        'parameter = "count"\nlow = 200\nhigh = 300')
+    p = tmp_path / "main_funnel_pb.toml"
+    p.write_text(text)
+    spec = load_study(p)
+    ovs = [run_overrides(spec, r) for _, r in design_table(spec).iterrows()]
+    assert {o["count"] for o in ovs} == {200, 300} and all(isinstance(o["count"], int) for o in ovs)
+    assert len({batch_key(spec, o) for o in ovs}) == 2
+
+
+def test_scene_study_and_bare_dotted_keys(tmp_path):
+    """A study may name a stage relative to its file instead of a rig; a bare dotted [fixed] key (a TOML
+    sub-table) means the same as the quoted key."""
+    scene = os.path.relpath(ROOT / "scenes" / "funnel.usda", tmp_path)
+    text = BASE.replace('rig = "funnel"\nsmoke = true', f'scene = "{scene}"').replace(
+        '"interaction.grain.grain.restitution" = 0.3', "interaction.grain.grain.restitution = 0.3")
+    p = tmp_path / "s.toml"
+    p.write_text(text)
+    spec = load_study(p)
+    assert spec.scene_path == (ROOT / "scenes" / "funnel.usda").resolve()
+    assert spec.fixed["interaction.grain.grain.restitution"] == 0.3
+
+
+# --------------------------------------------------------------------------------------------------
+BASE = """
+[study]
+name = "bad_case"
+title = "a small valid study that each case breaks"
+rig = "funnel"
+smoke = true
+seed = 1
+batch = 0
+
+[fixed]
+"interaction.grain.grain.restitution" = 0.3
+
+[[factors]]
+name = "A"
+parameter = "interaction.grain.grain.static_friction"
+low = 0.4
+high = 0.8
+
+[[factors]]
+name = "B"
+parameter = "interaction.grain.steel.static_friction"
+low = 0.3
+high = 0.6
+
+[[factors]]
+name = "C"
+parameter = "interaction.grain.grain.rolling_friction"
+low = 0.1
+high = 0.2
+
+[design]
+kind = "plackett_burman"
+runs = 12
+replicates = 1
+
+[[responses]]
+name = "aor_deg"
+measure = "angle_fit_deg"
+
+[analysis]
+model = "linear"
+
+[verification]
+replicates = 0
+"""
+
+_PB = 'kind = "plackett_burman"\nruns = 12'
+_FAC_B = 'name = "B"\nparameter = "interaction.grain.steel.static_friction"\nlow = 0.3\nhigh = 0.6'
+
+BAD = [
+    # (id, old, new, substrings the message must contain)
+    ("toml-syntax", "seed = 1", "seed = = 1", ["not valid TOML"]),
+    ("unknown-table", "[design]", "[desing]", ["[desing]", "did you mean 'design'"]),
+    ("unknown-key", "seed = 1", "sed = 1", ["[study]", "'sed'", "did you mean 'seed'"]),
+    ("missing-design", '[design]\n' + _PB + '\nreplicates = 1', "", ["[design] is missing"]),
+    ("bad-name", 'name = "bad_case"', 'name = "Bad Case"', ["[study]", "name = 'Bad Case'"]),
+    ("unknown-rig", 'rig = "funnel"', 'rig = "funel"', ["rig = 'funel'", "did you mean 'funnel'"]),
+    ("rig-and-scene", 'smoke = true', 'smoke = true\nscene = "x.usda"', ["exactly one of rig"]),
+    ("missing-scene", 'rig = "funnel"\nsmoke = true', 'scene = "nowhere/funnel.usda"', ["scene =", "does not exist"]),
+    ("negative-seed", "seed = 1", "seed = -1", ["seed = -1", "integer >= 0"]),
+    ("fixed-unknown-field", '"interaction.grain.grain.restitution"', '"interaction.grain.grain.restitutoin"',
+     ["[fixed]", "restitutoin", "did you mean 'restitution'"]),
+    ("fixed-unknown-rig-param", '"interaction.grain.grain.restitution" = 0.3', 'partcle_radius = 0.003',
+     ["[fixed]", "partcle_radius", "did you mean 'particle_radius'"]),
+    ("fixed-unknown-material", '"interaction.grain.grain.restitution"', '"interaction.grian.grain.restitution"',
+     ["[fixed]", "interaction.grian.grain.restitution", "material 'grian'"]),
+    ("fixed-value-refused", '"interaction.grain.grain.restitution" = 0.3', '"interaction.grain.grain.restitution" = 1.5',
+     ["[fixed]", "restitution = 1.5", "(0, 1]"]),
+    ("fixed-rig-value-refused", '"interaction.grain.grain.restitution" = 0.3', 'material = "wood"',
+     ["[fixed]", "material = 'wood'", "pellet or feed"]),
+    ("factor-key-form", '"interaction.grain.steel.static_friction"\nlow = 0.3',
+     '"interaction.grain.static_friction"\nlow = 0.3', ["[[factors]] 'B'", "parameter", "interaction.A.B.FIELD"]),
+    ("factor-not-numeric", '"interaction.grain.steel.static_friction"\nlow = 0.3',
+     '"interaction.grain.steel.law"\nlow = 0.3', ["[[factors]] 'B'", "parameter", "numeric interaction field"]),
+    ("factor-bool-rig-param", '"interaction.grain.steel.static_friction"\nlow = 0.3', '"particle"\nlow = 0.3',
+     ["[[factors]] 'B'", "numeric funnel parameter"]),
+    ("factor-missing-key", _FAC_B, 'name = "B"\nparameter = "interaction.grain.steel.static_friction"\nlow = 0.3',
+     ["[[factors]] #2 'B'", "high is missing"]),
+    ("factor-unknown-key", _FAC_B, _FAC_B + '\nunits = "-"', ["[[factors]] #2 'B'", "did you mean 'unit'"]),
+    ("duplicate-factor", 'name = "B"', 'name = "A"', ["[[factors]] 'A'", "unique factor names"]),
+    ("duplicate-parameter", '"interaction.grain.steel.static_friction"', '"interaction.grain.grain.static_friction"',
+     ["[[factors]] 'B'", "already sets it"]),
+    ("factor-also-fixed", '"interaction.grain.grain.restitution" = 0.3', '"interaction.grain.steel.static_friction" = 0.3',
+     ["[[factors]] 'B'", "[fixed] sets it too"]),
+    ("low-equals-high", "low = 0.3\nhigh = 0.6", "low = 0.3\nhigh = 0.3", ["[[factors]] 'B'", "low = 0.3 and high = 0.3"]),
+    ("bad-factor-name", 'name = "B"', 'name = "2B"', ["[[factors]]", "name = '2B'"]),
+    ("reserved-factor-name", 'name = "B"', 'name = "run"', ["[[factors]] 'run'", "design-table column"]),
+    ("extreme-value-refused", _PB, 'kind = "central_composite"\nalpha = 4.0',
+     ["[[factors]] 'A'", "static_friction = -0.2", "lowest"]),
+    ("replicates-zero", "replicates = 1", "replicates = 0", ["[design]", "replicates = 0", "integer >= 1"]),
+    ("unknown-kind", '"plackett_burman"', '"plackett_burmann"', ["kind = 'plackett_burmann'", "did you mean"]),
+    ("pb-runs", "runs = 12", "runs = 16", ["[design]", "runs = 16", "12 or 20"]),
+    ("option-of-other-kind", "runs = 12", "runs = 12\nalpha = 2.0", ["alpha = 2.0", "central_composite"]),
+    ("ff-no-generators", _PB, 'kind = "fractional_factorial"', ["[design]", "generators is missing", "E = ABCD"]),
+    ("ff-bad-generator", _PB, 'kind = "fractional_factorial"\ngenerators = ["C = AZ"]', ["[design]", "unknown factors"]),
+    ("ccd-bad-alpha", _PB, 'kind = "central_composite"\nalpha = "rotatible"', ["alpha = 'rotatible'", "rotatable"]),
+    ("steepest-missing-factor", _PB, 'kind = "steepest_ascent"\nsteps = 4\nstep = {A = 0.1, B = 0.05}',
+     ["[design]", "step", "lacks factor(s) C"]),
+    ("steepest-unknown-factor", _PB, 'kind = "steepest_ascent"\nsteps = 4\nstep = {A = 0.1, B = 0.05, Z = 0.1}',
+     ["[design]", "'Z'", "not a factor"]),
+    ("steepest-both", _PB, 'kind = "steepest_ascent"\nsteps = 4\nstep = {A = 0.1, B = 0.05, C = 0.01}\nbase = "A"',
+     ["[design]", "not both"]),
+    ("explicit-missing", _PB, 'kind = "explicit"\npoints = [{A = 0.5, B = 0.4}]', ["points[0]", "lacks factor(s) C"]),
+    ("unknown-measure", 'measure = "angle_fit_deg"', 'measure = "angle_fit"',
+     ["[[responses]] 'aor_deg'", "did you mean 'angle_fit_deg'"]),
+    ("no-responses", '[[responses]]\nname = "aor_deg"\nmeasure = "angle_fit_deg"', "", ["[responses] is missing"]),
+    ("model-not-estimable", 'model = "linear"', 'model = "quadratic"', ["[analysis]", "model = 'quadratic'", "rank"]),
+    ("model-unknown-term", 'model = "linear"', 'model = ["A", "A*Z"]', ["[analysis]", "A*Z"]),
+    ("model-unknown-name", 'model = "linear"', 'model = "cubic"', ["[analysis]", "model = 'cubic'"]),
+    ("analysis-alpha", 'model = "linear"', 'model = "linear"\nalpha = 1.5', ["[analysis]", "alpha = 1.5", "(0, 1)"]),
+    ("verification-negative", "replicates = 0", "replicates = -1", ["[verification]", "replicates = -1"]),
+]
+
+
+@pytest.mark.parametrize("case, old, new, needles", BAD, ids=[b[0] for b in BAD])
+def test_bad_input_raises_study_error_naming_the_field(tmp_path, case, old, new, needles):
+    """Each class of bad input raises StudyError (a ValueError) whose message names the file and the
+    table/field, the value and what is allowed."""
+    assert old in BASE, case
+    p = tmp_path / f"{case}.toml"
+    p.write_text(BASE.replace(old, new, 1))
+    with pytest.raises(StudyError) as err:
+        load_study(p)
+    msg = str(err.value)
+    assert str(p) in msg
+    for needle in needles:
+        assert needle in msg, f"{case}: {needle!r} not in {msg!r}"
+
+
+def test_factors_must_be_an_array_of_tables(tmp_path):
+    """[factors] written as one table (not [[factors]]) is refused with the right spelling."""
+    head, rest = BASE.split("[[factors]]", 1)
+    text = head + '[factors]\nname = "A"\nparameter = "interaction.grain.grain.static_friction"\nlow = 0.4\n' \
+        'high = 0.8\n\n[design]' + rest.split("[design]", 1)[1]
+    p = tmp_path / "table.toml"
+    p.write_text(text)
+    with pytest.raises(StudyError, match=r"\[factors\]: expected an array of tables, written \[\[factors\]\]"):
+        load_study(p)
+
+
+def test_base_case_is_valid(tmp_path):
+    """The template the bad cases break is itself a valid study (so each case fails for its own reason);
+    it also loads with a Box-Behnken and a central composite design."""
+    for text in (BASE, BASE.replace(_PB, 'kind = "box_behnken"\ncenter_points = 3'),
+                 BASE.replace(_PB, 'kind = "central_composite"\nalpha = "face"').replace('"linear"', '"quadratic"')):
+        p = tmp_path / "ok.toml"
+        p.write_text(text)
+        assert len(design_table(load_study(p))) > 0

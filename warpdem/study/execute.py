@@ -1,0 +1,310 @@
+"""Run a study: every design point as a world of a batched launch, results kept as they finish, resumable.
+
+Layout of a study's output folder ``OUT``::
+
+    OUT/study.toml          copy of the study file the runs came from
+    OUT/design.csv          the design table (run order, coded and actual values, world seeds, point ids)
+    OUT/runs/<point_id>.json one file per finished run: its design row, overrides, responses, metrics
+    OUT/results.csv         the design table with the responses of the finished runs (rewritten per batch)
+    OUT/analysis/           report.md, ANOVA tables, plots (:func:`analyze`)
+    OUT/verification/       runs at the chosen optimum and their summary (``verification.json``)
+
+A run is finished when its JSON exists; a JSON is written to a temporary name and renamed, so a study
+killed at any moment leaves only whole files, and running the same command again skips every finished
+point (matched by ``point_id``, which hashes the scene, the run's overrides and its world seed, so an edited
+study never mistakes an old result for a new point). The runs of one batch share one launch and finish
+together; ``[study] batch`` caps the worlds per launch, which bounds what a crash can lose.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from . import spec as sp
+
+
+def _write_json(path: Path, data) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w") as fh:
+        json.dump(data, fh, indent=1, default=_json_default)
+    os.replace(tmp, path)
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    return str(o)
+
+
+def _scene(study: sp.StudySpec, overrides: dict):
+    """SceneSpec with the overrides that must be shared by a batch (rig parameters first, then the rest)."""
+    from .. import rigs
+    from ..scene import apply_overrides
+
+    rig_vals = {k: v for k, v in overrides.items() if sp._is_rig_key(k)}
+    if study.rig is not None:
+        scene = rigs.spec(study.rig, rig_vals, study.smoke)
+    else:
+        scene = rigs.load(study.scene_path, rig_vals)
+    shared = {k: v for k, v in overrides.items() if not sp._is_rig_key(k) and not sp.varies_per_world(k)}
+    return apply_overrides(scene, shared)
+
+
+def _response(metrics: dict, measure: str):
+    """The metric named by ``measure`` (a key, or a dotted path into nested metrics); NaN when missing."""
+    v = metrics
+    for part in measure.split("."):
+        if not isinstance(v, dict) or part not in v:
+            return math.nan
+        v = v[part]
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _batches(study: sp.StudySpec, rows: list[dict]) -> list[list[dict]]:
+    """Runs grouped by what they must share (scene, rig parameters), each group cut to ``study.batch``."""
+    groups: dict[tuple, list[dict]] = {}
+    for row in rows:
+        groups.setdefault(sp.batch_key(study, row["overrides"]), []).append(row)
+    size = study.batch or max((len(g) for g in groups.values()), default=1)
+    out = []
+    for g in groups.values():
+        out += [g[i:i + size] for i in range(0, len(g), size)]
+    return out
+
+
+def run_batch(study: sp.StudySpec, rows: list[dict], device: str, progress=None) -> list[dict]:
+    """Run ``rows`` (dicts with ``overrides`` and ``world_seed``) as the worlds of one launch; returns one
+    record per row: responses, the world's metrics, run info."""
+    from ..runner import run_scene
+
+    scene = _scene(study, rows[0]["overrides"])
+    varying = sorted({k for r in rows for k in r["overrides"] if sp.varies_per_world(k)})
+    variations = {k: [float(r["overrides"][k]) for r in rows] for k in varying}
+    seeds = [int(r["world_seed"]) for r in rows]
+    res = run_scene(scene, device=device, world_count=len(rows), variations=variations or None, frames=False,
+                    progress=progress, world_seeds=seeds if any(seeds) else None)
+    info = dict(res.info)
+    out = []
+    for row, m in zip(rows, res.metrics):
+        responses = {r.name: _response(m, r.measure) for r in study.responses}
+        out.append({"responses": responses, "metrics": m, "info": info})
+    return out
+
+
+def _progress_bar(total: int, initial: int, desc: str, enabled: bool):
+    if not enabled:
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:  # tqdm is a dependency; the GPU machine may lack it
+        return None
+    return tqdm(total=total, initial=initial, desc=desc, unit="run", smoothing=0.0)
+
+
+def _check_folder(out: Path, study: sp.StudySpec) -> None:
+    """An output folder holds one study: refuse to mix another study's runs into it."""
+    copy_ = out / "study.toml"
+    if copy_.exists():
+        with open(copy_, "rb") as fh:
+            name = sp.tomllib.load(fh).get("study", {}).get("name")
+        if name != study.name:
+            raise sp.StudyError(f"{out}: holds study {name!r}, not {study.name!r}; choose another --out")
+
+
+def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, analyze_after: bool = True,
+              verify: bool = True, log=print) -> dict:
+    """Run (or resume) ``study`` (a path or a StudySpec) into ``out_dir`` (default ``runs/<name>``).
+
+    Finished points are skipped; the rest run batch by batch (a batch = runs that share a scene, as
+    worlds of one launch). Then, unless disabled, the analysis (:func:`analyze`) and the verification
+    runs at the chosen optimum. Returns {"out", "runs", "ran", "skipped", "wall_s", "analysis",
+    "verification"}.
+    """
+    study = study if isinstance(study, sp.StudySpec) else sp.load_study(study)
+    out = Path(out_dir) if out_dir else Path("runs") / study.name
+    out.mkdir(parents=True, exist_ok=True)
+    _check_folder(out, study)
+    if study.path is not None:
+        shutil.copyfile(study.path, out / "study.toml")
+    table = sp.design_table(study)
+    table.to_csv(out / "design.csv", index=False)
+    runs_dir = out / "runs"
+    runs_dir.mkdir(exist_ok=True)
+    rows = []
+    for _, r in table.iterrows():
+        rows.append({"run": int(r["run"]), "point_id": r["point_id"], "world_seed": int(r["world_seed"]),
+                     "overrides": sp.run_overrides(study, r), "row": r.to_dict()})
+    pending = [r for r in rows if not (runs_dir / f"{r['point_id']}.json").exists()]
+    done0 = len(rows) - len(pending)
+    if done0:
+        log(f"{study.name}: {done0} of {len(rows)} runs already finished in {out}; running {len(pending)}")
+    t0 = time.perf_counter()
+    bar = _progress_bar(len(rows), done0, study.name, progress)
+    batches = _batches(study, pending) if pending else []
+    for k, batch in enumerate(batches):
+        base = bar.n if bar is not None else 0
+
+        def tick(frac, msg, n=len(batch), base=base):
+            if bar is not None:
+                bar.n = base + frac * n
+                bar.set_postfix_str(f"batch {k + 1}/{len(batches)}: {n} worlds, {msg}", refresh=False)
+                bar.refresh()
+
+        tb = time.perf_counter()
+        records = run_batch(study, batch, device, progress=tick)
+        wall = time.perf_counter() - tb
+        for row, rec in zip(batch, records):
+            _write_json(runs_dir / f"{row['point_id']}.json", {
+                "study": study.name, "run": row["run"], "point_id": row["point_id"], "world_seed": row["world_seed"],
+                "design": row["row"], "overrides": row["overrides"], "responses": rec["responses"],
+                "metrics": rec["metrics"], "info": rec["info"] | {"batch_worlds": len(batch), "batch_wall_s": wall},
+                "device": device})
+        if bar is not None:
+            bar.n = base + len(batch)
+            bar.refresh()
+        _results_csv(study, out, table)
+    if bar is not None:
+        bar.close()
+    wall = time.perf_counter() - t0
+    result = {"out": str(out), "runs": len(rows), "ran": len(pending), "skipped": done0, "wall_s": wall,
+              "batches": len(batches), "analysis": None, "verification": None}
+    _results_csv(study, out, table)
+    if analyze_after and study.analysis.model != "none":
+        result["analysis"] = analyze(out, study)
+        if verify and study.verification.replicates > 0:
+            result["verification"] = run_verification(study, out, result["analysis"], device, progress, log)
+    return result
+
+
+def load_results(out, study: sp.StudySpec | None = None) -> pd.DataFrame:
+    """The design table of ``out`` with one column per response (NaN where a run has not finished)."""
+    out = Path(out)
+    study = study or sp.load_study(out / "study.toml", check_scene=False)
+    table = pd.read_csv(out / "design.csv")
+    for r in study.responses:
+        table[r.name] = math.nan
+    table["wall_s"] = math.nan
+    for i, pid in enumerate(table["point_id"]):
+        f = out / "runs" / f"{pid}.json"
+        if f.exists():
+            with open(f) as fh:
+                rec = json.load(fh)
+            for r in study.responses:
+                v = rec["responses"].get(r.name)
+                table.loc[i, r.name] = math.nan if v is None else v
+            table.loc[i, "wall_s"] = rec["info"].get("batch_wall_s", math.nan)
+    return table
+
+
+def _results_csv(study, out: Path, table) -> None:
+    load_results(out, study).to_csv(out / "results.csv", index=False)
+
+
+def analyze(out, study: sp.StudySpec | None = None) -> dict:
+    """Fit the study's model to the finished runs of ``out`` and write ``out/analysis`` (report.md, ANOVA
+    tables, Pareto and contour plots, target solutions). Returns :func:`report.write_report`'s summary."""
+    from .report import write_report
+
+    out = Path(out)
+    study = study or sp.load_study(out / "study.toml", check_scene=False)
+    data = load_results(out, study)
+    finished = data[[r.name for r in study.responses]].notna().any(axis=1)
+    notes = []
+    if not finished.all():
+        notes.append(f"{int((~finished).sum())} of {len(data)} runs have not finished; they are left out.")
+    model = study.analysis.model
+    summary = write_report(out / "analysis", data[finished].reset_index(drop=True), title=study.title or study.name,
+                           factors=study.levels, labels={f.name: f.label for f in study.factors},
+                           responses=[{"name": r.name, "unit": r.unit, "target": r.target} for r in study.responses],
+                           model=list(model) if isinstance(model, tuple) else model, alpha=study.analysis.alpha,
+                           eliminate=study.analysis.eliminate, design_kind=study.design.kind, notes=notes)
+    with open(out / "analysis" / "summary.json", "w") as fh:
+        json.dump(summary, fh, indent=1, default=_json_default)
+    vfile = out / "verification" / "verification.json"
+    if vfile.exists():
+        with open(vfile) as fh:
+            _append_verification(out, json.load(fh))
+    return summary
+
+
+def _append_verification(out: Path, v: dict) -> None:
+    """Add the verification section to the report (report.md is rewritten by every analysis)."""
+    n = len(v["values"])
+    lines = ["", "## Verification", "",
+             f"{n} replicate runs (world seeds 1..{n}) at the chosen settings "
+             + ", ".join(f"{k} = {val:.6g}" for k, val in v["settings"].items()) + ":", "",
+             "| replicate | " + v["response"] + " |", "|---|---|"]
+    lines += [f"| {k + 1} | {val:.4g} |" for k, val in enumerate(v["values"])]
+    lines += ["", f"Mean {v['mean']:.4g}, SD {v['sd']:.3g}, predicted {v['predicted']}, target {v['target']}, "
+                  f"relative error of the mean {v['relative_error_pct']:.3g} %.", ""]
+    with open(out / "analysis" / "report.md", "a") as fh:
+        fh.write("\n".join(lines))
+
+
+def run_verification(study: sp.StudySpec, out, summary: dict, device: str = "cpu", progress: bool = True,
+                     log=print) -> dict | None:
+    """Verification replicates at the chosen optimum of the first response with a target: ``replicates``
+    runs (world seeds 1..n, so they differ from each other) as one batch; writes
+    ``out/verification/verification.json`` with each value, the mean, SD and relative error against the
+    target, and appends them to the report. Resumes like the design runs (one file per replicate)."""
+    out = Path(out)
+    resp = next((r for r in study.responses if r.target is not None), None)
+    if resp is None:
+        return None
+    s = summary.get(resp.name) or {}
+    chosen = s.get("chosen")
+    if not chosen:
+        log(f"{study.name}: no verification: target {resp.target} is not reachable in the design region")
+        return None
+    n = study.verification.replicates
+    vdir = out / "verification"
+    vdir.mkdir(exist_ok=True)
+    base = dict(study.fixed)
+    for f in study.factors:
+        v = float(chosen[f.name])
+        base[f.parameter] = sp._rig_value(study, f.parameter, v) if sp._is_rig_key(f.parameter) else v
+    rows = [{"world_seed": k + 1, "overrides": base, "file": vdir / f"replicate_{k + 1}.json"} for k in range(n)]
+    pending = [r for r in rows if not r["file"].exists()]
+    if pending:
+        bar = _progress_bar(len(pending), 0, f"{study.name} verification", progress)
+
+        def tick(frac, msg):
+            if bar is not None:
+                bar.n = frac * len(pending)
+                bar.refresh()
+
+        records = run_batch(study, pending, device, progress=tick)
+        if bar is not None:
+            bar.close()
+        for row, rec in zip(pending, records):
+            _write_json(row["file"], {"world_seed": row["world_seed"], "overrides": row["overrides"],
+                                      "responses": rec["responses"], "metrics": rec["metrics"], "info": rec["info"]})
+    values = []
+    for r in rows:
+        with open(r["file"]) as fh:
+            values.append(json.load(fh)["responses"][resp.name])
+    v = np.asarray(values, dtype=float)
+    mean = float(np.nanmean(v)) if np.isfinite(v).any() else math.nan
+    result = {"response": resp.name, "target": resp.target, "settings": chosen,
+              "predicted": s.get("predicted"), "values": values, "mean": mean,
+              "sd": float(np.nanstd(v, ddof=1)) if np.isfinite(v).sum() > 1 else math.nan,
+              "relative_error_pct": 100.0 * abs(mean - resp.target) / abs(resp.target) if resp.target else math.nan}
+    _write_json(vdir / "verification.json", result)
+    _append_verification(out, result)
+    return result

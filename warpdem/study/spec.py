@@ -1,0 +1,1014 @@
+"""Study definitions: a TOML file per calibration stage, loaded into frozen, validated dataclasses.
+
+A study names a scene (a rig of :mod:`warpdem.rigs`, or a USD stage), the overrides every run shares,
+the factors (each one override key with its low and high actual value), a design of experiments, the
+responses to read from each run's metrics, the regression to fit and the verification runs.
+:func:`load_study` reads one; :func:`design_table` expands it into runs; :func:`run_overrides` gives
+the ``--set`` overrides of one run and :func:`batch_key` what runs must share to run as batched worlds.
+
+Every bad input raises :class:`StudyError` (a ``ValueError``) whose message names the file, the table
+and field, the value and what is allowed (an unknown key comes with a "did you mean").
+
+Schema (``studies/*.toml``)::
+
+    [study]
+    name = "pellets_pb"             # identifier, [a-z0-9_]+ (required)
+    title = "..."                   # free text
+    source = "000_9053eeef0bc95e7d.txt"   # seed paper (free text)
+    rig = "funnel"                  # one of warpdem.rigs.RIGS, or
+    # scene = "../scenes/funnel.usda"     # a stage, relative to the TOML (exactly one of rig / scene)
+    smoke = false                   # start from rigs.SMOKE[rig] (rig only)
+    seed = 1                        # run-order randomisation seed, integer >= 0 (default 1)
+    batch = 0                       # most worlds per launch, >= 0 (0: all runs that share a scene)
+
+    [fixed]                         # overrides of every run: rig parameters or override keys
+    particle = "pellet"
+    "interaction.grain.grain.restitution" = 0.37   # quoted (a bare dotted key is read the same way)
+
+    [[factors]]                     # one table per factor, in model order
+    name = "A"                      # [A-Za-z][A-Za-z0-9_]*, used in model terms (required)
+    label = "particle-wall static friction"
+    parameter = "interaction.grain.steel.static_friction"   # the override key it sets (required)
+    low = 0.38                      # actual value at coded -1 (required)
+    high = 0.65                     # actual value at coded +1 (required; low > high: reversed coding)
+    unit = ""
+
+    [design]
+    kind = "plackett_burman"        # plackett_burman | full_factorial | fractional_factorial |
+                                    # box_behnken | central_composite | steepest_ascent | explicit
+    runs = 12                       # plackett_burman: 12 or 20 (default: 12 for <= 11 factors, else 20)
+    generators = ["E = ABCD"]       # fractional_factorial (required there)
+    alpha = 2.0                     # central_composite: > 0, or "rotatable" (default) | "orthogonal" | "face"
+    center_points = 0               # two-level kinds (default 0), box_behnken (default 5, 5, 6 for
+                                    # 3, 4, 5 factors, as Design-Expert; >= 1), central_composite (default 6)
+    replicates = 1                  # whole-design replicates, >= 1
+    randomize = true                # run order drawn with [study] seed; false: standard order
+    # steepest_ascent: a path of `steps` runs (the start included) from `start` (actual units;
+    # default: the factors' centres), either by a fixed actual step per factor
+    #   step = {C = 0.02, D = 0.06, E = 0.01}
+    # or along the gradient of a first-order model in coded units
+    #   coefficients = {C = 1.33, D = 3.32, E = 1.79}, base = "D", base_step = 0.06 (actual units of
+    #   the base factor, > 0), descent = false
+    # explicit: points = [{C = 0.39, D = 0.45, E = 0.02}, ...] (actual units, every factor in each)
+
+    [[responses]]                   # at least one
+    name = "aor_deg"                # [A-Za-z][A-Za-z0-9_]* (required)
+    measure = "angle_fit_deg"       # a metric key of warpdem.runner (MEASURES), or a dotted path into
+                                    # the metrics (e.g. "phases.load.Body.max_speed_m_s") (required)
+    unit = "deg"
+    target = 28.27                  # measured value to calibrate to (optional)
+
+    [analysis]
+    model = "linear"                # linear | 2fi | quadratic | none | a list of terms ["A", "A*B", "A^2"]
+                                    # (default: linear for two-level kinds, quadratic for box_behnken and
+                                    # central_composite, none for steepest_ascent and explicit)
+    alpha = 0.05                    # significance level, in (0, 1)
+    eliminate = false               # hierarchical backward elimination at alpha
+
+    [verification]
+    replicates = 0                  # verification runs at the chosen optimum, >= 0
+
+Override keys (``[fixed]`` keys and factor parameters) follow :func:`warpdem.scene.apply_overrides`:
+``material.NAME.FIELD`` (density, youngs_modulus, shear_modulus, poisson_ratio),
+``interaction.A.B.FIELD`` (any :class:`~warpdem.materials.Interaction` field; a factor only the numeric
+ones of ``builder.INTERACTION_SCALARS``), ``run.FIELD``, ``measure.FIELD`` and ``factory.NAME.FIELD``
+(``[fixed]`` only), and any other key is a rig parameter (with ``rig``, checked against the rig's
+parameters; a factor must name a numeric one). Only ``material.*`` and ``interaction.*`` scalars can
+differ between the batched worlds of one launch (:meth:`warpdem.builder.ModelBuilder.vary`); a factor on
+anything else makes each of its levels a launch of its own (:func:`batch_key`).
+
+:func:`load_study` also builds the scene once (the rig from its parameters, or the stage) and applies
+``[fixed]`` and each factor's lowest and highest design value to it, so that a material that does not
+exist, or a value the contact law refuses (a restitution of 0 at an axial point), is reported by the
+loader and not by the run.
+
+The design table (:func:`design_table`): one row per run in run order with ``run`` (1..N),
+``std_order`` (1..N in the standard order of the replicated design, replicate-major), ``point_type``
+(factorial | axial | centre | path | point), ``replicate`` (0-based), ``world_seed``, one coded column
+per factor (named by the factor) and one actual column (``<name>_actual``), and ``point_id``.
+A DEM run is deterministic, so a repeated design point (a centre run, a replicate) would repeat its
+result exactly and give no pure error: ``world_seed`` is 0 for the first occurrence of a point (in
+standard order) and 1, 2, ... for each further occurrence, and the runner seeds the run's random
+inputs (particle release) with it. ``point_id`` is a short sha1 of the scene (rig and smoke, or the
+stage path as written), the run's overrides (``[fixed]`` and the factor values, rounded to 12
+significant digits) and ``world_seed``: the identity of a run, so that a resumed study matches
+finished runs by what they are, not by their position.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import difflib
+import hashlib
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli backport
+    import tomli as tomllib
+
+from . import designs
+from .analysis import model_terms
+from .designs import Factor
+
+__all__ = [
+    "DESIGN_KINDS",
+    "MEASURES",
+    "AnalysisSpec",
+    "DesignSpec",
+    "FactorSpec",
+    "FrozenMap",
+    "ResponseSpec",
+    "StudyError",
+    "StudySpec",
+    "VerificationSpec",
+    "batch_key",
+    "check_scene_overrides",
+    "design_table",
+    "load_study",
+    "run_overrides",
+    "varies_per_world",
+]
+
+
+class StudyError(ValueError):
+    """A study definition that cannot be used; the message names file, table, field, value and what is
+    allowed."""
+
+
+DESIGN_KINDS = ("plackett_burman", "full_factorial", "fractional_factorial", "box_behnken",
+                "central_composite", "steepest_ascent", "explicit")
+"""Design kinds of ``[design] kind``."""
+
+MEASURES = ("angle_fit_deg", "angle_fit_sd_deg", "angle_image_deg", "angle_image_sd_deg", "angle_cone_deg",
+            "pile_height_m", "particles", "max_displacement_m", "compression_ratio", "max_force_n",
+            "final_height_m", "fill_height_m", "inertial_number_max", "time_s")
+"""Scalar metric keys that :func:`warpdem.runner.run_scene` writes per world (``metrics.json``)."""
+
+MATERIAL_SCALARS = ("density", "youngs_modulus", "shear_modulus", "poisson_ratio")
+"""Material fields an override (and a per-world variation) can set."""
+
+_MEASURE_FIELDS = ("base_height", "force_limit", "backstop_height")
+_FACTORY_FIELDS = ("count", "mass", "rate", "mass_rate", "start_time", "seed", "interval")
+_POINT_TYPE = {"factorial": "factorial", "axial": "axial", "center": "centre"}
+_RESERVED = {"run", "std_order", "point_type", "replicate", "world_seed", "point_id", "kind", "run_order"}
+_NAME_RE = re.compile(r"^[a-z0-9_]+$")
+_FACTOR_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+_DIGITS = 12  # significant digits of actual values in the table and in point ids
+
+
+# --------------------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------------------
+
+def _interaction_fields():
+    from ..scene import PAIR_FIELDS
+
+    return tuple(PAIR_FIELDS)
+
+
+def _interaction_scalars():
+    from ..builder import INTERACTION_SCALARS
+
+    return tuple(INTERACTION_SCALARS)
+
+
+def _run_fields():
+    from ..scene import RUN_FIELDS
+
+    return tuple(RUN_FIELDS)
+
+
+def _rigs():
+    from .. import rigs
+
+    return rigs
+
+
+def _suggest(word: str, choices) -> str:
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _bad(where: str, key: str, value, expected: str) -> StudyError:
+    return StudyError(f"{where}: {key} = {value!r} is not allowed; expected {expected}")
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+
+
+def _number(where: str, key: str, v, *, finite: bool = True) -> float:
+    if not _is_number(v) or (finite and not math.isfinite(float(v))):
+        raise _bad(where, key, v, "a finite number")
+    return float(v)
+
+
+def _integer(where: str, key: str, v, minimum: int) -> int:
+    if not _is_number(v) or float(v) != int(v) or int(v) < minimum:
+        raise _bad(where, key, v, f"an integer >= {minimum}")
+    return int(v)
+
+
+def _boolean(where: str, key: str, v) -> bool:
+    if not isinstance(v, (bool, np.bool_)):
+        raise _bad(where, key, v, "true or false")
+    return bool(v)
+
+
+def _string(where: str, key: str, v) -> str:
+    if not isinstance(v, str):
+        raise _bad(where, key, v, "a string")
+    return v
+
+
+def _round(v: float) -> float:
+    """``v`` to 12 significant digits (-0.0 becomes 0.0): actual values free of coding round-off."""
+    r = float(f"{float(v):.{_DIGITS}g}")
+    return r + 0.0
+
+
+class FrozenMap(dict):
+    """A read-only dict (picklable and hashable, unlike ``types.MappingProxyType``): the mappings of the
+    frozen study dataclasses."""
+
+    def _read_only(self, *args, **kwargs):
+        raise TypeError("a study's mappings are read-only; build a new spec (dataclasses.replace)")
+
+    __setitem__ = __delitem__ = clear = pop = popitem = setdefault = update = _read_only  # type: ignore
+    __ior__ = _read_only  # type: ignore
+
+    def __hash__(self):
+        return hash(tuple(sorted((k, _hashable(v)) for k, v in self.items())))
+
+    def __reduce__(self):
+        return (type(self), (dict(self),))
+
+
+def _mapping(where: str, key: str, v, names: Sequence[str], need_all: bool) -> FrozenMap:
+    """A read-only {factor name: finite number} table."""
+    if not isinstance(v, Mapping):
+        raise _bad(where, key, v, "a table {factor = number, ...}")
+    unknown = [k for k in v if k not in names]
+    if unknown:
+        raise StudyError(f"{where}: {key} names factor {unknown[0]!r}, which is not a factor"
+                         f"{_suggest(unknown[0], names)}; factors: {', '.join(names)}")
+    if need_all:
+        missing = [n for n in names if n not in v]
+        if missing:
+            raise StudyError(f"{where}: {key} = {dict(v)!r} lacks factor(s) {', '.join(missing)}; expected a "
+                             f"value for every factor ({', '.join(names)})")
+    return FrozenMap({k: _number(where, f"{key}.{k}", v[k]) for k in names if k in v})
+
+
+def _rig_fields(rig: str | None) -> dict[str, dataclasses.Field]:
+    if rig is None:
+        return {}
+    return {f.name: f for f in dataclasses.fields(_rigs().RIGS[rig])}
+
+
+def _key_problem(key: str, rig: str | None, factor: bool) -> str | None:
+    """Why ``key`` is not an override key (None when it is one). ``factor``: it must be a numeric scalar."""
+    if not isinstance(key, str) or not key:
+        return "a non-empty string"
+    parts = key.split(".")
+    head = parts[0]
+    scalars = _interaction_scalars() if factor else _interaction_fields()
+    keyed = "material.NAME.FIELD, interaction.A.B.FIELD, run.FIELD" + (
+        "" if factor else ", measure.FIELD, factory.NAME.FIELD")
+    forms = keyed + " or a rig parameter"
+    if len(parts) == 1:
+        if rig is not None:
+            rf = _rig_fields(rig)
+            if key not in rf:
+                return f"a {rig} parameter{_suggest(key, rf)} ({', '.join(rf)}) or one of {keyed}"
+            if factor:
+                d = rf[key].default
+                if isinstance(d, (bool, str)):
+                    return f"a numeric {rig} parameter ({key} is {type(d).__name__})"
+        return None
+    if head == "material":
+        if len(parts) != 3 or not all(parts):
+            return f"material.NAME.FIELD (one of {forms})"
+        if parts[2] not in MATERIAL_SCALARS:
+            return (f"a material field: {', '.join(MATERIAL_SCALARS)}{_suggest(parts[2], MATERIAL_SCALARS)}")
+        return None
+    if head == "interaction":
+        if len(parts) != 4 or not all(parts):
+            return f"interaction.A.B.FIELD with two material names (one of {forms})"
+        if parts[3] not in scalars:
+            what = "a numeric interaction field" if factor else "an interaction field"
+            return f"{what}: {', '.join(scalars)}{_suggest(parts[3], scalars)}"
+        return None
+    if head == "run":
+        fields_ = _run_fields()
+        if len(parts) != 2 or parts[1] not in fields_:
+            return f"run.FIELD with FIELD one of {', '.join(fields_)}" + (
+                _suggest(parts[1], fields_) if len(parts) == 2 else "")
+        return None
+    if head in ("measure", "factory"):
+        if factor:
+            return f"a numeric scalar: {forms}"
+        if head == "measure" and (len(parts) != 2 or parts[1] not in _MEASURE_FIELDS):
+            return f"measure.FIELD with FIELD one of {', '.join(_MEASURE_FIELDS)}"
+        if head == "factory" and (len(parts) != 3 or not parts[1] or parts[2] not in _FACTORY_FIELDS):
+            return f"factory.NAME.FIELD with FIELD one of {', '.join(_FACTORY_FIELDS)}"
+        return None
+    return f"one of {forms}" + _suggest(head, ("material", "interaction", "run", "measure", "factory"))
+
+
+def _is_rig_key(key: str) -> bool:
+    return "." not in key
+
+
+def varies_per_world(key: str) -> bool:
+    """True when override ``key`` can differ between the batched worlds of one launch: a
+    ``material.NAME.FIELD`` or ``interaction.A.B.FIELD`` scalar (:meth:`ModelBuilder.vary`)."""
+    parts = key.split(".")
+    if parts[0] == "material":
+        return len(parts) == 3 and parts[2] in MATERIAL_SCALARS
+    if parts[0] == "interaction":
+        return len(parts) == 4 and parts[3] in _interaction_scalars()
+    return False
+
+
+# --------------------------------------------------------------------------------------------------
+# the parts of a study
+# --------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class FactorSpec:
+    """One factor: the override ``parameter`` it sets, its actual value at coded -1 (``low``) and +1
+    (``high``; ``low > high`` is a reversed coding), a ``label`` and ``unit`` for reports."""
+
+    name: str
+    parameter: str
+    low: float
+    high: float
+    label: str = ""
+    unit: str = ""
+
+    def __post_init__(self):
+        where = f"[[factors]] {self.name!r}"
+        if not isinstance(self.name, str) or not _FACTOR_RE.match(self.name):
+            raise _bad("[[factors]]", "name", self.name, "letters, digits and _ starting with a letter (e.g. A, X1)")
+        if self.name in _RESERVED or self.name.endswith("_actual"):
+            raise _bad(where, "name", self.name, "a name that is not a design-table column "
+                       f"({', '.join(sorted(_RESERVED))}, *_actual)")
+        problem = _key_problem(self.parameter, None, factor=True)
+        if problem:
+            raise _bad(where, "parameter", self.parameter, problem)
+        low = _number(where, "low", self.low)
+        high = _number(where, "high", self.high)
+        if low == high:
+            raise StudyError(f"{where}: low = {low!r} and high = {high!r} are not allowed; expected two "
+                             "different values (low > high is a reversed coding)")
+        object.__setattr__(self, "low", low)
+        object.__setattr__(self, "high", high)
+        _string(where, "label", self.label)
+        _string(where, "unit", self.unit)
+
+    @property
+    def factor(self) -> Factor:
+        """The coding of this factor (:class:`warpdem.study.designs.Factor`)."""
+        return Factor(self.name, self.low, self.high, self.unit)
+
+
+_KIND_OPTIONS = {
+    "plackett_burman": {"runs", "center_points"},
+    "full_factorial": {"center_points"},
+    "fractional_factorial": {"generators", "center_points"},
+    "box_behnken": {"center_points"},
+    "central_composite": {"alpha", "center_points"},
+    "steepest_ascent": {"base", "base_step", "steps", "coefficients", "start", "step", "descent"},
+    "explicit": {"points"},
+}
+_OPTIONS = ("runs", "generators", "alpha", "center_points", "base", "base_step", "steps", "coefficients", "start",
+            "step", "descent", "points")
+
+
+@dataclass(frozen=True)
+class DesignSpec:
+    """The design of experiments (``[design]``); options that do not apply to ``kind`` must stay None.
+
+    Factor-dependent checks (generators naming factors, a coefficient per factor, the number of factors a
+    kind holds) are made by :class:`StudySpec`, which knows the factors.
+    """
+
+    kind: str
+    runs: int | None = None
+    generators: tuple[str, ...] | None = None
+    alpha: float | str | None = None
+    center_points: int | None = None
+    replicates: int = 1
+    randomize: bool = True
+    base: str | None = None
+    base_step: float | None = None
+    steps: int | None = None
+    coefficients: Mapping[str, float] | None = None
+    start: Mapping[str, float] | None = None
+    step: Mapping[str, float] | None = None
+    descent: bool | None = None
+    points: tuple[Mapping[str, float], ...] | None = None
+
+    def __post_init__(self):
+        w = "[design]"
+        if self.kind not in DESIGN_KINDS:
+            raise _bad(w, "kind", self.kind, f"one of {', '.join(DESIGN_KINDS)}{_suggest(self.kind, DESIGN_KINDS)}")
+        for opt in _OPTIONS:
+            if getattr(self, opt) is not None and opt not in _KIND_OPTIONS[self.kind]:
+                kinds = [k for k, o in _KIND_OPTIONS.items() if opt in o]
+                raise StudyError(f"{w}: {opt} = {getattr(self, opt)!r} is not allowed with kind = {self.kind!r}; "
+                                 f"it applies to {', '.join(kinds)}")
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
+        set_("replicates", _integer(w, "replicates", self.replicates, 1))
+        set_("randomize", _boolean(w, "randomize", self.randomize))
+        if self.runs is not None:
+            if not _is_number(self.runs) or self.runs not in (12, 20):
+                raise _bad(w, "runs", self.runs, "12 or 20 (Plackett-Burman runs)")
+            set_("runs", int(self.runs))
+        if self.center_points is not None:
+            set_("center_points", _integer(w, "center_points", self.center_points, 0))
+            if self.kind == "box_behnken" and self.center_points < 1:
+                raise _bad(w, "center_points", self.center_points,
+                           "an integer >= 1 (a Box-Behnken design without a centre run cannot fit a quadratic)")
+        if self.kind == "fractional_factorial":
+            gens = self.generators
+            if gens is None:
+                raise StudyError(f'{w}: generators is missing; kind = "fractional_factorial" needs a list of '
+                                 'generator strings, e.g. ["E = ABCD"]')
+            if isinstance(gens, str):
+                gens = [gens]
+            if not gens or not isinstance(gens, (list, tuple)) or not all(isinstance(g, str) for g in gens):
+                raise _bad(w, "generators", self.generators, 'a list of generator strings, e.g. ["E = ABCD"]')
+            set_("generators", tuple(gens))
+        if self.alpha is not None:
+            if isinstance(self.alpha, str):
+                if self.alpha.lower() not in ("rotatable", "orthogonal", "face"):
+                    raise _bad(w, "alpha", self.alpha, 'a number > 0, "rotatable", "orthogonal" or "face"')
+                set_("alpha", self.alpha.lower())
+            elif not _is_number(self.alpha) or not (math.isfinite(self.alpha) and self.alpha > 0):
+                raise _bad(w, "alpha", self.alpha, 'a number > 0, "rotatable", "orthogonal" or "face"')
+            else:
+                set_("alpha", float(self.alpha))
+        if self.kind == "steepest_ascent":
+            if self.steps is None:
+                raise StudyError(f"{w}: steps is missing; expected the number of runs on the path (start included)")
+            set_("steps", _integer(w, "steps", self.steps, 2))
+            by_step = self.step is not None
+            by_gradient = any(getattr(self, k) is not None for k in ("coefficients", "base", "base_step"))
+            if by_step == by_gradient:
+                raise StudyError(f"{w}: a steepest_ascent path needs either step = {{factor = actual step, ...}} "
+                                 "or coefficients, base and base_step (not both, not neither)")
+            if by_gradient:
+                for k in ("coefficients", "base", "base_step"):
+                    if getattr(self, k) is None:
+                        raise StudyError(f"{w}: {k} is missing; a gradient path needs coefficients, base and "
+                                         "base_step")
+                _string(w, "base", self.base)
+                bs = _number(w, "base_step", self.base_step)
+                if bs <= 0:
+                    raise _bad(w, "base_step", self.base_step, "a step > 0 in the base factor's actual units")
+                set_("base_step", bs)
+                set_("descent", _boolean(w, "descent", self.descent if self.descent is not None else False))
+            elif self.descent is not None:
+                raise StudyError(f"{w}: descent = {self.descent!r} is not allowed with step = {{...}}; the sign of "
+                                 "each step gives the direction")
+            for k in ("coefficients", "start", "step"):
+                v = getattr(self, k)
+                if v is not None:
+                    names = list(v) if isinstance(v, Mapping) else []
+                    set_(k, _mapping(w, k, v, names, need_all=False))
+        if self.kind == "explicit":
+            pts = self.points
+            if not isinstance(pts, (list, tuple)) or not pts or not all(isinstance(p, Mapping) for p in pts):
+                raise _bad(w, "points", pts, "a non-empty list of tables {factor = actual value, ...}")
+            set_("points", tuple(_mapping(w, f"points[{i}]", p, list(p), need_all=False) for i, p in enumerate(pts)))
+
+
+@dataclass(frozen=True)
+class ResponseSpec:
+    """A response: the metric ``measure`` read from each run, its ``unit`` and an optional ``target``."""
+
+    name: str
+    measure: str
+    unit: str = ""
+    target: float | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not _FACTOR_RE.match(self.name):
+            raise _bad("[[responses]]", "name", self.name, "letters, digits and _ starting with a letter")
+        where = f"[[responses]] {self.name!r}"
+        m = self.measure
+        if not isinstance(m, str) or not m or ("." not in m and m not in MEASURES):
+            raise _bad(where, "measure", m, f"a metric key: {', '.join(MEASURES)}{_suggest(m, MEASURES)}, "
+                       "or a dotted path into the metrics")
+        _string(where, "unit", self.unit)
+        if self.target is not None:
+            object.__setattr__(self, "target", _number(where, "target", self.target))
+
+
+@dataclass(frozen=True)
+class AnalysisSpec:
+    """The regression: ``model`` (``linear``, ``2fi``, ``quadratic``, ``none`` or a tuple of terms), the
+    significance level ``alpha`` and whether to ``eliminate`` terms (hierarchical backward elimination).
+    ``model = None`` takes the design kind's default (see the module docstring)."""
+
+    model: str | tuple[str, ...] | None = None
+    alpha: float = 0.05
+    eliminate: bool = False
+
+    def __post_init__(self):
+        w = "[analysis]"
+        m = self.model
+        if isinstance(m, str):
+            if m.lower() not in ("linear", "2fi", "quadratic", "none"):
+                raise _bad(w, "model", m, 'linear, 2fi, quadratic, none or a list of terms such as ["A", "A*B", "A^2"]'
+                           + _suggest(m.lower(), ("linear", "2fi", "quadratic", "none")))
+            object.__setattr__(self, "model", m.lower())
+        elif m is not None:
+            if not isinstance(m, (list, tuple)) or not m or not all(isinstance(t, str) for t in m):
+                raise _bad(w, "model", m, 'linear, 2fi, quadratic, none or a list of terms such as ["A", "A*B", "A^2"]')
+            object.__setattr__(self, "model", tuple(m))
+        a = _number(w, "alpha", self.alpha)
+        if not 0 < a < 1:
+            raise _bad(w, "alpha", self.alpha, "a significance level in (0, 1)")
+        object.__setattr__(self, "alpha", a)
+        object.__setattr__(self, "eliminate", _boolean(w, "eliminate", self.eliminate))
+
+
+@dataclass(frozen=True)
+class VerificationSpec:
+    """Verification runs at the chosen optimum (``replicates``; 0: none)."""
+
+    replicates: int = 0
+
+    def __post_init__(self):
+        object.__setattr__(self, "replicates", _integer("[verification]", "replicates", self.replicates, 0))
+
+
+_DEFAULT_MODEL = {"plackett_burman": "linear", "full_factorial": "linear", "fractional_factorial": "linear",
+                  "box_behnken": "quadratic", "central_composite": "quadratic", "steepest_ascent": "none",
+                  "explicit": "none"}
+
+
+@dataclass(frozen=True)
+class StudySpec:
+    """A whole study (one TOML file). ``path`` is the TOML file (scene paths are relative to it);
+    ``fixed`` holds the overrides every run shares. Validated at construction, design included."""
+
+    name: str
+    factors: tuple[FactorSpec, ...]
+    design: DesignSpec
+    responses: tuple[ResponseSpec, ...]
+    title: str = ""
+    source: str = ""
+    rig: str | None = None
+    scene: str | None = None
+    smoke: bool = False
+    seed: int = 1
+    batch: int = 0
+    fixed: Mapping[str, Any] = field(default_factory=dict)
+    analysis: AnalysisSpec = field(default_factory=AnalysisSpec)
+    verification: VerificationSpec = field(default_factory=VerificationSpec)
+    path: Path | None = None
+
+    def __post_init__(self):
+        w = "[study]"
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
+        if not isinstance(self.name, str) or not _NAME_RE.match(self.name):
+            raise _bad(w, "name", self.name, "an identifier of lower-case letters, digits and _")
+        _string(w, "title", self.title)
+        _string(w, "source", self.source)
+        rigs = _rigs()
+        if (self.rig is None) == (self.scene is None):
+            raise StudyError(f"{w}: rig = {self.rig!r}, scene = {self.scene!r}: expected exactly one of rig "
+                             f"({', '.join(rigs.RIGS)}) and scene (a stage path relative to the study file)")
+        if self.rig is not None and self.rig not in rigs.RIGS:
+            raise _bad(w, "rig", self.rig, f"one of {', '.join(rigs.RIGS)}{_suggest(self.rig, rigs.RIGS)}")
+        set_("smoke", _boolean(w, "smoke", self.smoke))
+        if self.path is not None:
+            set_("path", Path(self.path))
+        if self.scene is not None:
+            _string(w, "scene", self.scene)
+            if self.smoke:
+                raise StudyError(f"{w}: smoke = true is not allowed with scene = {self.scene!r}; the smoke "
+                                 "overrides belong to a rig (use rig = ...)")
+            if not self.scene_path.is_file():
+                raise StudyError(f"{w}: scene = {self.scene!r} is not allowed: {self.scene_path} does not exist; "
+                                 "expected a stage path relative to the study file")
+        set_("seed", _integer(w, "seed", self.seed, 0))
+        set_("batch", _integer(w, "batch", self.batch, 0))
+
+        # fixed overrides
+        if not isinstance(self.fixed, Mapping):
+            raise _bad("[fixed]", "fixed", self.fixed, "a table of overrides")
+        for k, v in self.fixed.items():
+            problem = _key_problem(k, self.rig, factor=False)
+            if problem:
+                raise _bad("[fixed]", "key", k, problem)
+            if not isinstance(v, (str, bool, int, float)) or (_is_number(v) and not math.isfinite(v)):
+                raise _bad("[fixed]", k, v, "a string, a boolean or a finite number")
+        set_("fixed", FrozenMap(self.fixed))
+
+        # factors
+        factors = tuple(self.factors)
+        if not factors or not all(isinstance(f, FactorSpec) for f in factors):
+            raise StudyError("[[factors]]: expected at least one factor table (name, parameter, low, high)")
+        names = [f.name for f in factors]
+        params = [f.parameter for f in factors]
+        for i, f in enumerate(factors):
+            if f.name in names[:i]:
+                raise StudyError(f"[[factors]] {f.name!r}: name = {f.name!r} is not allowed; the name is used "
+                                 "twice, expected unique factor names")
+            if f.parameter in params[:i]:
+                other = names[params.index(f.parameter)]
+                raise StudyError(f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; factor "
+                                 f"{other!r} already sets it, expected one factor per parameter")
+            problem = _key_problem(f.parameter, self.rig, factor=True)
+            if problem:
+                raise _bad(f"[[factors]] {f.name!r}", "parameter", f.parameter, problem)
+            if f.parameter in self.fixed:
+                raise StudyError(f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; [fixed] sets "
+                                 "it too, expected a parameter that is either fixed or a factor")
+        set_("factors", factors)
+
+        # responses, analysis, verification
+        responses = tuple(self.responses)
+        if not responses or not all(isinstance(r, ResponseSpec) for r in responses):
+            raise StudyError("[[responses]]: expected at least one response table (name, measure)")
+        rn = [r.name for r in responses]
+        dup = next((n for i, n in enumerate(rn) if n in rn[:i]), None)
+        if dup:
+            raise StudyError(f"[[responses]] {dup!r}: name = {dup!r} is not allowed; expected unique response names")
+        set_("responses", responses)
+        if not isinstance(self.design, DesignSpec):
+            raise _bad("[design]", "design", self.design, "a [design] table")
+        if self.analysis.model is None:
+            set_("analysis", dataclasses.replace(self.analysis, model=_DEFAULT_MODEL[self.design.kind]))
+        self._check_design()
+        self._check_model()
+
+    # -- checks that need factors and design together ------------------------------------------------
+    def _check_design(self):
+        d, names, w = self.design, self.factor_names, "[design]"
+        k = len(names)
+        if d.kind == "plackett_burman" and d.runs is not None and k > d.runs - 1:
+            raise _bad(w, "runs", d.runs, f"more runs than factors: a {d.runs}-run Plackett-Burman design holds at "
+                       f"most {d.runs - 1} factors, this study has {k}")
+        if d.kind == "box_behnken" and k not in (3, 4, 5):
+            raise StudyError(f"{w}: kind = 'box_behnken' is not allowed with {k} factors; expected 3, 4 or 5")
+        if d.kind == "central_composite" and k < 2:
+            raise StudyError(f"{w}: kind = 'central_composite' is not allowed with {k} factor; expected >= 2")
+        if d.kind == "steepest_ascent":
+            for key in ("coefficients", "step"):
+                v = getattr(d, key)
+                if v is not None:
+                    _mapping(w, key, v, names, need_all=True)
+            if d.start is not None:
+                _mapping(w, "start", d.start, names, need_all=True)
+            if d.base is not None:
+                if d.base not in names:
+                    raise _bad(w, "base", d.base, f"a factor name: {', '.join(names)}{_suggest(d.base, names)}")
+                if d.coefficients[d.base] == 0:
+                    raise _bad(w, f"coefficients.{d.base}", 0.0, "a non-zero coefficient for the base factor")
+            if d.step is not None and all(v == 0 for v in d.step.values()):
+                raise _bad(w, "step", dict(d.step), "at least one non-zero step")
+        if d.kind == "explicit":
+            for i, p in enumerate(d.points):
+                _mapping(w, f"points[{i}]", p, names, need_all=True)
+        try:
+            _base_design(self)
+        except StudyError:
+            raise
+        except ValueError as e:
+            raise StudyError(f"{w}: kind = {d.kind!r} cannot be built for factors {', '.join(names)}: {e}") from None
+
+    def _check_model(self):
+        m = self.analysis.model
+        if m == "none":
+            return
+        try:
+            terms = model_terms(m if isinstance(m, str) else list(m), self.factor_names)
+        except ValueError as e:
+            raise _bad("[analysis]", "model", m if isinstance(m, str) else list(m),
+                       f"terms of the factors {', '.join(self.factor_names)}: {e}") from None
+        coded = _base_design(self)[0][self.factor_names].to_numpy(dtype=float)
+        cols = [np.ones(len(coded))] + [np.prod([coded[:, self.factor_names.index(f)] for f in t], axis=0)
+                                        for t in terms]
+        X = np.column_stack(cols)
+        rank = np.linalg.matrix_rank(X)
+        if rank < X.shape[1]:
+            raise _bad("[analysis]", "model", m if isinstance(m, str) else list(m),
+                       f"a model the {self.design.kind} design can estimate ({X.shape[1]} parameters, but the "
+                       f"design's distinct points give rank {rank}; aliased terms)")
+
+    # -- properties ----------------------------------------------------------------------------------
+    @property
+    def factor_names(self) -> list[str]:
+        return [f.name for f in self.factors]
+
+    @property
+    def levels(self) -> list[Factor]:
+        """The factors' codings, in factor order."""
+        return [f.factor for f in self.factors]
+
+    @property
+    def scene_path(self) -> Path | None:
+        """The stage file (``scene`` relative to the study file), or None for a rig study."""
+        if self.scene is None:
+            return None
+        base = self.path.parent if self.path is not None else Path.cwd()
+        return (base / self.scene).resolve()
+
+    def factor(self, name: str) -> FactorSpec:
+        for f in self.factors:
+            if f.name == name:
+                return f
+        raise KeyError(f"no factor {name!r}; factors: {', '.join(self.factor_names)}")
+
+    @classmethod
+    def from_dict(cls, data: Mapping, path: str | Path | None = None) -> "StudySpec":
+        """Study from parsed TOML ``data``; errors are prefixed with ``path`` (or ``<dict>``)."""
+        where = str(path) if path is not None else "<dict>"
+        try:
+            return _from_dict(data, path)
+        except StudyError as e:
+            raise StudyError(f"{where}: {e}") from None
+
+
+# --------------------------------------------------------------------------------------------------
+# reading
+# --------------------------------------------------------------------------------------------------
+
+_TABLES = {
+    "study": ("name", "title", "source", "rig", "scene", "smoke", "seed", "batch"),
+    "fixed": None,
+    "factors": ("name", "label", "parameter", "low", "high", "unit"),
+    "design": ("kind", "replicates", "randomize") + _OPTIONS,
+    "responses": ("name", "measure", "unit", "target"),
+    "analysis": ("model", "alpha", "eliminate"),
+    "verification": ("replicates",),
+}
+_REQUIRED = {"study": ("name",), "factors": ("name", "parameter", "low", "high"), "design": ("kind",),
+             "responses": ("name", "measure")}
+
+
+def _check_keys(table: str, data, label: str) -> dict:
+    if not isinstance(data, Mapping):
+        kind = "[[" + table + "]]" if table in ("factors", "responses") else "[" + table + "]"
+        raise StudyError(f"{label}: expected a table ({kind}), got {data!r}")
+    allowed = _TABLES[table]
+    for k in data:
+        if k not in allowed:
+            raise StudyError(f"{label}: key {k!r} is not allowed{_suggest(k, allowed)}; expected one of "
+                             f"{', '.join(allowed)}")
+    for k in _REQUIRED.get(table, ()):
+        if k not in data:
+            raise StudyError(f"{label}: {k} is missing; required: {', '.join(_REQUIRED[table])}")
+    return dict(data)
+
+
+def _flatten(d: Mapping, prefix: str = "") -> dict:
+    """A bare dotted TOML key (interaction.grain.grain.restitution = 0.37) is a nested table: flatten it."""
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(_flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def _from_dict(data: Mapping, path) -> StudySpec:
+    if not isinstance(data, Mapping):
+        raise StudyError(f"expected a TOML document with tables, got {data!r}")
+    for t in data:
+        if t not in _TABLES:
+            raise StudyError(f"table [{t}] is not allowed{_suggest(t, _TABLES)}; expected "
+                             + ", ".join(f"[{x}]" for x in _TABLES))
+    for t in ("study", "factors", "design", "responses"):
+        if t not in data:
+            raise StudyError(f"table [{t}] is missing; a study needs [study], [[factors]], [design] and [[responses]]")
+    study = _check_keys("study", data["study"], "[study]")
+    fixed = data.get("fixed", {})
+    if not isinstance(fixed, Mapping):
+        raise StudyError(f"[fixed]: expected a table of overrides, got {fixed!r}")
+    fixed = _flatten(fixed)
+    for t in ("factors", "responses"):
+        if not isinstance(data[t], list):
+            raise StudyError(f"[{t}]: expected an array of tables, written [[{t}]] (one per {t[:-1]})")
+    factors = []
+    for i, f in enumerate(data["factors"]):
+        label = f"[[factors]] #{i + 1}" + (f" {f['name']!r}" if isinstance(f, Mapping) and "name" in f else "")
+        factors.append(FactorSpec(**_check_keys("factors", f, label)))
+    responses = []
+    for i, r in enumerate(data["responses"]):
+        label = f"[[responses]] #{i + 1}" + (f" {r['name']!r}" if isinstance(r, Mapping) and "name" in r else "")
+        responses.append(ResponseSpec(**_check_keys("responses", r, label)))
+    design = DesignSpec(**_check_keys("design", data["design"], "[design]"))
+    analysis = AnalysisSpec(**_check_keys("analysis", data.get("analysis", {}), "[analysis]"))
+    verification = VerificationSpec(**_check_keys("verification", data.get("verification", {}), "[verification]"))
+    return StudySpec(factors=tuple(factors), design=design, responses=tuple(responses), fixed=fixed,
+                     analysis=analysis, verification=verification,
+                     path=Path(path) if path is not None else None, **study)
+
+
+def load_study(path: str | Path, check_scene: bool = True) -> StudySpec:
+    """Read and validate a study file (TOML, schema in the module docstring).
+
+    With ``check_scene`` (default) the scene is also built once (rig or stage) and ``[fixed]`` and each
+    factor's extreme design values are applied to it, so that unknown materials, rig parameter values the
+    rig refuses and contact parameters the law refuses are reported here. Raises :class:`StudyError`.
+    """
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise StudyError(f"{path}: no such study file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise StudyError(f"{path}: not valid TOML: {e}") from None
+    spec = StudySpec.from_dict(data, path)
+    if check_scene:
+        try:
+            check_scene_overrides(spec)
+        except StudyError as e:
+            raise StudyError(f"{path}: {e}") from None
+    return spec
+
+
+def check_scene_overrides(spec: StudySpec) -> None:
+    """Build the study's scene and apply ``[fixed]`` and every factor's lowest and highest design value
+    to it; raise :class:`StudyError` naming the key and value the scene or the contact law refuses."""
+    from ..scene import StageError, apply_overrides
+
+    rigs = _rigs()
+    rig_vals = {k: v for k, v in spec.fixed.items() if _is_rig_key(k)}
+    try:
+        if spec.rig is not None:
+            base = rigs.spec(spec.rig, rig_vals, spec.smoke)
+        else:
+            base = rigs.load(spec.scene_path, rig_vals)
+    except (StageError, ValueError, KeyError) as e:
+        keys = ", ".join(f"{k} = {v!r}" for k, v in rig_vals.items()) or "(no rig parameters)"
+        raise StudyError(f"[fixed]: the scene cannot be built from {keys}: {e}") from None
+    for k, v in spec.fixed.items():
+        if _is_rig_key(k):
+            continue
+        try:
+            apply_overrides(base, {k: v})
+        except (StageError, ValueError, KeyError, TypeError) as e:
+            raise StudyError(f"[fixed]: {k} = {v!r} is not allowed: {e}") from None
+    table = design_table(spec)
+    for f in spec.factors:
+        col = table[f"{f.name}_actual"]
+        for which, v in (("lowest", float(col.min())), ("highest", float(col.max()))):
+            try:
+                if _is_rig_key(f.parameter):
+                    rigs.params(base.rig, {**base.authoring, **rig_vals, f.parameter: _rig_value(spec, f.parameter, v)})
+                else:
+                    apply_overrides(copy.deepcopy(base), {f.parameter: v})
+            except (StageError, ValueError, KeyError, TypeError) as e:
+                raise StudyError(f"[[factors]] {f.name!r}: parameter {f.parameter} = {v!r} (the design's {which} "
+                                 f"value) is not allowed: {e}") from None
+
+
+# --------------------------------------------------------------------------------------------------
+# the design table
+# --------------------------------------------------------------------------------------------------
+
+def _base_design(spec: StudySpec) -> tuple[pd.DataFrame, pd.DataFrame | None]:
+    """(coded design in standard order with a ``point_type`` column, actual values or None).
+
+    Actual values are given (not derived from the coding) for explicit points."""
+    d, names = spec.design, spec.factor_names
+    k = len(names)
+    levels = {f.name: f.factor for f in spec.factors}
+    actual = None
+    if d.kind == "plackett_burman":
+        runs = d.runs or (12 if k <= 11 else 20)
+        df = designs.plackett_burman(names, runs, center_points=d.center_points or 0)
+    elif d.kind == "full_factorial":
+        df = designs.full_factorial(names, center_points=d.center_points or 0)
+    elif d.kind == "fractional_factorial":
+        df = designs.fractional_factorial(names, list(d.generators), center_points=d.center_points or 0)
+    elif d.kind == "box_behnken":
+        df = designs.box_behnken(names, d.center_points)
+    elif d.kind == "central_composite":
+        df = designs.central_composite(names, alpha=d.alpha if d.alpha is not None else "rotatable",
+                                       center_points=6 if d.center_points is None else d.center_points)
+    elif d.kind == "steepest_ascent":
+        start = dict(d.start) if d.start is not None else None
+        if d.step is not None:
+            dx = {n: d.step[n] / levels[n].half_range for n in names}  # coded step per factor
+            base = max(names, key=lambda n: abs(dx[n]))
+            x0 = {n: float(levels[n].to_coded(start[n])) for n in names} if start else None
+            path = designs.steepest_path(dx, base, abs(dx[base]), d.steps - 1, levels, x0, "coded")
+        else:
+            path = designs.steepest_path(dict(d.coefficients), d.base, d.base_step, d.steps - 1, levels, start,
+                                         "actual", descent=bool(d.descent))
+        df = path[names].copy()
+        df["kind"] = "path"
+    else:  # explicit
+        actual = pd.DataFrame([[p[n] for n in names] for p in d.points], columns=names)
+        df = pd.DataFrame({n: levels[n].to_coded(actual[n].to_numpy(dtype=float)) for n in names})
+        df["kind"] = "point"
+    df = df.reset_index(drop=True)
+    df["point_type"] = [_POINT_TYPE.get(x, x) for x in df.pop("kind")]
+    return df, actual
+
+
+def design_table(spec: StudySpec) -> pd.DataFrame:
+    """One row per run, in run order (columns in the module docstring)."""
+    names = spec.factor_names
+    base, given = _base_design(spec)
+    n, reps = len(base), spec.design.replicates
+    coded = np.vstack([base[names].to_numpy(dtype=float)] * reps)
+    if given is not None:
+        actual = np.vstack([given[names].to_numpy(dtype=float)] * reps)
+    else:
+        actual = np.column_stack([f.factor.to_actual(coded[:, j]) for j, f in enumerate(spec.factors)])
+    actual = np.vectorize(_round, otypes=[float])(actual)
+    coded = np.round(coded, 12) + 0.0
+    tab = pd.DataFrame({"std_order": np.arange(1, n * reps + 1),
+                        "point_type": list(base["point_type"]) * reps,
+                        "replicate": np.repeat(np.arange(reps), n)})
+    seen: dict[tuple, int] = {}
+    seeds = []
+    for row in actual:
+        key = tuple(row)
+        seeds.append(seen.get(key, 0))
+        seen[key] = seeds[-1] + 1
+    tab["world_seed"] = seeds
+    for j, name in enumerate(names):
+        tab[name] = coded[:, j]
+    for j, name in enumerate(names):
+        tab[f"{name}_actual"] = actual[:, j]
+    tab["point_id"] = [_point_id(spec, tab.iloc[i]) for i in range(len(tab))]
+    if spec.design.randomize:
+        tab = designs.randomize(tab, spec.seed).drop(columns="run_order")
+    tab = tab.reset_index(drop=True)
+    tab.insert(0, "run", np.arange(1, len(tab) + 1))
+    return tab
+
+
+def _canon(v):
+    if _is_number(v):
+        return _round(v)
+    return v
+
+
+def _point_id(spec: StudySpec, row) -> str:
+    scene = {"rig": spec.rig, "smoke": spec.smoke} if spec.rig is not None else {"scene": spec.scene}
+    ov = {k: _canon(v) for k, v in run_overrides(spec, row).items()}
+    text = json.dumps({"scene": scene, "overrides": ov, "world_seed": int(row["world_seed"])}, sort_keys=True)
+    return hashlib.sha1(text.encode()).hexdigest()[:12]
+
+
+def _rig_value(spec: StudySpec, key: str, v: float):
+    """A rig parameter value in its field's type (an integer parameter gets an int when v is integral)."""
+    rig = spec.rig
+    if rig is None:
+        return v
+    d = _rig_fields(rig)[key].default
+    if isinstance(d, int) and not isinstance(d, bool) and float(v) == int(v):
+        return int(v)
+    return v
+
+
+def run_overrides(spec: StudySpec, row) -> dict:
+    """``spec.fixed`` merged with every factor's ``parameter -> actual value`` of design-table ``row``
+    (a row of :func:`design_table`, or any mapping with the ``<name>_actual`` values)."""
+    out = dict(spec.fixed)
+    for f in spec.factors:
+        v = float(row[f"{f.name}_actual"])
+        out[f.parameter] = _rig_value(spec, f.parameter, v) if _is_rig_key(f.parameter) else v
+    return out
+
+
+def _hashable(v):
+    if isinstance(v, (list, tuple)):
+        return tuple(_hashable(x) for x in v)
+    if isinstance(v, Mapping):
+        return tuple(sorted((k, _hashable(x)) for k, x in v.items()))
+    if isinstance(v, (np.floating, np.integer)):
+        return v.item()
+    return v
+
+
+def batch_key(spec: StudySpec, overrides: Mapping) -> tuple:
+    """The overrides that cannot differ between batched worlds (all but ``material.*`` / ``interaction.*``
+    scalars, see :func:`varies_per_world`), as a sorted tuple of (key, value): runs with equal keys can
+    share one launch."""
+    return tuple(sorted((k, _hashable(v)) for k, v in overrides.items() if not varies_per_world(k)))
