@@ -235,7 +235,7 @@ def test_replicates_get_new_world_seeds(tmp_path):
 
 def test_batch_key_groups_runs(studies, tables, tmp_path):
     """Interaction and material scalars vary per world, so each seed study is one batch; a factor on a rig
-    parameter (particle count) makes one batch per level."""
+    parameter (the funnel's integer placement seed) makes one batch per level."""
     assert varies_per_world("interaction.grain.grain.static_friction")
     assert varies_per_world("material.grain.density")
     assert not varies_per_world("interaction.grain.grain.law") and not varies_per_world("count")
@@ -244,12 +244,12 @@ def test_batch_key_groups_runs(studies, tables, tmp_path):
         assert len(keys) == 1, name
     text = (STUDIES / "main_funnel_pb.toml").read_text().replace(
         'parameter = "interaction.grain.grain.restitution"\nlow = 0.05\nhigh = 0.1',
-        'parameter = "count"\nlow = 200\nhigh = 300')
+        'parameter = "seed"\nlow = 1\nhigh = 3')
     p = tmp_path / "main_funnel_pb.toml"
     p.write_text(text)
     spec = load_study(p)
     ovs = [run_overrides(spec, r) for _, r in design_table(spec).iterrows()]
-    assert {o["count"] for o in ovs} == {200, 300} and all(isinstance(o["count"], int) for o in ovs)
+    assert {o["seed"] for o in ovs} == {1, 3} and all(isinstance(o["seed"], int) for o in ovs)
     assert len({batch_key(spec, o) for o in ovs}) == 2
 
 
