@@ -106,13 +106,15 @@ def cmd_run(args) -> int:
             bar.set_postfix_str(msg)
             bar.refresh()
 
-    res = run_scene(spec, device=args.device, out_dir=out, frames=not args.no_frames, progress=progress)
+    res = run_scene(spec, device=args.device, out_dir=out, frames=not args.no_frames, progress=progress,
+                    checkpoint_every=args.checkpoint)
     if bar is not None:
         bar.close()
     info = res.info
     print(f"{info['rig']}: {info['spheres']} spheres ({info['clumps']} clumps, {info['glued_spheres']} glued), "
           f"{info['simulated_s']:.3f} s simulated in {info['wall_s']:.1f} s wall on {info['device']} "
-          f"({info['steps']} steps, stop: {info['stop']})")
+          f"({info['steps']} steps, stop: {info['stop']})"
+          + (f"; resumed from the checkpoint at {info['resumed_from_s']:.3f} s" if info.get("resumed_from_s") else ""))
     m = res.metrics[0]
     for k in ("angle_fit_deg", "angle_fit_sd_deg", "angle_image_deg", "angle_cone_deg", "max_displacement_m",
               "compression_ratio", "max_force_n", "fill_height_m", "inertial_number_max"):
@@ -235,6 +237,9 @@ def main(argv=None) -> int:
     r.add_argument("--device", default="cpu")
     r.add_argument("--out", help="output folder (default runs/RIG)")
     r.add_argument("--no-frames", action="store_true", help="skip the time-sampled USD and VTK")
+    r.add_argument("--checkpoint", type=float, default=60.0, metavar="SECONDS",
+                   help="with --no-frames: save the run's state every SECONDS of wall time to DIR/checkpoint.npz; "
+                        "the same command resumes from it (default 60, 0: never)")
     r.set_defaults(fn=cmd_run)
     st = sub.add_parser("study", help="run (or resume) a design of experiments, then analyse and verify it")
     st.add_argument("study", help="study file, e.g. studies/main_funnel_pb.toml")

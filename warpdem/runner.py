@@ -113,7 +113,7 @@ def _world_walls(model, state):
 
 def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: int = 1,
               variations: dict | None = None, frames: bool = True, progress=None, quiet: bool = False,
-              world_seeds=None) -> RunResult:
+              world_seeds=None, checkpoint_every: float = 0.0) -> RunResult:
     """Run ``spec`` on ``device``; with ``out_dir`` write metrics.json, result.usdc (+ VTK series), pile.png.
 
     Args:
@@ -122,6 +122,11 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             ``world_seeds`` one dynamic-factory placement seed per world (0: the factory's own).
         frames: write the time-sampled USD / VTK of world 0 (every ``run.output_interval``).
         progress: callable(fraction in [0, 1], message) called at each output tick.
+        checkpoint_every: with ``out_dir`` and no frames, save the run's whole state to
+            ``out_dir/checkpoint.npz`` at the first output tick after this many wall seconds (0: never);
+            a later call with the same inputs resumes from it, and a finished run deletes it. A checkpoint
+            also forces a neighbour-list rebuild, which the resumed run repeats, so the resumed run is
+            bit-identical to one that was never interrupted.
     Returns:
         RunResult with one metrics dict per world.
     """
@@ -167,6 +172,16 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     settled_since = 0
     settle_needed = 3
     eps = 0.5 * solver.dt
+    ckpt = out / "checkpoint.npz" if (out is not None and checkpoint_every > 0 and writer is None) else None
+    fingerprint = _fingerprint(spec, device, world_count, variations, world_seeds)
+    resumed_from = None
+    if ckpt is not None and ckpt.exists():
+        book = _load_checkpoint(ckpt, fingerprint, state, contacts)
+        if book is not None:
+            series, impulse_prev, t_prev = book["series"], book["impulse_prev"], book["t_prev"]
+            phase_snap, settled_since = book["phase_snap"], book["settled_since"]
+            resumed_from = state.time
+    t_ckpt = time.perf_counter()
     if writer is not None:
         _frame(writer, model, state, h, spec, 0.0)
     while state.time < run.duration - eps:
@@ -208,6 +223,11 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             if settled_since >= settle_needed:
                 stop_reason = "settled"
                 break
+        if ckpt is not None and time.perf_counter() - t_ckpt >= checkpoint_every:
+            _save_checkpoint(ckpt, fingerprint, state, contacts, {
+                "series": series, "impulse_prev": impulse_prev, "t_prev": t_prev, "phase_snap": phase_snap,
+                "settled_since": settled_since})
+            t_ckpt = time.perf_counter()
     wall_s = time.perf_counter() - t_wall0
 
     metrics = []
@@ -242,7 +262,8 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
         metrics.append(mw)
     info = {"rig": spec.rig, "device": str(device), "worlds": W, "spheres": model.sphere_count,
             "clumps": model.clump_count, "glued_spheres": model.attached_count, "dt_s": solver.dt,
-            "steps": state.step, "simulated_s": state.time, "wall_s": wall_s, "stop": stop_reason}
+            "steps": state.step, "simulated_s": state.time, "wall_s": wall_s, "stop": stop_reason,
+            "resumed_from_s": resumed_from}
     result = RunResult(metrics, info, series)
     if out is not None:
         files = {}
@@ -265,7 +286,62 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
         info["files"] = files
         with open(out / "metrics.json", "w") as fh:
             json.dump({"info": info, "metrics": metrics}, fh, indent=1, default=_json_default)
+    if ckpt is not None and ckpt.exists():
+        ckpt.unlink()
     return result
+
+
+def _fingerprint(spec, device, world_count, variations, world_seeds) -> str:
+    """Hash of what a run is made of: a checkpoint only resumes the run it was saved from."""
+    import hashlib
+
+    text = json.dumps([repr(spec), str(device), int(world_count), variations, world_seeds], sort_keys=True,
+                      default=_json_default)
+    return hashlib.sha1(text.encode()).hexdigest()
+
+
+def _device_arrays(obj) -> dict:
+    import warp as wp
+
+    return {k: v for k, v in vars(obj).items() if isinstance(v, wp.array)}
+
+
+def _save_checkpoint(path: Path, fingerprint: str, state, contacts, book: dict) -> None:
+    """State, contact lists and history, and the runner's bookkeeping, written to a temporary file and
+    renamed (a crash while saving leaves the previous checkpoint whole). Flags a list rebuild, which a
+    resumed run repeats, so both continue from identical lists."""
+    contacts.rebuild.fill_(1)
+    arrays = {f"state.{k}": v.numpy() for k, v in _device_arrays(state).items()}
+    arrays.update({f"contacts.{k}": v.numpy() for k, v in _device_arrays(contacts).items()})
+    arrays["book.impulse_prev"] = np.asarray(book["impulse_prev"])
+    for i, snap in enumerate(book["phase_snap"]):
+        for k, v in snap.items():
+            arrays[f"snap.{i}.{k}"] = v
+    meta = {"fingerprint": fingerprint, "time": state.time, "step": state.step, "half_step": state.half_step,
+            "released": {str(f): v for f, v in state.released.items()}, "series": book["series"],
+            "t_prev": book["t_prev"], "settled_since": book["settled_since"], "snaps": len(book["phase_snap"])}
+    arrays["meta"] = np.frombuffer(json.dumps(meta, default=_json_default).encode(), dtype=np.uint8)
+    tmp = path.with_name(path.stem + ".tmp.npz")
+    np.savez(tmp, **arrays)
+    tmp.replace(path)
+
+
+def _load_checkpoint(path: Path, fingerprint: str, state, contacts) -> dict | None:
+    """Restore a checkpoint into a fresh ``state`` and ``contacts``; None when it belongs to another run."""
+    with np.load(path) as z:
+        meta = json.loads(bytes(z["meta"]).decode())
+        if meta["fingerprint"] != fingerprint:
+            return None
+        for prefix, obj in (("state.", state), ("contacts.", contacts)):
+            for k, v in _device_arrays(obj).items():
+                v.assign(z[prefix + k])
+        book = {"impulse_prev": z["book.impulse_prev"].copy(),
+                "phase_snap": [{k.split(".", 2)[2]: z[k].copy() for k in z.files if k.startswith(f"snap.{i}.")}
+                               for i in range(meta["snaps"])]}
+    state.time, state.step, state.half_step = meta["time"], meta["step"], meta["half_step"]
+    state.released = {int(f): v for f, v in meta["released"].items()}
+    book.update(series=meta["series"], t_prev=meta["t_prev"], settled_since=meta["settled_since"])
+    return book
 
 
 def _json_default(o):

@@ -164,3 +164,34 @@ def test_analysis_and_verification(finished, tmp_path):
     # a new analysis rewrites the report and keeps the verification section
     execute.analyze(out)
     assert (out / "analysis" / "report.md").read_text().count("## Verification") == 1
+
+
+def test_crash_inside_a_launch_resumes_from_its_checkpoint(tmp_path, monkeypatch):
+    """A launch killed half way (after some checkpoints) is resumed from its checkpoint by the rerun, not
+    started again, and gives the same responses as an uninterrupted study."""
+    from warpdem import runner
+
+    study = _study(tmp_path)
+    real = runner.run_scene
+
+    class Crash(Exception):
+        pass
+
+    def killed(*a, **kw):
+        def kill(frac, msg):
+            if frac > 0.5:
+                raise Crash
+        return real(*a, **(kw | {"progress": kill, "checkpoint_every": 1e-9}))
+
+    monkeypatch.setattr(runner, "run_scene", killed)
+    with pytest.raises(Crash):
+        _run(study, tmp_path / "out", analyze_after=False)
+    assert list((tmp_path / "out" / "launches").glob("*/checkpoint.npz"))
+    monkeypatch.setattr(runner, "run_scene", lambda *a, **kw: real(*a, **(kw | {"checkpoint_every": 1e-9})))
+    _run(study, tmp_path / "out", analyze_after=False)
+    rec = json.loads(next((tmp_path / "out" / "runs").glob("*.json")).read_text())
+    assert rec["info"]["resumed_from_s"] > 0
+    _run(study, tmp_path / "ref", analyze_after=False)
+    got = execute.load_results(tmp_path / "out", study)["height"].tolist()
+    ref = execute.load_results(tmp_path / "ref", study)["height"].tolist()
+    assert got == ref

@@ -5,6 +5,7 @@ Layout of a study's output folder ``OUT``::
     OUT/study.toml          copy of the study file the runs came from
     OUT/design.csv          the design table (run order, coded and actual values, world seeds, point ids)
     OUT/runs/<point_id>.json one file per finished run: its design row, overrides, responses, metrics
+    OUT/launches/<id>/      each launch's metrics.json, final.npz, pile.png and, while it runs, checkpoint.npz
     OUT/results.csv         the design table with the responses of the finished runs (rewritten per batch)
     OUT/analysis/           report.md, ANOVA tables, plots (:func:`analyze`)
     OUT/verification/       runs at the chosen optimum and their summary (``verification.json``)
@@ -13,7 +14,9 @@ A run is finished when its JSON exists; a JSON is written to a temporary name an
 killed at any moment leaves only whole files, and running the same command again skips every finished
 point (matched by ``point_id``, which hashes the scene, the run's overrides and its world seed, so an edited
 study never mistakes an old result for a new point). The runs of one batch share one launch and finish
-together; ``[study] batch`` caps the worlds per launch, which bounds what a crash can lose.
+together; the launch checkpoints its whole state every minute (``OUT/launches/<id>/checkpoint.npz``) and a
+rerun resumes it from there, bit-identical to an uninterrupted launch; ``[study] batch`` caps the worlds
+per launch.
 """
 
 from __future__ import annotations
@@ -88,17 +91,26 @@ def _batches(study: sp.StudySpec, rows: list[dict]) -> list[list[dict]]:
     return out
 
 
-def run_batch(study: sp.StudySpec, rows: list[dict], device: str, progress=None) -> list[dict]:
+def _launch_id(rows: list[dict]) -> str:
+    import hashlib
+
+    return hashlib.sha1(",".join(r["point_id"] for r in rows).encode()).hexdigest()[:12]
+
+
+def run_batch(study: sp.StudySpec, rows: list[dict], device: str, progress=None, out_dir=None,
+              checkpoint_every: float = 0.0) -> list[dict]:
     """Run ``rows`` (dicts with ``overrides`` and ``world_seed``) as the worlds of one launch; returns one
-    record per row: responses, the world's metrics, run info."""
+    record per row: responses, the world's metrics, run info. With ``out_dir`` the launch checkpoints every
+    ``checkpoint_every`` wall seconds there and resumes from its checkpoint (see ``run_scene``)."""
     from ..runner import run_scene
 
     scene = _scene(study, rows[0]["overrides"])
     varying = sorted({k for r in rows for k in r["overrides"] if sp.varies_per_world(k)})
     variations = {k: [float(r["overrides"][k]) for r in rows] for k in varying}
     seeds = [int(r["world_seed"]) for r in rows]
-    res = run_scene(scene, device=device, world_count=len(rows), variations=variations or None, frames=False,
-                    progress=progress, world_seeds=seeds if any(seeds) else None)
+    res = run_scene(scene, device=device, out_dir=out_dir, world_count=len(rows), variations=variations or None,
+                    frames=False, progress=progress, world_seeds=seeds if any(seeds) else None,
+                    checkpoint_every=checkpoint_every)
     info = dict(res.info)
     out = []
     for row, m in zip(rows, res.metrics):
@@ -128,11 +140,13 @@ def _check_folder(out: Path, study: sp.StudySpec) -> None:
 
 
 def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, analyze_after: bool = True,
-              verify: bool = True, log=print) -> dict:
+              verify: bool = True, log=print, checkpoint_every: float = 60.0) -> dict:
     """Run (or resume) ``study`` (a path or a StudySpec) into ``out_dir`` (default ``runs/<name>``).
 
     Finished points are skipped; the rest run batch by batch (a batch = runs that share a scene, as
-    worlds of one launch). Then, unless disabled, the analysis (:func:`analyze`) and the verification
+    worlds of one launch). A launch also checkpoints every ``checkpoint_every`` wall seconds into
+    ``OUT/launches/<id>/`` (id: hash of its point ids), so a crash mid-launch resumes there. Then, unless
+    disabled, the analysis (:func:`analyze`) and the verification
     runs at the chosen optimum. Returns {"out", "runs", "ran", "skipped", "wall_s", "analysis",
     "verification"}.
     """
@@ -167,7 +181,8 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
                 bar.refresh()
 
         tb = time.perf_counter()
-        records = run_batch(study, batch, device, progress=tick)
+        launch = out / "launches" / _launch_id(batch)
+        records = run_batch(study, batch, device, progress=tick, out_dir=launch, checkpoint_every=checkpoint_every)
         wall = time.perf_counter() - tb
         for row, rec in zip(batch, records):
             _write_json(runs_dir / f"{row['point_id']}.json", {
