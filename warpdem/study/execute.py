@@ -21,7 +21,6 @@ per launch.
 
 from __future__ import annotations
 
-import copy
 import json
 import math
 import os
@@ -32,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..runner import _json_default
 from . import spec as sp
 
 
@@ -40,16 +40,6 @@ def _write_json(path: Path, data) -> None:
     with open(tmp, "w") as fh:
         json.dump(data, fh, indent=1, default=_json_default)
     os.replace(tmp, path)
-
-
-def _json_default(o):
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    return str(o)
 
 
 def _scene(study: sp.StudySpec, overrides: dict):
@@ -193,13 +183,14 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
         if bar is not None:
             bar.n = base + len(batch)
             bar.refresh()
-        _results_csv(study, out, table)
+        _results_csv(study, out)
     if bar is not None:
         bar.close()
     wall = time.perf_counter() - t0
     result = {"out": str(out), "runs": len(rows), "ran": len(pending), "skipped": done0, "wall_s": wall,
               "batches": len(batches), "analysis": None, "verification": None}
-    _results_csv(study, out, table)
+    if not batches:
+        _results_csv(study, out)
     if analyze_after and study.analysis.model != "none":
         result["analysis"] = analyze(out, study)
         if verify and study.verification.replicates > 0:
@@ -227,7 +218,7 @@ def load_results(out, study: sp.StudySpec | None = None) -> pd.DataFrame:
     return table
 
 
-def _results_csv(study, out: Path, table) -> None:
+def _results_csv(study, out: Path) -> None:
     load_results(out, study).to_csv(out / "results.csv", index=False)
 
 
