@@ -1,7 +1,11 @@
 """Neighbour search with a Verlet skin and history carried across rebuilds by sorted-key matching.
 
-Sphere candidates come from a ``wp.HashGrid`` grouped by world (the world id keeps overlapping
-worlds apart, so every world sits at the origin). Triangle candidates come from the mesh BVH.
+Sphere candidates come from a hashed cell grid with one linked list per bucket, keyed by cell and world
+(the world keeps overlapping worlds apart, so every world sits at the origin). It is built by plain
+kernels with one atomic exchange per sphere, not a sort, so that a rebuild can sit in a conditional
+node of a CUDA graph (Warp's ``HashGrid`` sorts with CUB, which a conditional node cannot hold); list
+order does not matter because each sphere's candidates are sorted. Triangle candidates come from the
+mesh BVH.
 Each sphere's new candidate list is sorted by partner (or face) index and every new entry looks its
 key up, by binary search, in the sphere's previous sorted list to inherit the spring history.
 """
@@ -11,6 +15,44 @@ import warp as wp
 from .geometry import closest_point_triangle
 
 wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def cell_of(x: wp.vec3, inv_cell: float):
+    """Integer cell coordinates of the point ``x`` [m] for cells of edge 1 / ``inv_cell``."""
+    return wp.vec3i(int(wp.floor(x[0] * inv_cell)), int(wp.floor(x[1] * inv_cell)), int(wp.floor(x[2] * inv_cell)))
+
+
+@wp.func
+def cell_bucket(c: wp.vec3i, world: int, mask: int):
+    """Bucket of cell ``c`` in world ``world``, in [0, mask] (mask + 1 a power of two)."""
+    h = (wp.uint32(c[0]) * wp.uint32(73856093)) ^ (wp.uint32(c[1]) * wp.uint32(19349663))
+    h = h ^ (wp.uint32(c[2]) * wp.uint32(83492791)) ^ (wp.uint32(world) * wp.uint32(2654435761))
+    return int(h & wp.uint32(mask))
+
+
+@wp.kernel
+def clear_cells(cell_head: wp.array[int]):
+    """Empty every bucket (-1 ends a list)."""
+    cell_head[wp.tid()] = -1
+
+
+@wp.kernel
+def bin_spheres(
+    x: wp.array[wp.vec3],
+    active: wp.array[int],
+    sphere_world: wp.array[int],
+    inv_cell: float,
+    cell_head: wp.array[int],
+    cell_next: wp.array[int],
+):
+    """Push each active sphere onto its bucket's list (parked factory particles stay out)."""
+    i = wp.tid()
+    if active[i] == 0:
+        cell_next[i] = -1
+        return
+    b = cell_bucket(cell_of(x[i], inv_cell), sphere_world[i], cell_head.shape[0] - 1)
+    cell_next[i] = wp.atomic_exch(cell_head, b, i)
 
 
 @wp.func
@@ -72,7 +114,9 @@ def carry_history(
 @wp.kernel
 def build_contacts(
     # Model:
-    grid: wp.uint64,
+    cell_head: wp.array[int],
+    cell_next: wp.array[int],
+    inv_cell: float,
     sphere_radius: wp.array[float],
     sphere_world: wp.array[int],
     sphere_clump: wp.array[int],
@@ -127,19 +171,24 @@ def build_contacts(
     capacity = new_index.shape[0]
 
     count = int(0)
-    query = wp.hash_grid_query(grid, x_i, r_i + radius_max + skin + reach, world)
-    j = int(0)
-    while wp.hash_grid_query_next(query, j):
-        if j == i or active[j] == 0:
-            continue
-        if clump >= 0 and sphere_clump[j] == clump:
-            continue
-        if wp.length(x[j] - x_i) < r_i + sphere_radius[j] + skin + reach:
-            if count < capacity:
-                new_index[count, i] = j
-                count += 1
-            else:
-                wp.atomic_or(overflow_out, 0, 1)
+    # cells are at least 2 r_max + skin + reach wide, so every candidate lies in the 27 cells around x_i
+    c_i = cell_of(x_i, inv_cell)
+    mask = cell_head.shape[0] - 1
+    for d in range(27):
+        cell = c_i + wp.vec3i(d % 3 - 1, (d // 3) % 3 - 1, d // 9 - 1)
+        j = cell_head[cell_bucket(cell, world, mask)]
+        while j >= 0:
+            x_j = x[j]
+            # a bucket holds other cells and worlds too: take j only from its own cell, so none is listed twice
+            if j != i and sphere_world[j] == world and cell_of(x_j, inv_cell) == cell:
+                if clump < 0 or sphere_clump[j] != clump:
+                    if wp.length(x_j - x_i) < r_i + sphere_radius[j] + skin + reach:
+                        if count < capacity:
+                            new_index[count, i] = j
+                            count += 1
+                        else:
+                            wp.atomic_or(overflow_out, 0, 1)
+            j = cell_next[j]
     sort_column(new_index, count, i)
     carry_history(old_index, old_count[i], old_spring, old_roll, old_aux, new_index, count, new_spring, new_roll,
                   new_aux, i)

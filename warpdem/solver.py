@@ -63,6 +63,11 @@ class SolverOptions:
             bad("impact_speed_min", self.impact_speed_min, "a speed >= 0 m/s")
 
 
+# steps in one replayed CUDA graph: long enough to hide the launch cost, short enough for a remainder
+# stepped eagerly to stay cheap
+CUDA_GRAPH_STEPS = 32
+
+
 class Solver:
     """Hertz-Mindlin DEM on spheres, planes and static triangle meshes (see kernels/step.py).
 
@@ -104,6 +109,8 @@ class Solver:
         # host copy of the rebuild flag, read between captured steps on CUDA (pinned: an async 4-byte copy)
         self._flag_host = wp.empty(1, dtype=int, device="cpu", pinned=wp.get_device(model.device).is_cuda)
         self._graph = None
+        self.cuda_graph_steps = CUDA_GRAPH_STEPS
+        """Steps per replayed CUDA graph (even); 0 reads the rebuild flag on the host every step instead."""
 
     # contacts -------------------------------------------------------------------------------
     def default_neighbor_capacity(self) -> int:
@@ -149,8 +156,9 @@ class Solver:
         for name in ("neighbor_count", "neighbor_index", "neighbor_spring", "neighbor_roll", "neighbor_aux",
                      "mesh_count", "mesh_face", "mesh_spring", "mesh_roll", "mesh_aux"):
             c.scratch[name] = wp.zeros_like(getattr(c, name))
-        cells = int(min(128, max(8, round((n / m.world_count) ** (1.0 / 3.0) * 2))))
-        c.grid = wp.HashGrid(cells, cells, cells, device=dev)
+        # about two buckets per sphere keeps the lists short without a large table to clear
+        buckets = 1 << max(10, int(math.ceil(math.log2(max(2 * n, 1)))))
+        c.cells = {"head": wp.full(buckets, -1, dtype=int, device=dev), "next": wp.full(n, -1, dtype=int, device=dev)}
         return c
 
     # launchers ------------------------------------------------------------------------------
@@ -158,13 +166,17 @@ class Solver:
         """Rebuild the candidate lists from ``state`` and carry the history over."""
         m, c = self.model, contacts
         reach = m.contact_reach
-        c.grid.build(points=state.sphere_x, radius=2.0 * m.radius_max + self.skin + reach, groups=m.sphere_world)
+        inv_cell = 1.0 / (2.0 * m.radius_max + self.skin + reach)
+        head, nxt = c.cells["head"], c.cells["next"]
+        wp.launch(_nb.clear_cells, dim=head.shape[0], inputs=[head], device=m.device)
+        wp.launch(_nb.bin_spheres, dim=m.sphere_count, inputs=[state.sphere_x, state.sphere_active, m.sphere_world,
+                                                               inv_cell], outputs=[head, nxt], device=m.device)
         s = c.scratch
         wp.launch(
             _nb.build_contacts,
             dim=m.sphere_count,
             inputs=[
-                c.grid.id, m.sphere_radius, m.sphere_world, m.sphere_clump, m.sphere_wall, m.radius_max,
+                head, nxt, inv_cell, m.sphere_radius, m.sphere_world, m.sphere_clump, m.sphere_wall, m.radius_max,
                 m.wall_mesh, m.wall_face_start, m.wall_world,
                 state.sphere_x, state.sphere_active, state.wall_pose, self.skin, reach,
                 c.neighbor_count, c.neighbor_index, c.neighbor_spring, c.neighbor_roll, c.neighbor_aux,
@@ -293,9 +305,10 @@ class Solver:
         """Take ``steps`` steps starting from ``state``; returns the final state (``state`` or its twin).
 
         On CPU, pairs of steps are replayed as one captured graph with the rebuild as a conditional
-        node. On CUDA each step is a captured graph and the host reads the 4-byte rebuild flag between
-        steps (Warp's HashGrid build cannot sit in a conditional node). Blow-ups and overflows are
-        checked once at the end and raise :class:`SimulationError`.
+        node; on CUDA, blocks of :attr:`cuda_graph_steps` steps. Where CUDA cannot capture that (a driver
+        without conditional nodes), each step is a captured graph and the host reads the 4-byte rebuild
+        flag between steps. Blow-ups and overflows are checked once at the end and raise
+        :class:`SimulationError`.
         """
         steps = int(steps)
         if steps <= 0:
@@ -314,14 +327,42 @@ class Solver:
             use_graph = steps >= 64
         self._set_time(state.time)
         done = 0
-        # the first step runs eagerly: it applies the half kick and allocates the hash grid before any capture
+        # the first step runs eagerly: it applies the half kick, which a replayed step does not
         if not a.half_step or (use_graph and self._graph is None):
             self._step(a, b, control, contacts)
             a, b = b, a
             done = 1
-        if use_graph and wp.get_device(self.model.device).is_cuda:
-            # Warp's HashGrid build (a CUB radix sort) cannot sit in a conditional graph node, so on CUDA
-            # the host reads the rebuild flag each step (one 4-byte copy) and replays a captured step.
+        if use_graph and wp.get_device(self.model.device).is_cuda and self.cuda_graph_steps and steps - done >= 2:
+            # CUDA: blocks of cuda_graph_steps steps replayed as one graph with the rebuild as a conditional node
+            # (the cell grid is built by plain kernels), so the host never waits on the GPU between blocks
+            block = self.cuda_graph_steps
+            if steps - done >= block:
+                key = (id(a), id(b), id(contacts), id(control), block)
+                if self._graph is None or self._graph[0] != key:
+                    a.half_step = b.half_step = True
+                    times = (a.time, a.step, b.time, b.step)
+                    try:
+                        with wp.ScopedCapture(device=self.model.device) as cap:
+                            for i in range(block):
+                                src, dst = (a, b) if i % 2 == 0 else (b, a)
+                                self._step(src, dst, control, contacts)
+                    except Exception as exc:  # an older driver without conditional nodes: host-read path
+                        warnings.warn(f"CUDA graph with a conditional rebuild failed ({exc}); "
+                                      "falling back to one host read of the rebuild flag per step", stacklevel=2)
+                        self.cuda_graph_steps = 0
+                        cap = None
+                    a.time, a.step, b.time, b.step = times
+                    self._graph = (key, cap.graph) if cap is not None else None
+                if self._graph is not None and self._graph[0] == key:
+                    blocks = (steps - done) // block
+                    for _ in range(blocks):
+                        wp.capture_launch(self._graph[1])
+                    done += blocks * block
+            # the remainder (fewer than a block) is stepped eagerly below, parity kept
+            a.time = t0 + done * self.dt
+            a.step = step0 + done
+        if use_graph and wp.get_device(self.model.device).is_cuda and not self.cuda_graph_steps:
+            # fallback: the host reads the rebuild flag each step (one 4-byte copy) and replays a captured step
             key = (id(a), id(b), id(contacts), id(control))
             if self._graph is None or self._graph[0] != key:
                 graphs = []
@@ -345,7 +386,7 @@ class Solver:
             if parity:
                 a, b = b, a
             a.time, a.step, a.half_step = t0 + steps * self.dt, step0 + steps, True
-        elif use_graph and steps - done >= 2:
+        elif use_graph and not wp.get_device(self.model.device).is_cuda and steps - done >= 2:
             key = (id(a), id(b), id(contacts), id(control))
             if self._graph is None or self._graph[0] != key:
                 before = int(self._clock.numpy()[0])

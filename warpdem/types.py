@@ -375,5 +375,6 @@ class Contacts:
     """Overflow bits (see :class:`Overflow`) since the last check, shape (1,), int32."""
     scratch: dict = field(default_factory=dict)
     """Second buffers of the history arrays, written by a rebuild and copied back."""
-    grid: object = None
-    """The grouped ``wp.HashGrid``."""
+    cells: dict = field(default_factory=dict)
+    """The cell grid of the last rebuild: ``head`` (bucket -> first sphere, -1 empty; a power-of-two length)
+    and ``next`` (sphere -> next sphere of its bucket), int32 arrays."""
