@@ -171,24 +171,29 @@ def build_contacts(
     capacity = new_index.shape[0]
 
     count = int(0)
-    # cells are at least 2 r_max + skin + reach wide, so every candidate lies in the 27 cells around x_i
-    c_i = cell_of(x_i, inv_cell)
+    # walk the box of cells that holds the query sphere; cells narrower than the reach make that box hug
+    # the sphere (a small sphere walks far fewer spheres than a fixed 27-cell stencil would)
+    reach_i = r_i + radius_max + skin + reach
+    lo = cell_of(x_i - wp.vec3(reach_i), inv_cell)
+    hi = cell_of(x_i + wp.vec3(reach_i), inv_cell)
     mask = cell_head.shape[0] - 1
-    for d in range(27):
-        cell = c_i + wp.vec3i(d % 3 - 1, (d // 3) % 3 - 1, d // 9 - 1)
-        j = cell_head[cell_bucket(cell, world, mask)]
-        while j >= 0:
-            x_j = x[j]
-            # a bucket holds other cells and worlds too: take j only from its own cell, so none is listed twice
-            if j != i and sphere_world[j] == world and cell_of(x_j, inv_cell) == cell:
-                if clump < 0 or sphere_clump[j] != clump:
+    for cz in range(lo[2], hi[2] + 1):
+        for cy in range(lo[1], hi[1] + 1):
+            for cx in range(lo[0], hi[0] + 1):
+                cell = wp.vec3i(cx, cy, cz)
+                j = cell_head[cell_bucket(cell, world, mask)]
+                while j >= 0:
+                    x_j = x[j]
                     if wp.length(x_j - x_i) < r_i + sphere_radius[j] + skin + reach:
-                        if count < capacity:
-                            new_index[count, i] = j
-                            count += 1
-                        else:
-                            wp.atomic_or(overflow_out, 0, 1)
-            j = cell_next[j]
+                        # a bucket holds other cells and worlds too: take j only in its own cell (never twice)
+                        if j != i and sphere_world[j] == world and cell_of(x_j, inv_cell) == cell:
+                            if clump < 0 or sphere_clump[j] != clump:
+                                if count < capacity:
+                                    new_index[count, i] = j
+                                    count += 1
+                                else:
+                                    wp.atomic_or(overflow_out, 0, 1)
+                    j = cell_next[j]
     sort_column(new_index, count, i)
     carry_history(old_index, old_count[i], old_spring, old_roll, old_aux, new_index, count, new_spring, new_roll,
                   new_aux, i)

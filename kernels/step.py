@@ -23,6 +23,8 @@ wp.set_module_options({"enable_backward": False})
 
 BLOWUP_NONE = wp.constant(2147483647)
 WALL_LANES = wp.constant(256)
+# threads per clump in integrate_clumps on CUDA (a tiled launch; Warp runs a CPU tile as one thread)
+CLUMP_LANES = 32
 """Partial accumulators per wall: spreads the force atomics of thousands of spheres on one wall."""
 
 
@@ -411,6 +413,7 @@ def integrate_clumps(
     skin: float,
     velocity_limit: float,
     clock: wp.array[int],
+    lanes: int,
     # Out:
     x_out: wp.array[wp.vec3],
     q_out: wp.array[wp.quat],
@@ -425,22 +428,28 @@ def integrate_clumps(
     rebuild_out: wp.array[int],
     blowup_out: wp.array[int],
 ):
-    """Reduce component forces to each clump (r x f, fixed order), integrate, place the components.
+    """Reduce component forces to each clump (r x f), integrate, place the components.
+
+    Launched tiled, ``lanes`` threads per clump (``CLUMP_LANES`` on CUDA, 1 on CPU): each lane sums every
+    lanes-th component in order and a tile reduction adds the lanes in a fixed tree, so the sum is deterministic; a clump of
+    141 spheres no longer waits on one thread's serial loop. Every lane integrates the body (the same
+    arithmetic, so the same numbers) and places its own components; lane 0 writes the body.
 
     Leapfrog on momentum and on angular momentum L (world frame, so a torque-free body keeps L
     exactly); the orientation advances by an explicit midpoint rule with L held at its half-step value.
     """
-    c = wp.tid()
+    c, lane = wp.tid()
     first = clump_sphere_start[c]
     last = clump_sphere_end[c]
     x_c = x_in[c]
     q_c = q_in[c]
     if active_in[first] == 0:
-        x_out[c] = x_c
-        q_out[c] = q_c
-        v_out[c] = v_in[c]
-        angmom_out[c] = angmom_in[c]
-        for s in range(first, last):
+        if lane == 0:
+            x_out[c] = x_c
+            q_out[c] = q_c
+            v_out[c] = v_in[c]
+            angmom_out[c] = angmom_in[c]
+        for s in range(first + lane, last, lanes):
             sphere_x_out[s] = x_c + wp.quat_rotate(q_c, sphere_offset[s])
         return
     world = clump_world[c]
@@ -448,14 +457,14 @@ def integrate_clumps(
     mass = rho * clump_volume[c]
     inertia = rho * clump_inertia[c]
 
-    f = wp.vec3(0.0)
-    t = wp.vec3(0.0)
-    for s in range(first, last):
+    f_lane = wp.vec3(0.0)
+    t_lane = wp.vec3(0.0)
+    for s in range(first + lane, last, lanes):
         fs = sphere_f[s]
-        f += fs
-        t += sphere_t[s] + wp.cross(wp.quat_rotate(q_c, sphere_offset[s]), fs)
-    f_out[c] = f
-    t_out[c] = t
+        f_lane += fs
+        t_lane += sphere_t[s] + wp.cross(wp.quat_rotate(q_c, sphere_offset[s]), fs)
+    f = wp.tile_extract(wp.tile_sum(wp.tile(f_lane, preserve_type=True)), 0)
+    t = wp.tile_extract(wp.tile_sum(wp.tile(t_lane, preserve_type=True)), 0)
 
     g = world_gravity[world % world_gravity.shape[0]]
     v_new = v_in[c] + kick * (f / mass + g)
@@ -466,22 +475,26 @@ def integrate_clumps(
     w_mid = body_angular_velocity(q_mid, inertia, angmom)
     q_new = quat_step(q_c, w_mid, dt)
 
-    x_out[c] = x_new
-    q_out[c] = q_new
-    v_out[c] = v_new
-    angmom_out[c] = angmom
-    w_out[c] = w_mid
+    if lane == 0:
+        f_out[c] = f
+        t_out[c] = t
+        x_out[c] = x_new
+        q_out[c] = q_new
+        v_out[c] = v_new
+        angmom_out[c] = angmom
+        w_out[c] = w_mid
 
     moved = float(0.0)
-    for s in range(first, last):
+    for s in range(first + lane, last, lanes):
         arm = wp.quat_rotate(q_new, sphere_offset[s])
         xs = x_new + arm
         sphere_x_out[s] = xs
         sphere_v_out[s] = v_new + wp.cross(w_mid, arm)
         sphere_w_out[s] = w_mid
         moved = wp.max(moved, wp.length(xs - build_x[s]))
-    if not (wp.length(v_new) <= velocity_limit) or not wp.isfinite(x_new) or not wp.isfinite(w_mid):
-        flag_blowup(blowup_out, clock[0], first)
+    if lane == 0:
+        if not (wp.length(v_new) <= velocity_limit) or not wp.isfinite(x_new) or not wp.isfinite(w_mid):
+            flag_blowup(blowup_out, clock[0], first)
     if moved > 0.5 * skin:
         rebuild_out[0] = 1
 

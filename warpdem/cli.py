@@ -165,7 +165,7 @@ def cmd_study(args) -> int:
 
     try:
         res = run_study(args.study, args.out, device=args.device, progress=not args.no_progress,
-                        verify=not args.no_verify)
+                        verify=not args.no_verify, checkpoint_every=args.checkpoint)
     except StudyError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -247,6 +247,8 @@ def main(argv=None) -> int:
     st.add_argument("--out", help="output folder (default runs/NAME); rerunning resumes it")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
     st.add_argument("--no-verify", action="store_true", help="skip the verification runs at the optimum")
+    st.add_argument("--checkpoint", type=float, default=60.0, metavar="SECONDS",
+                    help="save each launch's state every SECONDS of wall time (0: never); a rerun resumes from it")
     st.set_defaults(fn=cmd_study)
     an = sub.add_parser("analyze", help="fit, ANOVA, plots and report.md of a study folder")
     an.add_argument("out", help="a study's output folder")

@@ -109,6 +109,7 @@ class Solver:
         # host copy of the rebuild flag, read between captured steps on CUDA (pinned: an async 4-byte copy)
         self._flag_host = wp.empty(1, dtype=int, device="cpu", pinned=wp.get_device(model.device).is_cuda)
         self._graph = None
+        self._clump_lanes = _st.CLUMP_LANES if wp.get_device(model.device).is_cuda else 1
         self.cuda_graph_steps = CUDA_GRAPH_STEPS
         """Steps per replayed CUDA graph (even); 0 reads the rebuild flag on the host every step instead."""
 
@@ -166,7 +167,8 @@ class Solver:
         """Rebuild the candidate lists from ``state`` and carry the history over."""
         m, c = self.model, contacts
         reach = m.contact_reach
-        inv_cell = 1.0 / (2.0 * m.radius_max + self.skin + reach)
+        # cells half the longest reach: the walked box then hugs each sphere's own reach
+        inv_cell = 2.0 / (2.0 * m.radius_max + self.skin + reach)
         head, nxt = c.cells["head"], c.cells["next"]
         wp.launch(_nb.clear_cells, dim=head.shape[0], inputs=[head], device=m.device)
         wp.launch(_nb.bin_spheres, dim=m.sphere_count, inputs=[state.sphere_x, state.sphere_active, m.sphere_world,
@@ -269,15 +271,16 @@ class Solver:
             device=m.device,
         )
         if m.clump_count:
-            wp.launch(
+            wp.launch_tiled(
                 _st.integrate_clumps,
-                dim=m.clump_count,
+                dim=[m.clump_count],
+                block_dim=self._clump_lanes,
                 inputs=[
                     m.clump_sphere_start, m.clump_sphere_end, m.clump_material, m.clump_world, m.clump_volume, m.clump_inertia,
                     m.sphere_offset, m.material_density, m.world_gravity, c.build_x,
                     state_in.sphere_active, state_out.sphere_f, state_out.sphere_t,
                     state_in.clump_x, state_in.clump_q, state_in.clump_v, state_in.clump_angmom,
-                    dt, kick, self.skin, self.options.velocity_limit, self._clock,
+                    dt, kick, self.skin, self.options.velocity_limit, self._clock, self._clump_lanes,
                 ],
                 outputs=[
                     state_out.clump_x, state_out.clump_q, state_out.clump_v, state_out.clump_angmom, state_out.clump_w,

@@ -1,0 +1,71 @@
+"""Where a step's time goes on a dense bed of seed-000 feed pellets (141-sphere clumps) in a box:
+per-kernel GPU time over eager steps (Warp's timing API) and graph-replayed steps per second, for one
+world and for a batch of worlds. Prints a table per world count.
+
+    python benchmarks/profile_step.py [--device cuda] [--pellets 1500] [--worlds 1 --worlds 17]
+"""
+
+import argparse
+import time
+
+import numpy as np
+import warp as wp
+
+wp.config.quiet = True
+
+import warpdem as wd  # noqa: E402
+from warpdem.clumps import pellet_template  # noqa: E402
+
+p = argparse.ArgumentParser()
+p.add_argument("--device", default="cuda")
+p.add_argument("--pellets", type=int, default=1500)
+p.add_argument("--worlds", type=int, action="append")
+p.add_argument("--fall", type=float, default=0.15, help="simulated seconds before profiling [s]")
+p.add_argument("--steps", type=int, default=100, help="eager steps profiled")
+a = p.parse_args()
+wp.init()
+template = pellet_template()
+for worlds in a.worlds or [1, 17]:
+    b = wd.ModelBuilder()
+    b.add_material(wd.Material("pellet", density=1250, youngs_modulus=4e6, poisson_ratio=0.4))
+    b.add_material(wd.Material("steel", density=7900, shear_modulus=7e10, poisson_ratio=0.3))
+    b.set_interaction("pellet", "pellet", restitution=0.37, static_friction=0.6, rolling_friction=0.05)
+    b.set_interaction("pellet", "steel", restitution=0.45, static_friction=0.52, rolling_friction=0.03)
+    side = int(np.ceil(np.sqrt(a.pellets / 10)))
+    lattice = [(i, j, k) for k in range(10 * a.pellets) for j in range(side) for i in range(side)][: a.pellets]
+    pos = (np.asarray(lattice, float) - [side / 2, side / 2, -0.5]) * 0.0085
+    rng = np.random.default_rng(0)
+    q = rng.normal(size=(a.pellets, 4))
+    b.add_clumps(template, pos, "pellet", orientations=q / np.linalg.norm(q, axis=1, keepdims=True))
+    half = side * 0.0085 / 2 + 0.004
+    b.add_plane((0, 0, 0), (0, 0, 1), "steel")
+    for axis in range(2):
+        for sign in (1, -1):
+            n = np.zeros(3)
+            n[axis] = sign
+            b.add_plane(-n * half, n, "steel")
+    b.replicate(worlds)
+    m = b.finalize(a.device)
+    s = wd.Solver(m, wd.SolverOptions(neighbor_capacity=32))
+    state, c = m.state(), s.contacts()
+    steps = int(a.fall / s.dt)
+    state = s.run(state, c, steps)
+    wp.synchronize()
+    t0 = time.perf_counter()
+    state = s.run(state, c, 2048)
+    wp.synchronize()
+    rate = 2048 / (time.perf_counter() - t0)
+    wp.timing_begin(cuda_filter=wp.TIMING_KERNEL)
+    state = s.run(state, c, a.steps, use_graph=False)
+    results = wp.timing_end()
+    per = {}
+    for r in results:
+        per.setdefault(r.name, [0, 0.0])
+        per[r.name][0] += 1
+        per[r.name][1] += r.elapsed
+    total = sum(v[1] for v in per.values())
+    print(f"{worlds} worlds, {m.sphere_count} spheres ({m.clump_count} clumps), dt {s.dt:.3g} s, "
+          f"{wp.get_device(a.device).name}: {rate:.0f} graph steps/s = {rate * m.sphere_count / 1e6:.0f} M sphere-steps/s; "
+          f"eager kernel time {total / a.steps:.3f} ms/step")
+    for name, (count, ms) in sorted(per.items(), key=lambda kv: -kv[1][1]):
+        print(f"   {name[:60]:60s} {count:6d} launches {ms:9.2f} ms {100 * ms / total:5.1f} %")
