@@ -364,7 +364,8 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
     k = max(int(pressing[0]) - 1, 0)
     fill = float(series["bed_top"][k] - m.backstop_height)
     summ = ms.press_summary(z - m.backstop_height, f, fill_height=fill, force_limit=m.force_limit or None)
-    curve = ms.press_curve(z - m.backstop_height, f)
+    # the curve starts where the summary's displacement does: the piston at the loose bed's top
+    curve = ms.press_curve(z - m.backstop_height, f, contact_z=fill)
     mat = model.materials[int(h["material"][h["world"] == w][0])]
     d = 2.0 * float(np.mean(h["radius"][(h["world"] == w) & h["free"]]))
     area = math.pi * _piston_radius(model, m.piston) ** 2

@@ -251,7 +251,7 @@ def test_die_press_compaction(rig_run):
     """Die press: the bar stops at the force limit (10 N, reached within 1 % as the stop test fires on the
     first output at or above it); the bed is compressed but not crushed (ratio in (0, 0.8)); the measured
     fill height is the rig's settled fill (0.01 m) within 25 % (packing varies in a die a dozen particles
-    wide)."""
+    wide); the curve and the summary share their origin."""
     run = rig_run("die_press")
     m = run["metrics"]["metrics"][0]
     p = rigs.params("die_press", rigs.SMOKE["die_press"])
@@ -260,6 +260,11 @@ def test_die_press_compaction(rig_run):
     assert 0.0 < m["compression_ratio"] < 0.8
     assert m["fill_height_m"] == pytest.approx(p.fill_height, rel=0.25)
     assert m["max_force_n"] >= p.force_limit * 0.99
+    # the force-displacement curve starts where the summary's displacement does (the piston at the loose
+    # bed's top: its first sample lies within one output interval of travel, gap / 8, below it) and ends
+    # within one output interval of the maximum displacement
+    assert 0.0 <= m["displacement_m"][0] <= p.gap / 8 + 1e-9
+    assert abs(m["displacement_m"][-1] - m["max_displacement_m"]) <= p.gap / 8 + 1e-9
 
 
 def test_truck_tipper_impacts(rig_run):
