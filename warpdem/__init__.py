@@ -13,7 +13,7 @@ from .motion import Segment, WallMotion
 from .solver import SimulationError, Solver, SolverOptions
 from .types import ContactLaw, Contacts, Control, Model, Overflow, RollingModel, State
 from .export import ResultWriter, ShapeGeometry, WallGeometry, side_view_png
-from .runner import RunResult, run_scene
+from .runner import RunResult, RunStopped, run_scene
 from .scene import SceneSpec, StageError, read_stage, write_stage
 
 __version__ = "0.1.0"
@@ -24,6 +24,7 @@ __all__ = [
     "rigs",
     "ResultWriter",
     "RunResult",
+    "RunStopped",
     "SceneSpec",
     "ShapeGeometry",
     "StageError",

@@ -83,7 +83,7 @@ def _sets(items) -> dict:
 def cmd_run(args) -> int:
     _quiet_warp()
     from . import rigs
-    from .runner import run_scene
+    from .runner import RunStopped, run_scene
     from .scene import StageError
 
     try:
@@ -92,6 +92,12 @@ def cmd_run(args) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     out = args.out or f"runs/{spec.rig}"
+    if args.stop_after and not args.no_frames:
+        print("error: --stop-after needs --no-frames (it stops by saving a checkpoint)", file=sys.stderr)
+        return 2
+    if args.stop_after < 0:
+        print(f"error: --stop-after = {args.stop_after} is not allowed; expected seconds >= 0", file=sys.stderr)
+        return 2
     bar = None
     try:
         from tqdm import tqdm
@@ -106,8 +112,14 @@ def cmd_run(args) -> int:
             bar.set_postfix_str(msg)
             bar.refresh()
 
-    res = run_scene(spec, device=args.device, out_dir=out, frames=not args.no_frames, progress=progress,
-                    checkpoint_every=args.checkpoint)
+    try:
+        res = run_scene(spec, device=args.device, out_dir=out, frames=not args.no_frames, progress=progress,
+                        checkpoint_every=args.checkpoint, stop_after=args.stop_after)
+    except RunStopped as e:
+        if bar is not None:
+            bar.close()
+        print(str(e), file=sys.stderr)
+        return 3
     if bar is not None:
         bar.close()
     info = res.info
@@ -165,10 +177,14 @@ def cmd_study(args) -> int:
 
     try:
         res = run_study(args.study, args.out, device=args.device, progress=not args.no_progress,
-                        verify=not args.no_verify, checkpoint_every=args.checkpoint)
+                        verify=not args.no_verify, checkpoint_every=args.checkpoint, stop_after=args.stop_after)
     except StudyError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
+    if res["stopped"]:
+        print(f"{res['ran'] + res['skipped']} of {res['runs']} runs finished; stopped at the wall-time limit "
+              f"after {res['wall_s']:.1f} s on {args.device}; run the same command again to resume")
+        return 3
     print(f"{res['runs']} runs ({res['ran']} run now in {res['batches']} batch(es), {res['skipped']} already "
           f"finished) in {res['wall_s']:.1f} s on {args.device}; results in {res['out']}/")
     if res["analysis"]:
@@ -240,6 +256,9 @@ def main(argv=None) -> int:
     r.add_argument("--checkpoint", type=float, default=60.0, metavar="SECONDS",
                    help="with --no-frames: save the run's state every SECONDS of wall time to DIR/checkpoint.npz; "
                         "the same command resumes from it (default 60, 0: never)")
+    r.add_argument("--stop-after", type=float, default=0.0, metavar="SECONDS",
+                   help="with --no-frames: stop by itself after SECONDS of wall time, saving a checkpoint "
+                        "(exit code 3); the same command resumes (0: no limit)")
     r.set_defaults(fn=cmd_run)
     st = sub.add_parser("study", help="run (or resume) a design of experiments, then analyse and verify it")
     st.add_argument("study", help="study file, e.g. studies/main_funnel_pb.toml")
@@ -249,6 +268,9 @@ def main(argv=None) -> int:
     st.add_argument("--no-verify", action="store_true", help="skip the verification runs at the optimum")
     st.add_argument("--checkpoint", type=float, default=60.0, metavar="SECONDS",
                     help="save each launch's state every SECONDS of wall time (0: never); a rerun resumes from it")
+    st.add_argument("--stop-after", type=float, default=0.0, metavar="SECONDS",
+                    help="stop by itself after SECONDS of wall time, saving the running launch's checkpoint "
+                         "(exit code 3); the same command resumes (0: no limit)")
     st.set_defaults(fn=cmd_study)
     an = sub.add_parser("analyze", help="fit, ANOVA, plots and report.md of a study folder")
     an.add_argument("out", help="a study's output folder")

@@ -111,9 +111,21 @@ def _world_walls(model, state):
     return out
 
 
+class RunStopped(RuntimeError):
+    """A run reached its wall-time limit (``stop_after``) and saved a checkpoint; the same call resumes it.
+
+    Attributes: ``checkpoint`` (path of the saved checkpoint), ``simulated_s`` (simulated time reached [s]).
+    """
+
+    def __init__(self, checkpoint, simulated_s: float, wall_s: float):
+        self.checkpoint, self.simulated_s, self.wall_s = Path(checkpoint), float(simulated_s), float(wall_s)
+        super().__init__(f"stopped after {wall_s:.0f} s of wall time at {simulated_s:.4g} s simulated; "
+                         f"checkpoint saved to {checkpoint}; run the same command again to resume")
+
+
 def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: int = 1,
               variations: dict | None = None, frames: bool = True, progress=None, quiet: bool = False,
-              world_seeds=None, checkpoint_every: float = 0.0) -> RunResult:
+              world_seeds=None, checkpoint_every: float = 0.0, stop_after: float = 0.0) -> RunResult:
     """Run ``spec`` on ``device``; with ``out_dir`` write metrics.json, result.usdc (+ VTK series), pile.png.
 
     Args:
@@ -127,6 +139,9 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             a later call with the same inputs resumes from it, and a finished run deletes it. A checkpoint
             also forces a neighbour-list rebuild, which the resumed run repeats, so the resumed run is
             bit-identical to one that was never interrupted.
+        stop_after: with ``out_dir`` and no frames, save a checkpoint and raise :class:`RunStopped` at the
+            first output tick after this many wall seconds from the call's start (0: never), e.g. to fit
+            a job into a batch system's or a device's time limit; the same call resumes the run.
     Returns:
         RunResult with one metrics dict per world.
     """
@@ -172,7 +187,13 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     settled_since = 0
     settle_needed = 3
     eps = 0.5 * solver.dt
-    ckpt = out / "checkpoint.npz" if (out is not None and checkpoint_every > 0 and writer is None) else None
+    if stop_after < 0 or not math.isfinite(stop_after):
+        raise ValueError(f"run_scene: stop_after = {stop_after!r} is not allowed; expected wall seconds >= 0 "
+                         "(0: no limit)")
+    if stop_after > 0 and (out is None or writer is not None):
+        raise ValueError("run_scene: stop_after needs out_dir and frames=False (it stops by saving a checkpoint)")
+    ckpt = (out / "checkpoint.npz"
+            if (out is not None and (checkpoint_every > 0 or stop_after > 0) and writer is None) else None)
     fingerprint = _fingerprint(spec, device, world_count, variations, world_seeds)
     resumed_from = None
     if ckpt is not None and ckpt.exists():
@@ -223,11 +244,14 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             if settled_since >= settle_needed:
                 stop_reason = "settled"
                 break
-        if ckpt is not None and time.perf_counter() - t_ckpt >= checkpoint_every:
+        stopping = stop_after > 0 and time.perf_counter() - t_wall0 >= stop_after
+        if ckpt is not None and (stopping or (checkpoint_every > 0 and time.perf_counter() - t_ckpt >= checkpoint_every)):
             _save_checkpoint(ckpt, fingerprint, state, contacts, {
                 "series": series, "impulse_prev": impulse_prev, "t_prev": t_prev, "phase_snap": phase_snap,
                 "settled_since": settled_since})
             t_ckpt = time.perf_counter()
+            if stopping:
+                raise RunStopped(ckpt, state.time, time.perf_counter() - t_wall0)
     wall_s = time.perf_counter() - t_wall0
 
     metrics = []

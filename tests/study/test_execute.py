@@ -195,3 +195,22 @@ def test_crash_inside_a_launch_resumes_from_its_checkpoint(tmp_path, monkeypatch
     got = execute.load_results(tmp_path / "out", study)["height"].tolist()
     ref = execute.load_results(tmp_path / "ref", study)["height"].tolist()
     assert got == ref
+
+
+def test_study_stops_at_its_wall_time_limit_and_resumes(tmp_path):
+    """stop_after: the study stops by itself inside its first launch (checkpoint saved, nothing finished,
+    ``stopped`` says why); the same call resumes from the checkpoint and gives the same responses as an
+    uninterrupted study."""
+    study = _study(tmp_path)
+    res = _run(study, tmp_path / "out", analyze_after=False, stop_after=1e-9)
+    assert res["stopped"] and "launch 1 of" in res["stopped"] and res["ran"] == 0
+    assert list((tmp_path / "out" / "launches").glob("*/checkpoint.npz"))
+    assert not list((tmp_path / "out" / "runs").glob("*.json"))
+    res = _run(study, tmp_path / "out", analyze_after=False)
+    assert res["stopped"] is None and res["ran"] == res["runs"]
+    rec = json.loads(next((tmp_path / "out" / "runs").glob("*.json")).read_text())
+    assert rec["info"]["resumed_from_s"] > 0
+    _run(study, tmp_path / "ref", analyze_after=False)
+    got = execute.load_results(tmp_path / "out", study)["height"].tolist()
+    ref = execute.load_results(tmp_path / "ref", study)["height"].tolist()
+    assert got == ref

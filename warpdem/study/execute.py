@@ -88,10 +88,11 @@ def _launch_id(rows: list[dict]) -> str:
 
 
 def run_batch(study: sp.StudySpec, rows: list[dict], device: str, progress=None, out_dir=None,
-              checkpoint_every: float = 0.0) -> list[dict]:
+              checkpoint_every: float = 0.0, stop_after: float = 0.0) -> list[dict]:
     """Run ``rows`` (dicts with ``overrides`` and ``world_seed``) as the worlds of one launch; returns one
     record per row: responses, the world's metrics, run info. With ``out_dir`` the launch checkpoints every
-    ``checkpoint_every`` wall seconds there and resumes from its checkpoint (see ``run_scene``)."""
+    ``checkpoint_every`` wall seconds there and resumes from its checkpoint (see ``run_scene``); with
+    ``stop_after`` it saves a checkpoint and raises ``runner.RunStopped`` after that many wall seconds."""
     from ..runner import run_scene
 
     scene = _scene(study, rows[0]["overrides"])
@@ -100,7 +101,7 @@ def run_batch(study: sp.StudySpec, rows: list[dict], device: str, progress=None,
     seeds = [int(r["world_seed"]) for r in rows]
     res = run_scene(scene, device=device, out_dir=out_dir, world_count=len(rows), variations=variations or None,
                     frames=False, progress=progress, world_seeds=seeds if any(seeds) else None,
-                    checkpoint_every=checkpoint_every)
+                    checkpoint_every=checkpoint_every, stop_after=stop_after)
     info = dict(res.info)
     out = []
     for row, m in zip(rows, res.metrics):
@@ -130,16 +131,20 @@ def _check_folder(out: Path, study: sp.StudySpec) -> None:
 
 
 def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, analyze_after: bool = True,
-              verify: bool = True, log=print, checkpoint_every: float = 60.0) -> dict:
+              verify: bool = True, log=print, checkpoint_every: float = 60.0, stop_after: float = 0.0) -> dict:
     """Run (or resume) ``study`` (a path or a StudySpec) into ``out_dir`` (default ``runs/<name>``).
 
     Finished points are skipped; the rest run batch by batch (a batch = runs that share a scene, as
     worlds of one launch). A launch also checkpoints every ``checkpoint_every`` wall seconds into
     ``OUT/launches/<id>/`` (id: hash of its point ids), so a crash mid-launch resumes there. Then, unless
     disabled, the analysis (:func:`analyze`) and the verification
-    runs at the chosen optimum. Returns {"out", "runs", "ran", "skipped", "wall_s", "analysis",
-    "verification"}.
+    runs at the chosen optimum. With ``stop_after`` (wall seconds, 0: none) the study stops by itself
+    once that much wall time has passed: a launch then saves its checkpoint at its next output tick, no
+    further launch starts, and ``stopped`` in the result says where; the same call resumes. Returns
+    {"out", "runs", "ran", "skipped", "wall_s", "batches", "analysis", "verification", "stopped"}.
     """
+    from ..runner import RunStopped
+
     study = study if isinstance(study, sp.StudySpec) else sp.load_study(study)
     out = Path(out_dir) if out_dir else Path("runs") / study.name
     out.mkdir(parents=True, exist_ok=True)
@@ -161,6 +166,7 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
     t0 = time.perf_counter()
     bar = _progress_bar(len(rows), done0, study.name, progress)
     batches = _batches(study, pending) if pending else []
+    stopped = None
     for k, batch in enumerate(batches):
         base = bar.n if bar is not None else 0
 
@@ -172,7 +178,17 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
 
         tb = time.perf_counter()
         launch = out / "launches" / _launch_id(batch)
-        records = run_batch(study, batch, device, progress=tick, out_dir=launch, checkpoint_every=checkpoint_every)
+        # the first launch of a call always starts (and saves a checkpoint at least), so every call advances
+        left = max(stop_after - (tb - t0), 1e-9) if stop_after > 0 else 0.0
+        if stop_after > 0 and k > 0 and tb - t0 >= stop_after:
+            stopped = f"the wall-time limit ({stop_after:.0f} s) came before launch {k + 1} of {len(batches)}"
+            break
+        try:
+            records = run_batch(study, batch, device, progress=tick, out_dir=launch,
+                                checkpoint_every=checkpoint_every, stop_after=left)
+        except RunStopped as e:
+            stopped = f"launch {k + 1} of {len(batches)}: {e}"
+            break
         wall = time.perf_counter() - tb
         for row, rec in zip(batch, records):
             _write_json(runs_dir / f"{row['point_id']}.json", {
@@ -187,10 +203,14 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
     if bar is not None:
         bar.close()
     wall = time.perf_counter() - t0
-    result = {"out": str(out), "runs": len(rows), "ran": len(pending), "skipped": done0, "wall_s": wall,
-              "batches": len(batches), "analysis": None, "verification": None}
-    if not batches:
+    finished = sum((runs_dir / f"{r['point_id']}.json").exists() for r in rows)
+    result = {"out": str(out), "runs": len(rows), "ran": finished - done0, "skipped": done0, "wall_s": wall,
+              "batches": len(batches), "analysis": None, "verification": None, "stopped": stopped}
+    if not batches or stopped:
         _results_csv(study, out)
+    if stopped:
+        log(f"{study.name}: stopped, {finished} of {len(rows)} runs finished; {stopped}")
+        return result
     if analyze_after and study.analysis.model != "none":
         result["analysis"] = analyze(out, study)
         if verify and study.verification.replicates > 0:
