@@ -336,7 +336,12 @@ def _save_checkpoint(path: Path, fingerprint: str, state, contacts, book: dict) 
     resumed run repeats, so both continue from identical lists."""
     contacts.rebuild.fill_(1)
     arrays = {f"state.{k}": v.numpy() for k, v in _device_arrays(state).items()}
-    arrays.update({f"contacts.{k}": v.numpy() for k, v in _device_arrays(contacts).items()})
+    # list slots past the longest list are never read (a rebuild follows the load): keep only the used rows
+    used = {k: int(getattr(contacts, f"{k}_count").numpy().max(initial=0)) for k in ("neighbor", "mesh")}
+    for k, v in _device_arrays(contacts).items():
+        group = k.split("_")[0]
+        rows = used.get(group) if v.ndim == 2 and k != f"{group}_count" else None
+        arrays[f"contacts.{k}"] = v.numpy()[:rows] if rows is not None else v.numpy()
     arrays["book.impulse_prev"] = np.asarray(book["impulse_prev"])
     for i, snap in enumerate(book["phase_snap"]):
         for k, v in snap.items():
@@ -358,7 +363,12 @@ def _load_checkpoint(path: Path, fingerprint: str, state, contacts) -> dict | No
             return None
         for prefix, obj in (("state.", state), ("contacts.", contacts)):
             for k, v in _device_arrays(obj).items():
-                v.assign(z[prefix + k])
+                a = z[prefix + k]
+                if v.ndim == 2 and a.shape[0] != v.shape[0]:  # list slots trimmed at saving: the rest are zero
+                    full = np.zeros((v.shape[0],) + a.shape[1:], dtype=a.dtype)
+                    full[: a.shape[0]] = a
+                    a = full
+                v.assign(a)
         book = {"impulse_prev": z["book.impulse_prev"].copy(),
                 "phase_snap": [{k.split(".", 2)[2]: z[k].copy() for k in z.files if k.startswith(f"snap.{i}.")}
                                for i in range(meta["snaps"])]}

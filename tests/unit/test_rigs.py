@@ -539,13 +539,16 @@ def test_run_resumes_from_checkpoint_bit_identical(tmp_path):
 
 def test_run_stops_at_its_wall_time_limit_and_resumes(tmp_path):
     """stop_after: the run saves a checkpoint at its first output tick past the limit and raises RunStopped
-    (naming the checkpoint and the simulated time); the same call resumes and ends bit-identical to an
-    uninterrupted run. Bad limits are refused with the field and the allowed range."""
+    (naming the checkpoint and the simulated time), its list slots trimmed to the longest list; the same
+    call resumes and ends bit-identical to an uninterrupted run. Bad limits are refused with the field and the allowed range."""
     spec = rigs.spec("funnel", {"count": 60, "duration": 0.2}, smoke=True)
     a = runner.run_scene(spec, out_dir=tmp_path / "a", frames=False, checkpoint_every=1e-9)
     with pytest.raises(runner.RunStopped, match="run the same command again to resume") as e:
         runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9, stop_after=1e-9)
     assert e.value.checkpoint.exists() and 0 < e.value.simulated_s < 0.2
+    with np.load(e.value.checkpoint) as z:  # list slots are saved only up to the longest list
+        assert z["contacts.neighbor_index"].shape[0] == z["contacts.neighbor_count"].max()
+        assert z["contacts.mesh_spring"].shape[0] == z["contacts.mesh_count"].max() < 32
     b = runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9)
     assert b.info["resumed_from_s"] == pytest.approx(e.value.simulated_s)
     xa = np.load(tmp_path / "a" / "final.npz")["sphere_x"]

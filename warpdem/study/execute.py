@@ -47,12 +47,12 @@ def _scene(study: sp.StudySpec, overrides: dict):
     from .. import rigs
     from ..scene import apply_overrides
 
-    rig_vals = {k: v for k, v in overrides.items() if sp._is_rig_key(k)}
+    rig_vals = {k: v for k, v in overrides.items() if sp.is_rig_key(k)}
     if study.rig is not None:
         scene = rigs.spec(study.rig, rig_vals, study.smoke)
     else:
         scene = rigs.load(study.scene_path, rig_vals)
-    shared = {k: v for k, v in overrides.items() if not sp._is_rig_key(k) and not sp.varies_per_world(k)}
+    shared = {k: v for k, v in overrides.items() if not sp.is_rig_key(k) and not sp.varies_per_world(k)}
     return apply_overrides(scene, shared)
 
 
@@ -304,7 +304,7 @@ def run_verification(study: sp.StudySpec, out, summary: dict, device: str = "cpu
     base = dict(study.fixed)
     for f in study.factors:
         v = float(chosen[f.name])
-        base[f.parameter] = sp._rig_value(study, f.parameter, v) if sp._is_rig_key(f.parameter) else v
+        base[f.parameter] = sp.rig_value(study, f.parameter, v) if sp.is_rig_key(f.parameter) else v
     rows = [{"world_seed": k + 1, "overrides": base, "file": vdir / f"replicate_{k + 1}.json"} for k in range(n)]
     pending = [r for r in rows if not r["file"].exists()]
     if pending:

@@ -326,7 +326,8 @@ def _key_problem(key: str, rig: str | None, factor: bool) -> str | None:
     return f"one of {forms}" + _suggest(head, ("material", "interaction", "run", "measure", "factory"))
 
 
-def _is_rig_key(key: str) -> bool:
+def is_rig_key(key: str) -> bool:
+    """True for an override key that sets a rig parameter (``count``), not a material or interaction scalar."""
     return "." not in key
 
 
@@ -854,7 +855,7 @@ def check_scene_overrides(spec: StudySpec) -> None:
     from ..scene import StageError, apply_overrides
 
     rigs = _rigs()
-    rig_vals = {k: v for k, v in spec.fixed.items() if _is_rig_key(k)}
+    rig_vals = {k: v for k, v in spec.fixed.items() if is_rig_key(k)}
     try:
         if spec.rig is not None:
             base = rigs.spec(spec.rig, rig_vals, spec.smoke)
@@ -864,7 +865,7 @@ def check_scene_overrides(spec: StudySpec) -> None:
         keys = ", ".join(f"{k} = {v!r}" for k, v in rig_vals.items()) or "(no rig parameters)"
         raise StudyError(f"[fixed]: the scene cannot be built from {keys}: {e}") from None
     for k, v in spec.fixed.items():
-        if _is_rig_key(k):
+        if is_rig_key(k):
             continue
         try:
             apply_overrides(base, {k: v})
@@ -875,8 +876,8 @@ def check_scene_overrides(spec: StudySpec) -> None:
         col = table[f"{f.name}_actual"]
         for which, v in (("lowest", float(col.min())), ("highest", float(col.max()))):
             try:
-                if _is_rig_key(f.parameter):
-                    rigs.params(base.rig, {**base.authoring, **rig_vals, f.parameter: _rig_value(spec, f.parameter, v)})
+                if is_rig_key(f.parameter):
+                    rigs.params(base.rig, {**base.authoring, **rig_vals, f.parameter: rig_value(spec, f.parameter, v)})
                 else:
                     apply_overrides(copy.deepcopy(base), {f.parameter: v})
             except (StageError, ValueError, KeyError, TypeError) as e:
@@ -976,7 +977,7 @@ def _point_id(spec: StudySpec, row) -> str:
     return hashlib.sha1(text.encode()).hexdigest()[:12]
 
 
-def _rig_value(spec: StudySpec, key: str, v: float):
+def rig_value(spec: StudySpec, key: str, v: float):
     """A rig parameter value in its field's type (an integer parameter gets an int when v is integral)."""
     rig = spec.rig
     if rig is None:
@@ -993,7 +994,7 @@ def run_overrides(spec: StudySpec, row) -> dict:
     out = dict(spec.fixed)
     for f in spec.factors:
         v = float(row[f"{f.name}_actual"])
-        out[f.parameter] = _rig_value(spec, f.parameter, v) if _is_rig_key(f.parameter) else v
+        out[f.parameter] = rig_value(spec, f.parameter, v) if is_rig_key(f.parameter) else v
     return out
 
 
