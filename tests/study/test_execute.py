@@ -166,6 +166,16 @@ def test_analysis_and_verification(finished, tmp_path):
     assert (out / "analysis" / "report.md").read_text().count("## Verification") == 1
 
 
+def _assert_resumed_like_uninterrupted(study, tmp_path):
+    """tmp_path/out was resumed from a checkpoint and holds the responses of an uninterrupted study."""
+    rec = json.loads(next((tmp_path / "out" / "runs").glob("*.json")).read_text())
+    assert rec["info"]["resumed_from_s"] > 0
+    _run(study, tmp_path / "ref", analyze_after=False)
+    got = execute.load_results(tmp_path / "out", study)["height"].tolist()
+    ref = execute.load_results(tmp_path / "ref", study)["height"].tolist()
+    assert got == ref
+
+
 def test_crash_inside_a_launch_resumes_from_its_checkpoint(tmp_path, monkeypatch):
     """A launch killed half way (after some checkpoints) is resumed from its checkpoint by the rerun, not
     started again, and gives the same responses as an uninterrupted study."""
@@ -189,12 +199,7 @@ def test_crash_inside_a_launch_resumes_from_its_checkpoint(tmp_path, monkeypatch
     assert list((tmp_path / "out" / "launches").glob("*/checkpoint.npz"))
     monkeypatch.setattr(runner, "run_scene", lambda *a, **kw: real(*a, **(kw | {"checkpoint_every": 1e-9})))
     _run(study, tmp_path / "out", analyze_after=False)
-    rec = json.loads(next((tmp_path / "out" / "runs").glob("*.json")).read_text())
-    assert rec["info"]["resumed_from_s"] > 0
-    _run(study, tmp_path / "ref", analyze_after=False)
-    got = execute.load_results(tmp_path / "out", study)["height"].tolist()
-    ref = execute.load_results(tmp_path / "ref", study)["height"].tolist()
-    assert got == ref
+    _assert_resumed_like_uninterrupted(study, tmp_path)
 
 
 def test_study_stops_at_its_wall_time_limit_and_resumes(tmp_path):
@@ -208,9 +213,4 @@ def test_study_stops_at_its_wall_time_limit_and_resumes(tmp_path):
     assert not list((tmp_path / "out" / "runs").glob("*.json"))
     res = _run(study, tmp_path / "out", analyze_after=False)
     assert res["stopped"] is None and res["ran"] == res["runs"]
-    rec = json.loads(next((tmp_path / "out" / "runs").glob("*.json")).read_text())
-    assert rec["info"]["resumed_from_s"] > 0
-    _run(study, tmp_path / "ref", analyze_after=False)
-    got = execute.load_results(tmp_path / "out", study)["height"].tolist()
-    ref = execute.load_results(tmp_path / "ref", study)["height"].tolist()
-    assert got == ref
+    _assert_resumed_like_uninterrupted(study, tmp_path)
