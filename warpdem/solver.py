@@ -66,6 +66,9 @@ class SolverOptions:
 # steps in one replayed CUDA graph: long enough to hide the launch cost, short enough for a remainder
 # stepped eagerly to stay cheap
 CUDA_GRAPH_STEPS = 32
+# neighbour cells per longest reach (2 r_max + skin + cohesive reach): 2 makes the walked box of cells hug
+# each sphere's own reach
+CELLS_PER_REACH = 2.0
 
 
 class Solver:
@@ -167,8 +170,7 @@ class Solver:
         """Rebuild the candidate lists from ``state`` and carry the history over."""
         m, c = self.model, contacts
         reach = m.contact_reach
-        # cells half the longest reach: the walked box then hugs each sphere's own reach
-        inv_cell = 2.0 / (2.0 * m.radius_max + self.skin + reach)
+        inv_cell = CELLS_PER_REACH / (2.0 * m.radius_max + self.skin + reach)
         head, nxt = c.cells["head"], c.cells["next"]
         wp.launch(_nb.clear_cells, dim=head.shape[0], inputs=[head], device=m.device)
         wp.launch(_nb.bin_spheres, dim=m.sphere_count, inputs=[state.sphere_x, state.sphere_active, m.sphere_world,
