@@ -182,8 +182,8 @@ def cmd_study(args) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     if res["stopped"]:
-        print(f"{res['ran'] + res['skipped']} of {res['runs']} runs finished; stopped at the wall-time limit "
-              f"after {res['wall_s']:.1f} s on {args.device}; run the same command again to resume")
+        print(f"{res['ran'] + res['skipped']} of {res['runs']} design runs finished; stopped at the wall-time "
+              f"limit ({res['stopped']}); run the same command again to resume")
         return 3
     print(f"{res['runs']} runs ({res['ran']} run now in {res['batches']} batch(es), {res['skipped']} already "
           f"finished) in {res['wall_s']:.1f} s on {args.device}; results in {res['out']}/")

@@ -142,15 +142,22 @@ def test_another_study_in_the_folder_is_refused(finished, tmp_path):
 def test_analysis_and_verification(finished, tmp_path):
     """The analysis of the finished runs writes report.md and the ANOVA; with a target inside the fitted
     range the chosen settings predict it, and the verification runs (2 replicates, world seeds 1 and 2) are
-    summarised with mean, SD and relative error against the target, in verification.json and report.md."""
+    summarised with mean, SD and relative error against the target, in verification.json and report.md; a
+    verification launch stopped by the wall-time limit resumes from its checkpoint."""
     study, out, _ = finished
     table = execute.load_results(out, study)
     target = float(table["height"].median())
     path = tmp_path / "tiny.toml"
     path.write_text(STUDY.format(batch=0, target=target, verify=2))
     study2 = load_study(path)
+    # a wall-time limit stops the verification launch with a checkpoint; the next call resumes it
+    res = _run(study2, out, stop_after=1e-9)
+    assert res["stopped"].startswith("verification:") and res["verification"] is None
+    assert (out / "verification" / "launch" / "checkpoint.npz").exists()
     res = _run(study2, out)  # same point ids (target and verification do not change the runs): no new design runs
-    assert res["ran"] == 0
+    assert res["ran"] == 0 and res["stopped"] is None
+    rep = json.loads((out / "verification" / "replicate_1.json").read_text())
+    assert rep["info"]["resumed_from_s"] > 0
     s = res["analysis"]["height"]
     assert (out / "analysis" / "report.md").exists() and (out / "analysis" / "anova_height.csv").exists()
     assert s["reachable"] and s["predicted"] == pytest.approx(target, rel=1e-6)

@@ -214,7 +214,13 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
     if analyze_after and study.analysis.model != "none":
         result["analysis"] = analyze(out, study)
         if verify and study.verification.replicates > 0:
-            result["verification"] = run_verification(study, out, result["analysis"], device, progress, log)
+            left = max(stop_after - (time.perf_counter() - t0), 1e-9) if stop_after > 0 else 0.0
+            try:
+                result["verification"] = run_verification(study, out, result["analysis"], device, progress, log,
+                                                           checkpoint_every=checkpoint_every, stop_after=left)
+            except RunStopped as e:
+                result["stopped"] = f"verification: {e}"
+                log(f"{study.name}: stopped in the verification runs; {e}")
     return result
 
 
@@ -284,11 +290,13 @@ def _append_verification(out: Path, v: dict) -> None:
 
 
 def run_verification(study: sp.StudySpec, out, summary: dict, device: str = "cpu", progress: bool = True,
-                     log=print) -> dict | None:
+                     log=print, checkpoint_every: float = 60.0, stop_after: float = 0.0) -> dict | None:
     """Verification replicates at the chosen optimum of the first response with a target: ``replicates``
     runs (world seeds 1..n, so they differ from each other) as one batch; writes
     ``out/verification/verification.json`` with each value, the mean, SD and relative error against the
-    target, and appends them to the report. Resumes like the design runs (one file per replicate)."""
+    target, and appends them to the report. Resumes like the design runs (one file per replicate); the
+    launch checkpoints into ``out/verification/launch/`` and, with ``stop_after``, raises
+    ``runner.RunStopped`` after that many wall seconds (see :func:`run_batch`)."""
     out = Path(out)
     resp = next((r for r in study.responses if r.target is not None), None)
     if resp is None:
@@ -315,9 +323,12 @@ def run_verification(study: sp.StudySpec, out, summary: dict, device: str = "cpu
                 bar.n = frac * len(pending)
                 bar.refresh()
 
-        records = run_batch(study, pending, device, progress=tick)
-        if bar is not None:
-            bar.close()
+        try:
+            records = run_batch(study, pending, device, progress=tick, out_dir=vdir / "launch",
+                                checkpoint_every=checkpoint_every, stop_after=stop_after)
+        finally:
+            if bar is not None:
+                bar.close()
         for row, rec in zip(pending, records):
             _write_json(row["file"], {"world_seed": row["world_seed"], "overrides": row["overrides"],
                                       "responses": rec["responses"], "metrics": rec["metrics"], "info": rec["info"]})
