@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -152,11 +153,11 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     model = builder.finalize(device)
     run = spec.run
     # rig meshes have fans and seams where one sphere may touch many triangles
-    options = SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min, mesh_capacity=32)
-    # a compacted bed (die press) or glued layers hold more partners per sphere than a loose packing
-    neighbors = max(32, Solver(model, options).default_neighbor_capacity())
     solver = Solver(model, SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min,
-                                         mesh_capacity=32, neighbor_capacity=neighbors))
+                                         mesh_capacity=32))
+    # a compacted bed (die press) or glued layers hold more partners per sphere than a loose packing
+    solver.options = dataclasses.replace(solver.options,
+                                         neighbor_capacity=max(32, solver.default_neighbor_capacity()))
     state, contacts = model.state(), solver.contacts()
     h = _host(model)
     W = model.world_count
