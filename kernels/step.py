@@ -23,9 +23,9 @@ wp.set_module_options({"enable_backward": False})
 
 BLOWUP_NONE = wp.constant(2147483647)
 WALL_LANES = wp.constant(256)
-# threads per clump in integrate_clumps on CUDA (a tiled launch; Warp runs a CPU tile as one thread)
-CLUMP_LANES = 32
 """Partial accumulators per wall: spreads the force atomics of thousands of spheres on one wall."""
+CLUMP_LANES = 32
+"""Threads per clump in integrate_clumps on CUDA (a tiled launch; Warp runs a CPU tile as one thread)."""
 
 
 @wp.func
@@ -431,9 +431,10 @@ def integrate_clumps(
     """Reduce component forces to each clump (r x f), integrate, place the components.
 
     Launched tiled, ``lanes`` threads per clump (``CLUMP_LANES`` on CUDA, 1 on CPU): each lane sums every
-    lanes-th component in order and a tile reduction adds the lanes in a fixed tree, so the sum is deterministic; a clump of
-    141 spheres no longer waits on one thread's serial loop. Every lane integrates the body (the same
-    arithmetic, so the same numbers) and places its own components; lane 0 writes the body.
+    lanes-th component in order and a tile reduction adds the lanes in a fixed tree, so the sum is
+    deterministic; a clump of 141 spheres no longer waits on one thread's serial loop. Every lane
+    integrates the body (the same arithmetic, so the same numbers) and places its own components;
+    lane 0 writes the body.
 
     Leapfrog on momentum and on angular momentum L (world frame, so a torque-free body keeps L
     exactly); the orientation advances by an explicit midpoint rule with L held at its half-step value.

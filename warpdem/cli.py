@@ -83,7 +83,7 @@ def _sets(items) -> dict:
 def cmd_run(args) -> int:
     _quiet_warp()
     from . import rigs
-    from .runner import RunStopped, run_scene
+    from .runner import RunStopped, check_stop_after, run_scene
     from .scene import StageError
 
     try:
@@ -92,11 +92,10 @@ def cmd_run(args) -> int:
         print(f"error: {e}", file=sys.stderr)
         return 2
     out = args.out or f"runs/{spec.rig}"
-    if args.stop_after and not args.no_frames:
-        print("error: --stop-after needs --no-frames (it stops by saving a checkpoint)", file=sys.stderr)
-        return 2
-    if args.stop_after < 0:
-        print(f"error: --stop-after = {args.stop_after} is not allowed; expected seconds >= 0", file=sys.stderr)
+    try:
+        check_stop_after(args.stop_after, out, frames=not args.no_frames)
+    except ValueError as e:
+        print(f"error: --stop-after: {e}", file=sys.stderr)
         return 2
     bar = None
     try:

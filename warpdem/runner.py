@@ -7,10 +7,10 @@ the host reads positions, velocities and the walls' running impulses once.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
-import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -124,6 +124,15 @@ class RunStopped(RuntimeError):
                          f"checkpoint saved to {checkpoint}; run the same command again to resume")
 
 
+def check_stop_after(stop_after: float, out_dir, frames: bool) -> None:
+    """Raise ValueError unless ``stop_after`` [s] is usable: >= 0, and > 0 only with an out_dir and no frames."""
+    if not (math.isfinite(stop_after) and stop_after >= 0):
+        raise ValueError(f"stop_after = {stop_after!r} is not allowed; expected wall seconds >= 0 (0: no limit)")
+    if stop_after > 0 and (out_dir is None or frames):
+        raise ValueError("stop_after needs out_dir and frames=False, i.e. warpdem run --no-frames "
+                         "(it stops by saving a checkpoint)")
+
+
 def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: int = 1,
               variations: dict | None = None, frames: bool = True, progress=None, quiet: bool = False,
               world_seeds=None, checkpoint_every: float = 0.0, stop_after: float = 0.0) -> RunResult:
@@ -148,6 +157,7 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     """
     from .solver import Solver, SolverOptions
 
+    check_stop_after(stop_after, out_dir, frames)
     t_wall0 = time.perf_counter()
     builder = build(spec, world_count, variations, world_seeds)
     model = builder.finalize(device)
@@ -188,11 +198,6 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     settled_since = 0
     settle_needed = 3
     eps = 0.5 * solver.dt
-    if stop_after < 0 or not math.isfinite(stop_after):
-        raise ValueError(f"run_scene: stop_after = {stop_after!r} is not allowed; expected wall seconds >= 0 "
-                         "(0: no limit)")
-    if stop_after > 0 and (out is None or writer is not None):
-        raise ValueError("run_scene: stop_after needs out_dir and frames=False (it stops by saving a checkpoint)")
     ckpt = (out / "checkpoint.npz"
             if (out is not None and (checkpoint_every > 0 or stop_after > 0) and writer is None) else None)
     fingerprint = _fingerprint(spec, device, world_count, variations, world_seeds)

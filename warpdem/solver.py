@@ -110,9 +110,10 @@ class Solver:
         self._blowup = wp.array([2**31 - 1, 2**31 - 1], dtype=int, device=model.device)
         self._spare: State | None = None
         # host copy of the rebuild flag, read between captured steps on CUDA (pinned: an async 4-byte copy)
-        self._flag_host = wp.empty(1, dtype=int, device="cpu", pinned=wp.get_device(model.device).is_cuda)
+        self._is_cuda = wp.get_device(model.device).is_cuda
+        self._flag_host = wp.empty(1, dtype=int, device="cpu", pinned=self._is_cuda)
         self._graph = None
-        self._clump_lanes = _st.CLUMP_LANES if wp.get_device(model.device).is_cuda else 1
+        self._clump_lanes = _st.CLUMP_LANES if self._is_cuda else 1
         self.cuda_graph_steps = CUDA_GRAPH_STEPS
         """Steps per replayed CUDA graph (even); 0 reads the rebuild flag on the host every step instead."""
 
@@ -337,7 +338,7 @@ class Solver:
             self._step(a, b, control, contacts)
             a, b = b, a
             done = 1
-        if use_graph and wp.get_device(self.model.device).is_cuda and self.cuda_graph_steps and steps - done >= 2:
+        if use_graph and self._is_cuda and self.cuda_graph_steps and steps - done >= 2:
             # CUDA: blocks of cuda_graph_steps steps replayed as one graph with the rebuild as a conditional node
             # (the cell grid is built by plain kernels), so the host never waits on the GPU between blocks
             block = self.cuda_graph_steps
@@ -366,7 +367,7 @@ class Solver:
             # the remainder (fewer than a block) is stepped eagerly below, parity kept
             a.time = t0 + done * self.dt
             a.step = step0 + done
-        if use_graph and wp.get_device(self.model.device).is_cuda and not self.cuda_graph_steps:
+        if use_graph and self._is_cuda and not self.cuda_graph_steps:
             # fallback: the host reads the rebuild flag each step (one 4-byte copy) and replays a captured step
             key = (id(a), id(b), id(contacts), id(control))
             if self._graph is None or self._graph[0] != key:
@@ -391,7 +392,7 @@ class Solver:
             if parity:
                 a, b = b, a
             a.time, a.step, a.half_step = t0 + steps * self.dt, step0 + steps, True
-        elif use_graph and not wp.get_device(self.model.device).is_cuda and steps - done >= 2:
+        elif use_graph and not self._is_cuda and steps - done >= 2:
             key = (id(a), id(b), id(contacts), id(control))
             if self._graph is None or self._graph[0] != key:
                 before = int(self._clock.numpy()[0])

@@ -110,6 +110,12 @@ def run_batch(study: sp.StudySpec, rows: list[dict], device: str, progress=None,
     return out
 
 
+def _time_left(stop_after: float, t0: float) -> float:
+    """Wall seconds left of ``stop_after`` since ``t0`` (perf_counter), at least 1 ns so a launch always
+    starts and checkpoints; 0 (no limit) stays 0."""
+    return max(stop_after - (time.perf_counter() - t0), 1e-9) if stop_after > 0 else 0.0
+
+
 def _progress_bar(total: int, initial: int, desc: str, enabled: bool):
     if not enabled:
         return None
@@ -179,13 +185,12 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
         tb = time.perf_counter()
         launch = out / "launches" / _launch_id(batch)
         # the first launch of a call always starts (and saves a checkpoint at least), so every call advances
-        left = max(stop_after - (tb - t0), 1e-9) if stop_after > 0 else 0.0
         if stop_after > 0 and k > 0 and tb - t0 >= stop_after:
             stopped = f"the wall-time limit ({stop_after:.0f} s) came before launch {k + 1} of {len(batches)}"
             break
         try:
             records = run_batch(study, batch, device, progress=tick, out_dir=launch,
-                                checkpoint_every=checkpoint_every, stop_after=left)
+                                checkpoint_every=checkpoint_every, stop_after=_time_left(stop_after, t0))
         except RunStopped as e:
             stopped = f"launch {k + 1} of {len(batches)}: {e}"
             break
@@ -214,10 +219,10 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
     if analyze_after and study.analysis.model != "none":
         result["analysis"] = analyze(out, study)
         if verify and study.verification.replicates > 0:
-            left = max(stop_after - (time.perf_counter() - t0), 1e-9) if stop_after > 0 else 0.0
             try:
                 result["verification"] = run_verification(study, out, result["analysis"], device, progress, log,
-                                                           checkpoint_every=checkpoint_every, stop_after=left)
+                                                           checkpoint_every=checkpoint_every,
+                                                           stop_after=_time_left(stop_after, t0))
             except RunStopped as e:
                 result["stopped"] = f"verification: {e}"
                 log(f"{study.name}: stopped in the verification runs; {e}")
