@@ -126,6 +126,17 @@ def wall_contact(
 
 
 @wp.func
+def contact_mass(m: float, i: int, sphere_clump: wp.array[int], clump_contacts: wp.array[int], share: int):
+    """Mass [kg] one contact of sphere ``i`` damps: its body mass ``m``, divided for a clump sphere (with
+    ``share``) by the clump's sub-sphere contacts at the last step, since those contacts act in parallel on one
+    body; a sphere's contacts keep the whole mass (the usual convention, e.g. EDEM's)."""
+    c = sphere_clump[i]
+    if share == 0 or c < 0:
+        return m
+    return m / float(wp.max(clump_contacts[c], 1))
+
+
+@wp.func
 def flag_blowup(blowup_out: wp.array[int], step: int, i: int):
     """Record the first step with a blow-up and the lowest sphere index flagged in it."""
     first = blowup_out[1]
@@ -142,6 +153,8 @@ def step_spheres(
     sphere_world: wp.array[int],
     sphere_clump: wp.array[int],
     sphere_body_volume: wp.array[float],
+    clump_contacts: wp.array[int],
+    share_mass: int,
     sphere_wall: wp.array[int],
     material_density: wp.array2d[float],
     pair_params: wp.array3d[PairParams],
@@ -195,6 +208,7 @@ def step_spheres(
     face_impact_count_out: wp.array2d[int],
     face_impact_energy_out: wp.array2d[wp.float64],
     face_impact_speed_out: wp.array2d[float],
+    contact_count_out: wp.array[int],
     rebuild_out: wp.array[int],
     blowup_out: wp.array[int],
 ):
@@ -212,14 +226,17 @@ def step_spheres(
             w_out[i] = w_i
         f_out[i] = wp.vec3(0.0)
         t_out[i] = wp.vec3(0.0)
+        contact_count_out[i] = 0
         return
     world = sphere_world[i]
     mat_i = sphere_material[i]
     r_i = sphere_radius[i]
     mw = world % material_density.shape[0]
     pw = world % pair_params.shape[0]
-    # the mass that resists a contact is the body's: the sphere's, or its whole clump's
+    # the body's mass (a sphere's, or its whole clump's), and the share of it one contact damps
     m_i = material_density[mw, mat_i] * sphere_body_volume[i]
+    mc_i = contact_mass(m_i, i, sphere_clump, clump_contacts, share_mass)
+    touching = int(0)
 
     f = wp.vec3(0.0)
     t = wp.vec3(0.0)
@@ -238,6 +255,9 @@ def step_spheres(
         if overlap <= 0.0 and neighbor_aux[k, i] == 0.0:
             neighbor_spring[k, i] = wp.vec3(0.0)
             neighbor_roll[k, i] = wp.vec3(0.0)
+            # a contact due within one step counts already, so a clump's mass is shared from its first step
+            if dist > 0.0 and overlap + dt * wp.dot(v_in[a] - v_in[b], d / dist) > 0.0:
+                touching += 1
             continue
         if dist <= 0.0 or active_in[j] == 0:
             neighbor_spring[k, i] = wp.vec3(0.0)
@@ -247,8 +267,10 @@ def step_spheres(
         n = d / dist
         mat_a = sphere_material[a]
         mat_b = sphere_material[b]
-        m_a = material_density[mw, mat_a] * sphere_body_volume[a]
-        m_b = material_density[mw, mat_b] * sphere_body_volume[b]
+        m_a = contact_mass(material_density[mw, mat_a] * sphere_body_volume[a], a, sphere_clump, clump_contacts,
+                           share_mass)
+        m_b = contact_mass(material_density[mw, mat_b] * sphere_body_volume[b], b, sphere_clump, clump_contacts,
+                           share_mass)
         r_star = r_a * r_b / (r_a + r_b)
         m_star = m_a * m_b / (m_a + m_b)
         arm_a = r_a - 0.5 * overlap
@@ -266,6 +288,7 @@ def step_spheres(
             continue
         neighbor_spring[k, i] = xi
         neighbor_aux[k, i] = aux
+        touching += 1
         i_roll = 0.0
         if p.rolling_model == ROLLING_EPSD:
             i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
@@ -295,18 +318,21 @@ def step_spheres(
         n_p = plane_normal[p_id]
         gap = wp.dot(x_i - plane_point[p_id], n_p)
         p = pair_params[pw, mat_i, plane_material[p_id]]
-        active, f_a, t_a, xi, roll, aux = wall_contact(r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, m_i, p,
+        active, f_a, t_a, xi, roll, aux = wall_contact(r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p,
                                                        plane_spring[p_id, i], plane_roll[p_id, i],
                                                        plane_aux[p_id, i], dt)
         plane_spring[p_id, i] = xi
         plane_roll[p_id, i] = roll
         plane_aux[p_id, i] = aux
         if active != 0:
+            touching += 1
             f += f_a
             t += t_a
             q = x_i - gap * n_p
             wp.atomic_add(wall_f_out, p_id, i % WALL_LANES, -f_a)
             wp.atomic_add(wall_t_out, p_id, i % WALL_LANES, wp.cross(q - plane_point[p_id], -f_a))
+        elif r_i - gap - dt * wp.dot(v_i, n_p) > 0.0:
+            touching += 1
 
     # triangle-mesh walls (rigid, possibly moving)
     plane_total = plane_point.shape[0]
@@ -328,12 +354,13 @@ def step_spheres(
         origin = wp.transform_get_translation(wall_pose[wall])
         v_wall = wall_v[wall] + wp.cross(wall_w[wall], q - origin)
         p = pair_params[pw, mat_i, wall_material[wall]]
-        active, f_a, t_a, xi, roll, aux = wall_contact(r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, m_i, p,
+        active, f_a, t_a, xi, roll, aux = wall_contact(r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p,
                                                        mesh_spring[k, i], mesh_roll[k, i], mesh_aux[k, i], dt)
         mesh_spring[k, i] = xi
         mesh_roll[k, i] = roll
         mesh_aux[k, i] = aux
         if active != 0:
+            touching += 1
             f += f_a
             t += t_a
             wp.atomic_add(wall_f_out, plane_total + wall, i % WALL_LANES, -f_a)
@@ -347,9 +374,12 @@ def step_spheres(
                 wp.atomic_add(face_impact_count_out, fw, face, 1)
                 wp.atomic_add(face_impact_energy_out, fw, face, wp.float64(0.5 * m_i * approach * approach))
                 wp.atomic_max(face_impact_speed_out, fw, face, approach)
+        elif r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0:
+            touching += 1
 
     f_out[i] = f
     t_out[i] = t
+    contact_count_out[i] = touching
     if clump >= 0:
         return
 
@@ -403,6 +433,7 @@ def integrate_clumps(
     active_in: wp.array[int],
     sphere_f: wp.array[wp.vec3],
     sphere_t: wp.array[wp.vec3],
+    sphere_contacts: wp.array[int],
     x_in: wp.array[wp.vec3],
     q_in: wp.array[wp.quat],
     v_in: wp.array[wp.vec3],
@@ -425,6 +456,7 @@ def integrate_clumps(
     sphere_x_out: wp.array[wp.vec3],
     sphere_v_out: wp.array[wp.vec3],
     sphere_w_out: wp.array[wp.vec3],
+    clump_contacts_out: wp.array[int],
     rebuild_out: wp.array[int],
     blowup_out: wp.array[int],
 ):
@@ -450,6 +482,7 @@ def integrate_clumps(
             q_out[c] = q_c
             v_out[c] = v_in[c]
             angmom_out[c] = angmom_in[c]
+            clump_contacts_out[c] = 0
         for s in range(first + lane, last, lanes):
             sphere_x_out[s] = x_c + wp.quat_rotate(q_c, sphere_offset[s])
         return
@@ -460,12 +493,15 @@ def integrate_clumps(
 
     f_lane = wp.vec3(0.0)
     t_lane = wp.vec3(0.0)
+    n_lane = int(0)
     for s in range(first + lane, last, lanes):
         fs = sphere_f[s]
         f_lane += fs
         t_lane += sphere_t[s] + wp.cross(wp.quat_rotate(q_c, sphere_offset[s]), fs)
+        n_lane += sphere_contacts[s]
     f = wp.tile_extract(wp.tile_sum(wp.tile(f_lane, preserve_type=True)), 0)
     t = wp.tile_extract(wp.tile_sum(wp.tile(t_lane, preserve_type=True)), 0)
+    touching = wp.tile_extract(wp.tile_sum(wp.tile(n_lane)), 0)
 
     g = world_gravity[world % world_gravity.shape[0]]
     v_new = v_in[c] + kick * (f / mass + g)
@@ -477,6 +513,7 @@ def integrate_clumps(
     q_new = quat_step(q_c, w_mid, dt)
 
     if lane == 0:
+        clump_contacts_out[c] = touching
         f_out[c] = f
         t_out[c] = t
         x_out[c] = x_new

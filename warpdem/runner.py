@@ -150,8 +150,10 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             also forces a neighbour-list rebuild, which the resumed run repeats, so the resumed run is
             bit-identical to one that was never interrupted.
         stop_after: with ``out_dir`` and no frames, save a checkpoint and raise :class:`RunStopped` at the
-            first output tick after this many wall seconds from the call's start (0: never), e.g. to fit
-            a job into a batch system's or a device's time limit; the same call resumes the run.
+            last output tick from which one more tick (taken to last as long as the one just run) would end
+            past this many wall seconds from the call's start (0: never), e.g. to fit a job into a batch
+            system's or a device's time limit; the same call resumes the run. The first tick always runs,
+            and the save itself is not predicted: leave room for it (seconds per GB written).
     Returns:
         RunResult with one metrics dict per world.
     """
@@ -212,6 +214,7 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     if writer is not None:
         _frame(writer, model, state, h, spec, 0.0)
     while state.time < run.duration - eps:
+        t_tick = time.perf_counter()
         t_next = min(state.time + run.output_interval, run.duration)
         for te in phase_ends:
             if state.time + eps < te < t_next - eps:
@@ -250,7 +253,9 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             if settled_since >= settle_needed:
                 stop_reason = "settled"
                 break
-        stopping = stop_after > 0 and time.perf_counter() - t_wall0 >= stop_after
+        now = time.perf_counter()
+        # a dense bed can take a minute per tick on the GPU: stop before the tick that would overrun
+        stopping = stop_after > 0 and (now - t_wall0) + (now - t_tick) >= stop_after
         if ckpt is not None and (stopping or (checkpoint_every > 0 and time.perf_counter() - t_ckpt >= checkpoint_every)):
             _save_checkpoint(ckpt, fingerprint, state, contacts, {
                 "series": series, "impulse_prev": impulse_prev, "t_prev": t_prev, "phase_snap": phase_snap,

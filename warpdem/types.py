@@ -373,6 +373,9 @@ class Contacts:
     """1 when a rebuild is due, shape (1,), int32."""
     overflow: wp.array
     """Overflow bits (see :class:`Overflow`) since the last check, shape (1,), int32."""
+    clump_contacts: wp.array
+    """Active sub-sphere contacts of each clump at the last step, shape (max(clump_count, 1),), int32: the next
+    step shares the clump's mass among them in the contact laws (``SolverOptions.clump_contact_mass``)."""
     scratch: dict = field(default_factory=dict)
     """Second buffers of the history arrays, written by a rebuild and copied back."""
     cells: dict = field(default_factory=dict)

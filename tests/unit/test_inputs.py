@@ -81,6 +81,8 @@ def test_solver_options_checked():
         wd.SolverOptions(dt_fraction=1.5)
     with pytest.raises(ValueError, match="dt = -1"):
         wd.SolverOptions(dt=-1)
+    with pytest.raises(ValueError, match="clump_contact_mass = 'half'.*\"shared\" or \"body\""):
+        wd.SolverOptions(clump_contact_mass="half")
 
 
 def test_large_dt_warns():

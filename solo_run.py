@@ -1,0 +1,18 @@
+"""Run one BBD design point alone on CUDA to completion; print wall time, steps and its angle of repose."""
+import sys, time, json
+import warp as wp
+wp.config.quiet = True
+from warpdem.study import spec as sp
+from warpdem.study import execute as ex
+study = sp.load_study(sys.argv[1])
+table = sp.design_table(study)
+runs = [int(a) for a in sys.argv[2].split(",")]
+rows = [{"run": int(r["run"]), "point_id": r["point_id"], "world_seed": int(r["world_seed"]),
+         "overrides": sp.run_overrides(study, r)} for _, r in table.iterrows() if int(r["run"]) in runs]
+t0 = time.perf_counter()
+recs = ex.run_batch(study, rows, "cuda")
+wall = time.perf_counter() - t0
+for row, rec in zip(rows, recs):
+    print("run", row["run"], {k: v for k, v in row["overrides"].items() if "." in k}, "responses", rec["responses"], flush=True)
+print("info", json.dumps(recs[0]["info"], default=str)[:600])
+print(f"wall {wall:.1f} s")
