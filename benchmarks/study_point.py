@@ -1,4 +1,10 @@
-"""Run one BBD design point alone on CUDA to completion; print wall time, steps and its angle of repose."""
+"""Run some design points of a study as one launch, without the study's folder; print their responses and the
+wall time. For diagnosing one world of a batch: a world gives the same numbers alone as in its batch when every
+world releases the same particles.
+
+    python benchmarks/study_point.py studies/pellets_bbd.toml 2        # design run 2 on CUDA
+    python benchmarks/study_point.py studies/pellets_bbd.toml 1,2 cpu
+"""
 import sys, time, json
 import warp as wp
 wp.config.quiet = True
@@ -10,7 +16,7 @@ runs = [int(a) for a in sys.argv[2].split(",")]
 rows = [{"run": int(r["run"]), "point_id": r["point_id"], "world_seed": int(r["world_seed"]),
          "overrides": sp.run_overrides(study, r)} for _, r in table.iterrows() if int(r["run"]) in runs]
 t0 = time.perf_counter()
-recs = ex.run_batch(study, rows, "cuda")
+recs = ex.run_batch(study, rows, sys.argv[3] if len(sys.argv) > 3 else "cuda")
 wall = time.perf_counter() - t0
 for row, rec in zip(rows, recs):
     print("run", row["run"], {k: v for k, v in row["overrides"].items() if "." in k}, "responses", rec["responses"], flush=True)
