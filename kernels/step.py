@@ -25,6 +25,8 @@ BLOWUP_NONE = wp.constant(2147483647)
 WALL_LANES = wp.constant(256)
 """Partial accumulators per wall: spreads the force atomics of thousands of spheres on one wall."""
 CLUMP_LANES = 32
+PARTNER_SLOTS = wp.constant(16)
+"""Partner bodies a clump's table holds (a power of two): compact clumps touch at most about 14 bodies."""
 """Threads per clump in integrate_clumps on CUDA (a tiled launch; Warp runs a CPU tile as one thread)."""
 
 
@@ -126,14 +128,71 @@ def wall_contact(
 
 
 @wp.func
-def contact_mass(m: float, i: int, sphere_clump: wp.array[int], clump_contacts: wp.array[int], share: int):
-    """Mass [kg] one contact of sphere ``i`` damps: its body mass ``m``, divided for a clump sphere (with
-    ``share``) by the clump's sub-sphere contacts at the last step, since those contacts act in parallel on one
-    body; a sphere's contacts keep the whole mass (the usual convention, e.g. EDEM's)."""
+def body_key(i: int, sphere_clump: wp.array[int], clump_total: int):
+    """Key of the body sphere ``i`` belongs to in the partner tables: its clump, or the sphere itself."""
     c = sphere_clump[i]
+    if c >= 0:
+        return c
+    return clump_total + i
+
+
+@wp.func
+def partner_slot(key: int, s: int):
+    """Probe ``s`` of ``key`` in a clump's table of PARTNER_SLOTS slots (a power of two)."""
+    h = int((wp.uint32(key) * wp.uint32(2654435761)) >> wp.uint32(16))
+    return (h + s) & (PARTNER_SLOTS - 1)
+
+
+@wp.func
+def partner_find(keys: wp.array[int], counts: wp.array[int], c: int, key: int):
+    """Sub-contacts clump ``c`` had with body ``key`` at the last step (0: none, or its table was full)."""
+    for s in range(PARTNER_SLOTS):
+        t = c * PARTNER_SLOTS + partner_slot(key, s)
+        k = keys[t]
+        if k == key:
+            return counts[t]
+        if k == -1:
+            return 0
+    return 0
+
+
+@wp.func
+def partner_add(keys: wp.array[int], counts: wp.array[int], c: int, key: int, n: int):
+    """Add ``n`` sub-contacts of clump ``c`` with body ``key`` (a full table drops them: that partner then
+    damps with the whole mass, right for the single-touch partners that fill a table, such as fine spheres)."""
+    for s in range(PARTNER_SLOTS):
+        t = c * PARTNER_SLOTS + partner_slot(key, s)
+        k = keys[t]
+        if k == -1:
+            k = wp.atomic_cas(keys, t, -1, key)
+            if k == -1:
+                k = key
+        if k == key:
+            wp.atomic_add(counts, t, n)
+            return
+
+
+@wp.func
+def partner_tally(keys: wp.array[int], counts: wp.array[int], c: int, run_key: int, run_n: int, key: int):
+    """Count one sub-contact of clump ``c`` (-1: none counted) with body ``key``; a run of them with the same
+    body (a sphere's sorted list holds each clump's spheres together) is added to the table at once."""
+    if c < 0:
+        return run_key, run_n
+    if key == run_key:
+        return run_key, run_n + 1
+    if run_n > 0:
+        partner_add(keys, counts, c, run_key, run_n)
+    return key, 1
+
+
+@wp.func
+def contact_mass(m: float, c: int, key: int, keys: wp.array[int], counts: wp.array[int], share: int):
+    """Mass [kg] one contact damps for a sphere of body mass ``m`` in clump ``c`` (-1: a plain sphere) touching
+    body ``key``: with ``share``, a clump's mass divided by its sub-contacts with that body at the last step,
+    since they act in parallel as one touch; a plain sphere's contacts keep the whole mass (EDEM's convention)."""
     if share == 0 or c < 0:
         return m
-    return m / float(wp.max(clump_contacts[c], 1))
+    return m / float(wp.max(partner_find(keys, counts, c, key), 1))
 
 
 @wp.func
@@ -153,7 +212,8 @@ def step_spheres(
     sphere_world: wp.array[int],
     sphere_clump: wp.array[int],
     sphere_body_volume: wp.array[float],
-    clump_contacts: wp.array[int],
+    partner_key: wp.array[int],
+    partner_count: wp.array[int],
     share_mass: int,
     sphere_wall: wp.array[int],
     material_density: wp.array2d[float],
@@ -208,7 +268,8 @@ def step_spheres(
     face_impact_count_out: wp.array2d[int],
     face_impact_energy_out: wp.array2d[wp.float64],
     face_impact_speed_out: wp.array2d[float],
-    contact_count_out: wp.array[int],
+    partner_key_out: wp.array[int],
+    partner_count_out: wp.array[int],
     rebuild_out: wp.array[int],
     blowup_out: wp.array[int],
 ):
@@ -226,7 +287,6 @@ def step_spheres(
             w_out[i] = w_i
         f_out[i] = wp.vec3(0.0)
         t_out[i] = wp.vec3(0.0)
-        contact_count_out[i] = 0
         return
     world = sphere_world[i]
     mat_i = sphere_material[i]
@@ -235,8 +295,14 @@ def step_spheres(
     pw = world % pair_params.shape[0]
     # the body's mass (a sphere's, or its whole clump's), and the share of it one contact damps
     m_i = material_density[mw, mat_i] * sphere_body_volume[i]
-    mc_i = contact_mass(m_i, i, sphere_clump, clump_contacts, share_mass)
-    touching = int(0)
+    clump_total = partner_key.shape[0] // PARTNER_SLOTS
+    wall_key0 = clump_total + sphere_radius.shape[0]
+    # sub-contacts of this sphere's clump per partner body, for the next step's mass shares
+    tally = -1
+    if share_mass != 0:
+        tally = clump
+    run_key = int(-1)
+    run_n = int(0)
 
     f = wp.vec3(0.0)
     t = wp.vec3(0.0)
@@ -257,7 +323,8 @@ def step_spheres(
             neighbor_roll[k, i] = wp.vec3(0.0)
             # a contact due within one step counts already, so a clump's mass is shared from its first step
             if dist > 0.0 and overlap + dt * wp.dot(v_in[a] - v_in[b], d / dist) > 0.0:
-                touching += 1
+                run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n,
+                                               body_key(j, sphere_clump, clump_total))
             continue
         if dist <= 0.0 or active_in[j] == 0:
             neighbor_spring[k, i] = wp.vec3(0.0)
@@ -267,10 +334,12 @@ def step_spheres(
         n = d / dist
         mat_a = sphere_material[a]
         mat_b = sphere_material[b]
-        m_a = contact_mass(material_density[mw, mat_a] * sphere_body_volume[a], a, sphere_clump, clump_contacts,
-                           share_mass)
-        m_b = contact_mass(material_density[mw, mat_b] * sphere_body_volume[b], b, sphere_clump, clump_contacts,
-                           share_mass)
+        key_a = body_key(a, sphere_clump, clump_total)
+        key_b = body_key(b, sphere_clump, clump_total)
+        m_a = contact_mass(material_density[mw, mat_a] * sphere_body_volume[a], sphere_clump[a], key_b,
+                           partner_key, partner_count, share_mass)
+        m_b = contact_mass(material_density[mw, mat_b] * sphere_body_volume[b], sphere_clump[b], key_a,
+                           partner_key, partner_count, share_mass)
         r_star = r_a * r_b / (r_a + r_b)
         m_star = m_a * m_b / (m_a + m_b)
         arm_a = r_a - 0.5 * overlap
@@ -288,7 +357,8 @@ def step_spheres(
             continue
         neighbor_spring[k, i] = xi
         neighbor_aux[k, i] = aux
-        touching += 1
+        run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n,
+                                       body_key(j, sphere_clump, clump_total))
         i_roll = 0.0
         if p.rolling_model == ROLLING_EPSD:
             i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
@@ -318,21 +388,22 @@ def step_spheres(
         n_p = plane_normal[p_id]
         gap = wp.dot(x_i - plane_point[p_id], n_p)
         p = pair_params[pw, mat_i, plane_material[p_id]]
+        key_w = wall_key0 + p_id
+        mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
         active, f_a, t_a, xi, roll, aux = wall_contact(r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p,
                                                        plane_spring[p_id, i], plane_roll[p_id, i],
                                                        plane_aux[p_id, i], dt)
         plane_spring[p_id, i] = xi
         plane_roll[p_id, i] = roll
         plane_aux[p_id, i] = aux
+        if active != 0 or r_i - gap - dt * wp.dot(v_i, n_p) > 0.0:
+            run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
         if active != 0:
-            touching += 1
             f += f_a
             t += t_a
             q = x_i - gap * n_p
             wp.atomic_add(wall_f_out, p_id, i % WALL_LANES, -f_a)
             wp.atomic_add(wall_t_out, p_id, i % WALL_LANES, wp.cross(q - plane_point[p_id], -f_a))
-        elif r_i - gap - dt * wp.dot(v_i, n_p) > 0.0:
-            touching += 1
 
     # triangle-mesh walls (rigid, possibly moving)
     plane_total = plane_point.shape[0]
@@ -354,13 +425,16 @@ def step_spheres(
         origin = wp.transform_get_translation(wall_pose[wall])
         v_wall = wall_v[wall] + wp.cross(wall_w[wall], q - origin)
         p = pair_params[pw, mat_i, wall_material[wall]]
+        key_w = wall_key0 + plane_total + wall
+        mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
         active, f_a, t_a, xi, roll, aux = wall_contact(r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p,
                                                        mesh_spring[k, i], mesh_roll[k, i], mesh_aux[k, i], dt)
         mesh_spring[k, i] = xi
         mesh_roll[k, i] = roll
         mesh_aux[k, i] = aux
+        if active != 0 or r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0:
+            run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
         if active != 0:
-            touching += 1
             f += f_a
             t += t_a
             wp.atomic_add(wall_f_out, plane_total + wall, i % WALL_LANES, -f_a)
@@ -374,12 +448,11 @@ def step_spheres(
                 wp.atomic_add(face_impact_count_out, fw, face, 1)
                 wp.atomic_add(face_impact_energy_out, fw, face, wp.float64(0.5 * m_i * approach * approach))
                 wp.atomic_max(face_impact_speed_out, fw, face, approach)
-        elif r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0:
-            touching += 1
 
     f_out[i] = f
     t_out[i] = t
-    contact_count_out[i] = touching
+    if run_n > 0:
+        partner_add(partner_key_out, partner_count_out, tally, run_key, run_n)
     if clump >= 0:
         return
 
@@ -433,7 +506,6 @@ def integrate_clumps(
     active_in: wp.array[int],
     sphere_f: wp.array[wp.vec3],
     sphere_t: wp.array[wp.vec3],
-    sphere_contacts: wp.array[int],
     x_in: wp.array[wp.vec3],
     q_in: wp.array[wp.quat],
     v_in: wp.array[wp.vec3],
@@ -456,7 +528,6 @@ def integrate_clumps(
     sphere_x_out: wp.array[wp.vec3],
     sphere_v_out: wp.array[wp.vec3],
     sphere_w_out: wp.array[wp.vec3],
-    clump_contacts_out: wp.array[int],
     rebuild_out: wp.array[int],
     blowup_out: wp.array[int],
 ):
@@ -482,7 +553,6 @@ def integrate_clumps(
             q_out[c] = q_c
             v_out[c] = v_in[c]
             angmom_out[c] = angmom_in[c]
-            clump_contacts_out[c] = 0
         for s in range(first + lane, last, lanes):
             sphere_x_out[s] = x_c + wp.quat_rotate(q_c, sphere_offset[s])
         return
@@ -493,15 +563,12 @@ def integrate_clumps(
 
     f_lane = wp.vec3(0.0)
     t_lane = wp.vec3(0.0)
-    n_lane = int(0)
     for s in range(first + lane, last, lanes):
         fs = sphere_f[s]
         f_lane += fs
         t_lane += sphere_t[s] + wp.cross(wp.quat_rotate(q_c, sphere_offset[s]), fs)
-        n_lane += sphere_contacts[s]
     f = wp.tile_extract(wp.tile_sum(wp.tile(f_lane, preserve_type=True)), 0)
     t = wp.tile_extract(wp.tile_sum(wp.tile(t_lane, preserve_type=True)), 0)
-    touching = wp.tile_extract(wp.tile_sum(wp.tile(n_lane)), 0)
 
     g = world_gravity[world % world_gravity.shape[0]]
     v_new = v_in[c] + kick * (f / mass + g)
@@ -513,7 +580,6 @@ def integrate_clumps(
     q_new = quat_step(q_c, w_mid, dt)
 
     if lane == 0:
-        clump_contacts_out[c] = touching
         f_out[c] = f
         t_out[c] = t
         x_out[c] = x_new
@@ -535,6 +601,16 @@ def integrate_clumps(
             flag_blowup(blowup_out, clock[0], first)
     if moved > 0.5 * skin:
         rebuild_out[0] = 1
+
+
+@wp.kernel
+def roll_partners(key_next: wp.array[int], count_next: wp.array[int], key: wp.array[int], count: wp.array[int]):
+    """The partner tables just filled become the ones the next step reads; the fill tables are emptied."""
+    t = wp.tid()
+    key[t] = key_next[t]
+    count[t] = count_next[t]
+    key_next[t] = -1
+    count_next[t] = 0
 
 
 @wp.kernel

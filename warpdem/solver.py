@@ -34,8 +34,9 @@ class SolverOptions:
             when its normal approach speed is at least this [m/s]; it keeps resting contacts that chatter
             out of the impact statistics.
         clump_contact_mass: the mass a clump's sub-sphere contact damps: "shared" (default) divides the
-            clump's mass by its number of sub-sphere contacts at the previous step, so a flat face whose n
-            spheres touch at once rebounds with the pair's restitution and the explicit step stays stable;
+            clump's mass by its number of sub-sphere contacts with the same partner body at the previous
+            step, so a flat face whose n spheres touch at once rebounds with the pair's restitution and the
+            explicit step stays stable;
             "body" gives every sub-contact the whole clump mass (EDEM's convention): such a face is then
             about sqrt(n) times overdamped (a 3 x 3 raft dropped flat rebounds at 0.02 for e = 0.45) and,
             with tens of sub-contacts, the damping outgrows the time step and the clump spins up.
@@ -123,8 +124,10 @@ class Solver:
         self._flag_host = wp.empty(1, dtype=int, device="cpu", pinned=self._is_cuda)
         self._graph = None
         self._clump_lanes = _st.CLUMP_LANES if self._is_cuda else 1
-        self._sphere_contacts = wp.zeros(model.sphere_count, dtype=int, device=model.device)
-        """Active contacts of each sphere in the step just taken (summed per clump by integrate_clumps)."""
+        slots = max(model.clump_count, 1) * _st.PARTNER_SLOTS
+        self._partner_key_next = wp.full(slots, -1, dtype=int, device=model.device)
+        self._partner_count_next = wp.zeros(slots, dtype=int, device=model.device)
+        """Partner tables the step being taken fills (Contacts.partner_* hold the last step's)."""
         self.cuda_graph_steps = CUDA_GRAPH_STEPS
         """Steps per replayed CUDA graph (even); 0 reads the rebuild flag on the host every step instead."""
 
@@ -168,7 +171,8 @@ class Solver:
             build_x=wp.zeros(n, dtype=wp.vec3, device=dev),
             rebuild=wp.ones(1, dtype=int, device=dev),
             overflow=wp.zeros(1, dtype=int, device=dev),
-            clump_contacts=wp.zeros(max(m.clump_count, 1), dtype=int, device=dev),
+            partner_key=wp.full(max(m.clump_count, 1) * _st.PARTNER_SLOTS, -1, dtype=int, device=dev),
+            partner_count=wp.zeros(max(m.clump_count, 1) * _st.PARTNER_SLOTS, dtype=int, device=dev),
         )
         for name in ("neighbor_count", "neighbor_index", "neighbor_spring", "neighbor_roll", "neighbor_aux",
                      "mesh_count", "mesh_face", "mesh_spring", "mesh_roll", "mesh_aux"):
@@ -268,7 +272,7 @@ class Solver:
             dim=m.sphere_count,
             inputs=[
                 m.sphere_radius, m.sphere_material, m.sphere_world, m.sphere_clump, m.sphere_body_volume,
-                c.clump_contacts, int(self.options.clump_contact_mass == "shared"), m.sphere_wall,
+                c.partner_key, c.partner_count, int(self.options.clump_contact_mass == "shared"), m.sphere_wall,
                 m.material_density, m.pair_params, m.world_gravity,
                 m.plane_point, m.plane_normal, m.plane_material, m.plane_world,
                 m.wall_mesh, m.wall_face_start, m.triangle_wall, m.wall_material,
@@ -282,10 +286,15 @@ class Solver:
             outputs=[
                 state_out.sphere_x, state_out.sphere_v, state_out.sphere_w, state_out.sphere_f, state_out.sphere_t,
                 self._wall_lanes, self._wall_t_lanes, state_in.face_impact_count, state_in.face_impact_energy,
-                state_in.face_impact_speed, self._sphere_contacts, c.rebuild, self._blowup,
+                state_in.face_impact_speed, self._partner_key_next, self._partner_count_next, c.rebuild,
+                self._blowup,
             ],
             device=m.device,
         )
+        if m.clump_count and self.options.clump_contact_mass == "shared":
+            wp.launch(_st.roll_partners, dim=self._partner_key_next.shape[0],
+                      inputs=[self._partner_key_next, self._partner_count_next],
+                      outputs=[c.partner_key, c.partner_count], device=m.device)
         if m.clump_count:
             wp.launch_tiled(
                 _st.integrate_clumps,
@@ -294,14 +303,14 @@ class Solver:
                 inputs=[
                     m.clump_sphere_start, m.clump_sphere_end, m.clump_material, m.clump_world, m.clump_volume, m.clump_inertia,
                     m.sphere_offset, m.material_density, m.world_gravity, c.build_x,
-                    state_in.sphere_active, state_out.sphere_f, state_out.sphere_t, self._sphere_contacts,
+                    state_in.sphere_active, state_out.sphere_f, state_out.sphere_t,
                     state_in.clump_x, state_in.clump_q, state_in.clump_v, state_in.clump_angmom,
                     dt, kick, self.skin, self.options.velocity_limit, self._clock, self._clump_lanes,
                 ],
                 outputs=[
                     state_out.clump_x, state_out.clump_q, state_out.clump_v, state_out.clump_angmom, state_out.clump_w,
                     state_out.clump_f, state_out.clump_t, state_out.sphere_x, state_out.sphere_v, state_out.sphere_w,
-                    c.clump_contacts, c.rebuild, self._blowup,
+                    c.rebuild, self._blowup,
                 ],
                 device=m.device,
             )

@@ -373,9 +373,13 @@ class Contacts:
     """1 when a rebuild is due, shape (1,), int32."""
     overflow: wp.array
     """Overflow bits (see :class:`Overflow`) since the last check, shape (1,), int32."""
-    clump_contacts: wp.array
-    """Active sub-sphere contacts of each clump at the last step, shape (max(clump_count, 1),), int32: the next
-    step shares the clump's mass among them in the contact laws (``SolverOptions.clump_contact_mass``)."""
+    partner_key: wp.array
+    """Per clump, the bodies its spheres touched at the last step (contacts due within one step included), a
+    small hash table of ``PARTNER_SLOTS`` slots per clump: key = clump index, ``clump_count`` + sphere index for a
+    plain sphere, then planes and mesh walls; -1 empty. Shape (max(clump_count, 1) * PARTNER_SLOTS,), int32."""
+    partner_count: wp.array
+    """Sub-sphere contacts with each body of ``partner_key``: the next step divides the clump's mass by it in that
+    body's contacts (``SolverOptions.clump_contact_mass``). Same shape, int32."""
     scratch: dict = field(default_factory=dict)
     """Second buffers of the history arrays, written by a rebuild and copied back."""
     cells: dict = field(default_factory=dict)

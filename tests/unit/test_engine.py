@@ -164,6 +164,27 @@ def test_clump_sub_contacts_share_the_mass():
     assert _raft_rebound(0.45, "body") < 0.1
 
 
+def test_clump_mass_is_shared_per_partner_body():
+    """A raft resting on a plane with a sphere on one of its spheres: the partner table counts nine
+    sub-contacts with the plane and one with the sphere, so the sphere's contact damps with the whole raft
+    mass and each plane sub-contact with a ninth of it."""
+    r = 1e-3
+    offsets = np.array([(i * 1.6 * r, j * 1.6 * r, 0.0) for i in (-1, 0, 1) for j in (-1, 0, 1)])
+    b = wd.ModelBuilder(gravity=(0, 0, -9.81))
+    b.add_material(wd.Material("a", density=2000, youngs_modulus=1e7, poisson_ratio=0.3))
+    b.add_plane((0, 0, 0), (0, 0, 1), "a")
+    b.add_clump(wd.ClumpTemplate.from_spheres("raft", offsets, np.full(9, r)), (0, 0, r - 1e-6), "a")
+    b.add_sphere((0, 0, 3 * r - 2e-6), r, "a")
+    m = b.finalize("cpu")
+    s = wd.Solver(m)
+    c = s.contacts()
+    s.run(m.state(), c, 3)
+    keys, counts = c.partner_key.numpy(), c.partner_count.numpy()
+    table = {int(k): int(n) for k, n in zip(keys, counts) if k >= 0}
+    plane_key, sphere_key = m.clump_count + m.sphere_count, m.clump_count + 9
+    assert table == {plane_key: 9, sphere_key: 1}
+
+
 def test_same_inputs_same_numbers():
     """Reproducible: the same inputs on CPU give bit-identical results."""
     out = []
