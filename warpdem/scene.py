@@ -114,7 +114,8 @@ class RunSpec:
     """Run settings: ``duration`` [s]; ``dt_fraction`` of the Rayleigh time; a run stops early once the mean
     kinetic energy per particle stays below ``settle_energy`` [J] (0: never) for three outputs after
     ``settle_after`` [s] with every factory done; ``output_interval`` [s] between frames;
-    ``impact_speed_min`` [m/s] (SolverOptions)."""
+    ``impact_speed_min`` [m/s] and ``clump_contact_mass`` ("shared" or "body", a token in USD) as in
+    SolverOptions."""
 
     duration: float = 1.0
     dt_fraction: float = 0.2
@@ -122,6 +123,7 @@ class RunSpec:
     settle_after: float = 0.0
     output_interval: float = 0.05
     impact_speed_min: float = 0.05
+    clump_contact_mass: str = "shared"
 
 
 @dataclass
@@ -186,6 +188,8 @@ def _camel(name: str) -> str:
 
 PAIR_FIELDS = [f.name for f in dataclasses.fields(Interaction)]
 RUN_FIELDS = [f.name for f in dataclasses.fields(RunSpec)]
+RUN_TOKENS = {"clump_contact_mass": ("shared", "body")}
+"""Run settings that are words, with the words allowed (the others are numbers)."""
 MEASURE_SCALARS = ["kind", "base_height", "center", "piston", "force_limit", "backstop_height", "walls",
                    "phase_names", "phase_ends"]
 FACTORY_FIELDS = ["mode", "material", "shape", "count", "mass", "rate", "mass_rate", "start_time", "seed",
@@ -230,7 +234,10 @@ def write_stage(spec: SceneSpec, path=None):
     wp_.CreateAttribute(NS + "rig", Sdf.ValueTypeNames.Token).Set(spec.rig)
     wp_.CreateAttribute(NS + "authoring", Sdf.ValueTypeNames.String).Set(json.dumps(spec.authoring, sort_keys=True))
     for f in RUN_FIELDS:
-        wp_.CreateAttribute(NS + "run:" + _camel(f), Sdf.ValueTypeNames.Double).Set(float(getattr(spec.run, f)))
+        if f in RUN_TOKENS:
+            wp_.CreateAttribute(NS + "run:" + _camel(f), Sdf.ValueTypeNames.Token).Set(str(getattr(spec.run, f)))
+        else:
+            wp_.CreateAttribute(NS + "run:" + _camel(f), Sdf.ValueTypeNames.Double).Set(float(getattr(spec.run, f)))
     m = spec.measure
     wp_.CreateAttribute(NS + "measure:kind", Sdf.ValueTypeNames.Token).Set(m.kind)
     wp_.CreateAttribute(NS + "measure:baseHeight", Sdf.ValueTypeNames.Double).Set(float(m.base_height))
@@ -480,8 +487,12 @@ def read_stage(path_or_stage) -> SceneSpec:
     r.check_names(world, "world")
     rig = r.get(world, NS + "rig", "token")
     authoring = json.loads(r.get(world, NS + "authoring", "string", required=False, default="{}") or "{}")
-    run = RunSpec(**{f: r.get(world, NS + "run:" + _camel(f), required=(f == "duration"),
-                              default=getattr(RunSpec, f)) for f in RUN_FIELDS})
+    run = RunSpec(**{f: r.get(world, NS + "run:" + _camel(f), "token" if f in RUN_TOKENS else "number",
+                              required=(f == "duration"), default=getattr(RunSpec, f)) for f in RUN_FIELDS})
+    for f, allowed in RUN_TOKENS.items():
+        if getattr(run, f) not in allowed:
+            r.fail(world, NS + "run:" + _camel(f), f"= {getattr(run, f)!r} is not allowed; expected "
+                   + " or ".join(allowed))
     if run.duration <= 0:
         r.fail(world, NS + "run:duration", f"= {run.duration} is not allowed; expected a duration > 0 s")
     if not 0 < run.dt_fraction <= 1:
@@ -770,7 +781,13 @@ def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
         elif parts[0] == "run" and len(parts) == 2:
             if parts[1] not in RUN_FIELDS:
                 raise StageError(f"--set {key}: {parts[1]!r} is not a run setting; expected one of {', '.join(RUN_FIELDS)}")
-            setattr(spec.run, parts[1], float(value))
+            if parts[1] in RUN_TOKENS:
+                if value not in RUN_TOKENS[parts[1]]:
+                    raise StageError(f"--set {key}: {value!r} is not allowed; expected "
+                                     + " or ".join(RUN_TOKENS[parts[1]]))
+                setattr(spec.run, parts[1], value)
+            else:
+                setattr(spec.run, parts[1], float(value))
         elif parts[0] == "measure" and len(parts) == 2:
             if parts[1] not in ("base_height", "force_limit", "backstop_height"):
                 raise StageError(f"--set {key}: expected measure.base_height, measure.force_limit or "

@@ -253,6 +253,19 @@ def test_batch_key_groups_runs(studies, tables, tmp_path):
     assert len({batch_key(spec, o) for o in ovs}) == 2
 
 
+def test_fixed_clump_contact_mass_reaches_the_scene(tmp_path):
+    """[fixed] "run.clump_contact_mass" = "body" (EDEM's damping convention, for comparing with EDEM) is the
+    run setting of every run's scene."""
+    from warpdem.study.execute import _scene
+
+    p = tmp_path / "s.toml"
+    p.write_text(BASE.replace('"interaction.grain.grain.restitution" = 0.3',
+                              '"interaction.grain.grain.restitution" = 0.3\n"run.clump_contact_mass" = "body"'))
+    spec = load_study(p)
+    row = design_table(spec).iloc[0]
+    assert _scene(spec, run_overrides(spec, row)).run.clump_contact_mass == "body"
+
+
 def test_scene_study_and_bare_dotted_keys(tmp_path):
     """A study may name a stage relative to its file instead of a rig; a bare dotted [fixed] key (a TOML
     sub-table) means the same as the quoted key."""
@@ -378,6 +391,9 @@ BAD = [
     ("model-unknown-name", 'model = "linear"', 'model = "cubic"', ["[analysis]", "model = 'cubic'"]),
     ("analysis-alpha", 'model = "linear"', 'model = "linear"\nalpha = 1.5', ["[analysis]", "alpha = 1.5", "(0, 1)"]),
     ("verification-negative", "replicates = 0", "replicates = -1", ["[verification]", "replicates = -1"]),
+    ("clump-mass-word", '"interaction.grain.grain.restitution" = 0.3',
+     '"interaction.grain.grain.restitution" = 0.3\n"run.clump_contact_mass" = "half"',
+     ["[fixed]", "run.clump_contact_mass = 'half'", "shared or body"]),
 ]
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from warpdem import geometry, rigs, runner
-from warpdem.scene import StageError, read_stage, write_stage
+from warpdem.scene import StageError, apply_overrides, read_stage, write_stage
 
 pytest.importorskip("pxr")
 from pxr import Sdf, Usd, UsdGeom  # noqa: E402
@@ -138,6 +138,7 @@ def test_stage_round_trip(rig):
 
     for f in ("duration", "dt_fraction", "settle_energy", "settle_after", "output_interval", "impact_speed_min"):
         assert getattr(got.run, f) == pytest.approx(getattr(want.run, f), rel=1e-12, abs=0), f
+    assert got.run.clump_contact_mass == want.run.clump_contact_mass == "shared"
 
     gm, wm = got.measure, want.measure
     assert gm.kind == wm.kind
@@ -330,6 +331,24 @@ def test_stage_wrong_type(funnel_stage):
     prim.CreateAttribute("warpdem:pair:staticFriction", Sdf.ValueTypeNames.String, custom=True).Set("0.5")
     msg = _read_error(path, stage)
     assert pair in msg and "warpdem:pair:staticFriction" in msg and "type" in msg
+
+
+def test_stage_clump_contact_mass(funnel_stage):
+    """warpdem:run:clumpContactMass is a token: "body" reads back (EDEM's convention, for comparisons), a
+    word outside shared / body names /World, the attribute and the words allowed; --set checks the same."""
+    path, stage = funnel_stage
+    attr = stage.GetPrimAtPath("/World").GetAttribute("warpdem:run:clumpContactMass")
+    assert attr.Get() == "shared"
+    attr.Set("body")
+    stage.GetRootLayer().Save()
+    assert read_stage(str(path)).run.clump_contact_mass == "body"
+    attr.Set("half")
+    msg = _read_error(path, stage)
+    assert "/World" in msg and "warpdem:run:clumpContactMass" in msg and "shared or body" in msg
+    spec = rigs.spec("funnel", smoke=True)
+    assert apply_overrides(spec, {"run.clump_contact_mass": "body"}).run.clump_contact_mass == "body"
+    with pytest.raises(StageError, match="'half' is not allowed; expected shared or body"):
+        apply_overrides(spec, {"run.clump_contact_mass": "half"})
 
 
 def test_stage_negative_friction(funnel_stage):
