@@ -556,6 +556,29 @@ def test_run_resumes_from_checkpoint_bit_identical(tmp_path):
     assert c.info["resumed_from_s"] is None
 
 
+def test_stop_after_stops_before_the_tick_that_would_overrun(tmp_path, monkeypatch):
+    """With a clock on which every output tick takes exactly T seconds and stop_after = 2.5 T, the run stops
+    after its second tick (2 T, since a third would end at 3 T), not after the first tick past the limit."""
+    import types
+
+    from warpdem.solver import Solver
+
+    spec = rigs.spec("funnel", {"count": 60, "duration": 0.2}, smoke=True)
+    tick, clock = 10.0, [0.0]
+    monkeypatch.setattr(runner, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
+    advance = Solver.advance
+
+    def slow_advance(self, *args, **kwargs):
+        clock[0] += tick
+        return advance(self, *args, **kwargs)
+
+    monkeypatch.setattr(Solver, "advance", slow_advance)
+    with pytest.raises(runner.RunStopped) as e:
+        runner.run_scene(spec, out_dir=tmp_path, frames=False, stop_after=2.5 * tick)
+    # ticks end on whole steps: within a step of 2 intervals, far from 1 or 3
+    assert e.value.simulated_s == pytest.approx(2 * spec.run.output_interval, abs=0.25 * spec.run.output_interval)
+
+
 def test_run_stops_at_its_wall_time_limit_and_resumes(tmp_path):
     """stop_after: the run saves a checkpoint at its first output tick past the limit and raises RunStopped
     (naming the checkpoint and the simulated time), its list slots trimmed to the longest list; the same
