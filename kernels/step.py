@@ -25,9 +25,9 @@ BLOWUP_NONE = wp.constant(2147483647)
 WALL_LANES = wp.constant(256)
 """Partial accumulators per wall: spreads the force atomics of thousands of spheres on one wall."""
 CLUMP_LANES = 32
+"""Threads per clump in integrate_clumps on CUDA (a tiled launch; Warp runs a CPU tile as one thread)."""
 PARTNER_SLOTS = wp.constant(16)
 """Partner bodies a clump's table holds (a power of two): compact clumps touch at most about 14 bodies."""
-"""Threads per clump in integrate_clumps on CUDA (a tiled launch; Warp runs a CPU tile as one thread)."""
 
 
 @wp.func
@@ -322,7 +322,7 @@ def step_spheres(
             neighbor_spring[k, i] = wp.vec3(0.0)
             neighbor_roll[k, i] = wp.vec3(0.0)
             # a contact due within one step counts already, so a clump's mass is shared from its first step
-            if dist > 0.0 and overlap + dt * wp.dot(v_in[a] - v_in[b], d / dist) > 0.0:
+            if tally >= 0 and dist > 0.0 and overlap + dt * wp.dot(v_in[a] - v_in[b], d / dist) > 0.0:
                 run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n,
                                                body_key(j, sphere_clump, clump_total))
             continue
@@ -396,7 +396,7 @@ def step_spheres(
         plane_spring[p_id, i] = xi
         plane_roll[p_id, i] = roll
         plane_aux[p_id, i] = aux
-        if active != 0 or r_i - gap - dt * wp.dot(v_i, n_p) > 0.0:
+        if tally >= 0 and (active != 0 or r_i - gap - dt * wp.dot(v_i, n_p) > 0.0):
             run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
         if active != 0:
             f += f_a
@@ -432,7 +432,7 @@ def step_spheres(
         mesh_spring[k, i] = xi
         mesh_roll[k, i] = roll
         mesh_aux[k, i] = aux
-        if active != 0 or r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0:
+        if tally >= 0 and (active != 0 or r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0):
             run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
         if active != 0:
             f += f_a

@@ -256,7 +256,7 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
         now = time.perf_counter()
         # a dense bed can take a minute per tick on the GPU: stop before the tick that would overrun
         stopping = stop_after > 0 and (now - t_wall0) + (now - t_tick) >= stop_after
-        if ckpt is not None and (stopping or (checkpoint_every > 0 and time.perf_counter() - t_ckpt >= checkpoint_every)):
+        if ckpt is not None and (stopping or (checkpoint_every > 0 and now - t_ckpt >= checkpoint_every)):
             _save_checkpoint(ckpt, fingerprint, state, contacts, {
                 "series": series, "impulse_prev": impulse_prev, "t_prev": t_prev, "phase_snap": phase_snap,
                 "settled_since": settled_since})

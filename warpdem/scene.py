@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .materials import Interaction, Material
+from .solver import CLUMP_CONTACT_MASSES
 from .types import ContactLaw, RollingModel
 
 TIME_CODES_PER_SECOND = 100.0
@@ -188,7 +189,7 @@ def _camel(name: str) -> str:
 
 PAIR_FIELDS = [f.name for f in dataclasses.fields(Interaction)]
 RUN_FIELDS = [f.name for f in dataclasses.fields(RunSpec)]
-RUN_TOKENS = {"clump_contact_mass": ("shared", "body")}
+RUN_TOKENS = {"clump_contact_mass": CLUMP_CONTACT_MASSES}
 """Run settings that are words, with the words allowed (the others are numbers)."""
 MEASURE_SCALARS = ["kind", "base_height", "center", "piston", "force_limit", "backstop_height", "walls",
                    "phase_names", "phase_ends"]

@@ -19,6 +19,9 @@ class SimulationError(RuntimeError):
     """A run stopped: a sphere's velocity became non-finite or exceeded the limit, or a capacity overflowed."""
 
 
+CLUMP_CONTACT_MASSES = ("shared", "body")
+"""The values of SolverOptions.clump_contact_mass (also a stage's warpdem:run:clumpContactMass)."""
+
 @dataclass(frozen=True)
 class SolverOptions:
     """Solver settings, validated at construction.
@@ -69,7 +72,7 @@ class SolverOptions:
             bad("velocity_limit", self.velocity_limit, "a speed > 0 m/s")
         if not (math.isfinite(self.impact_speed_min) and self.impact_speed_min >= 0):
             bad("impact_speed_min", self.impact_speed_min, "a speed >= 0 m/s")
-        if self.clump_contact_mass not in ("shared", "body"):
+        if self.clump_contact_mass not in CLUMP_CONTACT_MASSES:
             bad("clump_contact_mass", self.clump_contact_mass, '"shared" or "body"')
 
 

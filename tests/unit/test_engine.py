@@ -139,16 +139,20 @@ def test_blowup_with_overflow_names_both():
         s.run(m.state(), s.contacts(), 3)
 
 
+def _raft(r: float = 1e-3):
+    """A flat 3 x 3 raft of spheres of radius r [m], 1.6 r apart: nine spheres touch a plane at once."""
+    offsets = np.array([(i * 1.6 * r, j * 1.6 * r, 0.0) for i in (-1, 0, 1) for j in (-1, 0, 1)])
+    return wd.ClumpTemplate.from_spheres("raft", offsets, np.full(9, r))
+
+
 def _raft_rebound(e: float, mass: str) -> float:
     """Rebound speed ratio of a flat 3 x 3 raft clump dropped flat onto a plane at 0.5 m/s."""
     r = 1e-3
-    offsets = np.array([(i * 1.6 * r, j * 1.6 * r, 0.0) for i in (-1, 0, 1) for j in (-1, 0, 1)])
     b = wd.ModelBuilder(gravity=(0, 0, 0))
     b.add_material(wd.Material("a", density=2000, youngs_modulus=1e7, poisson_ratio=0.3))
     b.set_interaction("a", "a", restitution=e, static_friction=0.5)
     b.add_plane((0, 0, 0), (0, 0, 1), "a")
-    b.add_clump(wd.ClumpTemplate.from_spheres("raft", offsets, np.full(9, r)), (0, 0, r + 1e-5), "a",
-                velocity=(0, 0, -0.5))
+    b.add_clump(_raft(r), (0, 0, r + 1e-5), "a", velocity=(0, 0, -0.5))
     m = b.finalize("cpu")
     s = wd.Solver(m, wd.SolverOptions(clump_contact_mass=mass))
     state = s.run(m.state(), s.contacts(), int(0.005 / s.dt))
@@ -169,11 +173,10 @@ def test_clump_mass_is_shared_per_partner_body():
     sub-contacts with the plane and one with the sphere, so the sphere's contact damps with the whole raft
     mass and each plane sub-contact with a ninth of it."""
     r = 1e-3
-    offsets = np.array([(i * 1.6 * r, j * 1.6 * r, 0.0) for i in (-1, 0, 1) for j in (-1, 0, 1)])
     b = wd.ModelBuilder(gravity=(0, 0, -9.81))
     b.add_material(wd.Material("a", density=2000, youngs_modulus=1e7, poisson_ratio=0.3))
     b.add_plane((0, 0, 0), (0, 0, 1), "a")
-    b.add_clump(wd.ClumpTemplate.from_spheres("raft", offsets, np.full(9, r)), (0, 0, r - 1e-6), "a")
+    b.add_clump(_raft(r), (0, 0, r - 1e-6), "a")
     b.add_sphere((0, 0, 3 * r - 2e-6), r, "a")
     m = b.finalize("cpu")
     s = wd.Solver(m)
