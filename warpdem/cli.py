@@ -261,7 +261,9 @@ def main(argv=None) -> int:
     r.set_defaults(fn=cmd_run)
     st = sub.add_parser("study", help="run (or resume) a design of experiments, then analyse and verify it")
     st.add_argument("study", help="study file, e.g. studies/main_funnel_pb.toml")
-    st.add_argument("--device", default="cpu")
+    st.add_argument("--device", default="cpu",
+                    help="cpu, cuda, cuda:N, cuda:all, or a comma-separated list (cuda:0,cuda:1; cpu,cpu): with "
+                         "several, the runs are split into one launch per device, run at once, one process each")
     st.add_argument("--out", help="output folder (default runs/NAME); rerunning resumes it")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
     st.add_argument("--no-verify", action="store_true", help="skip the verification runs at the optimum")

@@ -221,3 +221,39 @@ def test_study_stops_at_its_wall_time_limit_and_resumes(tmp_path):
     res = _run(study, tmp_path / "out", analyze_after=False)
     assert res["stopped"] is None and res["ran"] == res["runs"]
     _assert_resumed_like_uninterrupted(study, tmp_path)
+
+
+def test_two_cpu_processes_give_the_single_launch_numbers(finished, tmp_path):
+    """'cpu,cpu' splits the six runs into two launches of three, run at once in two processes; each point
+    is saved with its launch's size and device, and since a world never reads another world's spheres,
+    every response equals the one-launch response to the last bit."""
+    study, out1, _ = finished
+    out2 = tmp_path / "out"
+    res = _run(study, out2, device="cpu,cpu", analyze_after=False)
+    assert res["ran"] == 6 and res["batches"] == 2 and res["stopped"] is None
+    one, two = execute.load_results(out1, study), execute.load_results(out2, study)
+    assert list(one["height"]) == list(two["height"])
+    for pid in two["point_id"]:
+        rec = json.loads((out2 / "runs" / f"{pid}.json").read_text())
+        assert rec["info"]["batch_worlds"] == 3 and rec["device"] == "cpu"
+
+
+def test_runs_split_evenly_over_devices(tmp_path):
+    """17 runs over 4 devices: launches of 5, 4, 4, 4 worlds, one per device; a [study] batch cap still
+    holds (7 runs, at most 3 per launch, 2 devices: 3 launches of 3, 2, 2, shared out 3 + 2 | 2 worlds)."""
+    study = _study(tmp_path)
+    rows = [{"overrides": {}, "point_id": str(k)} for k in range(17)]
+    sizes = [len(b) for b in execute._batches(study, rows, 4)]
+    assert sizes == [5, 4, 4, 4]
+    assert sorted(map(len, execute._assign(execute._batches(study, rows, 4), 4))) == [1, 1, 1, 1]
+    capped = _study(tmp_path, batch=3)
+    batches = execute._batches(capped, rows[:7], 2)
+    assert [len(b) for b in batches] == [3, 2, 2]
+    assert [[k for k in ks] for ks in execute._assign(batches, 2)] == [[0], [1, 2]]
+    assert [len(b) for b in execute._batches(study, rows[:3], 1)] == [3]
+
+
+@pytest.mark.parametrize("device", ["gpu", "cuda:x", "cpu,,cpu"])
+def test_bad_device_names_the_value(device):
+    with pytest.raises(ValueError, match=f"device = {device!r}: .* is not a device; expected 'cpu', 'cuda'"):
+        execute.parse_devices(device)

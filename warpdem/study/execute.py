@@ -17,6 +17,12 @@ study never mistakes an old result for a new point). The runs of one batch share
 together; the launch checkpoints its whole state every minute (``OUT/launches/<id>/checkpoint.npz``) and a
 rerun resumes it from there, bit-identical to an uninterrupted launch; ``[study] batch`` caps the worlds
 per launch.
+
+Several devices (``device="cuda:0,cuda:1"``, ``"cuda:all"``, or ``"cpu,cpu"`` for two CPU processes) split
+each group of runs into one launch per device, as even as the runs allow; each device runs its launches in
+a process of its own (spawned, so every process owns its CUDA context and Warp's CPU kernels, which run on
+one thread each, use one core each). Launch ids hash the point ids, so a resumed study must keep the
+same number of devices to pick up a checkpoint; finished points are kept whatever the devices.
 """
 
 from __future__ import annotations
@@ -69,16 +75,57 @@ def _response(metrics: dict, measure: str):
         return math.nan
 
 
-def _batches(study: sp.StudySpec, rows: list[dict]) -> list[list[dict]]:
-    """Runs grouped by what they must share (scene, rig parameters), each group cut to ``study.batch``."""
+def parse_devices(device: str) -> list[str]:
+    """The devices named by ``device``: one Warp device name ("cpu", "cuda", "cuda:N") or a comma-separated
+    list of them, which may repeat a name ("cpu,cpu": two CPU processes); "cuda:all" is every CUDA device.
+    Raises StudyError naming the value and what is allowed."""
+    names = [d.strip() for d in str(device).split(",")]
+    allowed = "'cpu', 'cuda', 'cuda:N', 'cuda:all', or a comma-separated list of these (e.g. 'cuda:0,cuda:1')"
+    out = []
+    for d in names:
+        if d == "cuda:all":
+            import warp as wp
+
+            n = wp.get_cuda_device_count()
+            if n == 0:
+                raise sp.StudyError(f"device = {device!r}: 'cuda:all' names no device, this machine has no CUDA "
+                                    f"device; use 'cpu'")
+            out += [f"cuda:{i}" for i in range(n)]
+        elif d in ("cpu", "cuda") or (d.startswith("cuda:") and d[5:].isdigit()):
+            out.append(d)
+        else:
+            raise sp.StudyError(f"device = {device!r}: {d!r} is not a device; expected {allowed}")
+    return out
+
+
+def _batches(study: sp.StudySpec, rows: list[dict], parts: int = 1) -> list[list[dict]]:
+    """Runs grouped by what they must share (scene, rig parameters), each group cut to ``study.batch``;
+    with ``parts`` > 1 (devices) each group is also cut into at least ``parts`` launches (as many as it has
+    runs at most), their sizes differing by one at most."""
     groups: dict[tuple, list[dict]] = {}
     for row in rows:
         groups.setdefault(sp.batch_key(study, row["overrides"]), []).append(row)
-    size = study.batch or max((len(g) for g in groups.values()), default=1)
     out = []
     for g in groups.values():
-        out += [g[i:i + size] for i in range(0, len(g), size)]
+        if parts <= 1:
+            size = study.batch or len(g)
+            out += [g[i:i + size] for i in range(0, len(g), size)]
+            continue
+        n = max(-(-len(g) // study.batch) if study.batch else 1, min(parts, len(g)))
+        q, r = divmod(len(g), n)
+        starts = [k * q + min(k, r) for k in range(n + 1)]
+        out += [g[starts[k]:starts[k + 1]] for k in range(n)]
     return out
+
+
+def _assign(batches: list[list[dict]], count: int) -> list[list[int]]:
+    """Batch indices per device: largest batch first to the device with the fewest worlds so far."""
+    load, lists = [0] * count, [[] for _ in range(count)]
+    for k in sorted(range(len(batches)), key=lambda k: -len(batches[k])):
+        d = min(range(count), key=lambda i: load[i])
+        lists[d].append(k)
+        load[d] += len(batches[k])
+    return [sorted(x) for x in lists]
 
 
 def _launch_id(rows: list[dict]) -> str:
@@ -136,6 +183,99 @@ def _check_folder(out: Path, study: sp.StudySpec) -> None:
             raise sp.StudyError(f"{out}: holds study {name!r}, not {study.name!r}; choose another --out")
 
 
+def _save_batch(study, runs_dir: Path, batch: list[dict], records: list[dict], wall: float, device: str) -> None:
+    for row, rec in zip(batch, records):
+        _write_json(runs_dir / f"{row['point_id']}.json", {
+            "study": study.name, "run": row["run"], "point_id": row["point_id"], "world_seed": row["world_seed"],
+            "design": row["row"], "overrides": row["overrides"], "responses": rec["responses"],
+            "metrics": rec["metrics"], "info": rec["info"] | {"batch_worlds": len(batch), "batch_wall_s": wall},
+            "device": device})
+
+
+def _device_worker(study, out: str, batches: list[list[dict]], device: str, deadline: float,
+                   checkpoint_every: float, queue, slot: int, quiet: bool) -> dict:
+    """One device's launches, in order, in a process of its own (see :func:`run_study`). ``deadline`` is a
+    ``time.time()`` (0: none): no launch starts after it, and the running one stops at it with a checkpoint.
+    Reports (slot, launch, fraction, message) on ``queue``; returns {"ran", "stopped", "walls"}."""
+    import warp as wp
+
+    from ..runner import RunStopped
+
+    wp.config.quiet = quiet
+    runs_dir = Path(out) / "runs"
+    ran, walls = 0, []
+    for k, batch in enumerate(batches):
+        if deadline and k > 0 and time.time() >= deadline:
+            return {"ran": ran, "walls": walls,
+                    "stopped": f"{device}: the wall-time limit came before its launch {k + 1} of {len(batches)}"}
+
+        def tick(frac, msg, k=k):
+            queue.put((slot, k, frac, msg))
+
+        tb = time.perf_counter()
+        try:
+            records = run_batch(study, batch, device, progress=tick, out_dir=Path(out) / "launches" / _launch_id(batch),
+                                checkpoint_every=checkpoint_every,
+                                stop_after=max(deadline - time.time(), 1e-9) if deadline else 0.0)
+        except RunStopped as e:
+            return {"ran": ran, "walls": walls, "stopped": f"{device}, launch {k + 1} of {len(batches)}: {e}"}
+        walls.append(time.perf_counter() - tb)
+        _save_batch(study, runs_dir, batch, records, walls[-1], device)
+        ran += len(batch)
+        queue.put((slot, k, 1.0, "done"))
+    return {"ran": ran, "walls": walls, "stopped": None}
+
+
+def _run_parallel(study, out: Path, batches: list[list[dict]], devices: list[str], bar, t0: float,
+                  checkpoint_every: float, stop_after: float, log) -> str | None:
+    """Run ``batches`` over ``devices`` at once, one spawned process per device that has work; every finished
+    launch is saved by its process as it ends. A failing device does not stop the others: its error is
+    raised once they are done. Returns the stop message(s), or None."""
+    import multiprocessing as mp
+    import queue as queue_mod
+    from concurrent.futures import ProcessPoolExecutor
+
+    import warp as wp
+
+    plan = [(d, [batches[k] for k in ks]) for d, ks in zip(devices, _assign(batches, len(devices))) if ks]
+    for d, bs in plan:
+        log(f"{study.name}: {d}: {len(bs)} launch(es) of {', '.join(str(len(b)) for b in bs)} world(s)")
+    deadline = time.time() + max(stop_after - (time.perf_counter() - t0), 1e-9) if stop_after > 0 else 0.0
+    ctx = mp.get_context("spawn")
+    done = [[0.0] * len(bs) for _, bs in plan]
+    base = bar.n if bar is not None else 0
+    results, errors = [None] * len(plan), []
+    with ctx.Manager() as manager, ProcessPoolExecutor(len(plan), mp_context=ctx) as pool:
+        q = manager.Queue()
+        futures = [pool.submit(_device_worker, study, str(out), bs, d, deadline, checkpoint_every, q, i,
+                               bool(wp.config.quiet)) for i, (d, bs) in enumerate(plan)]
+        while True:
+            try:
+                slot, k, frac, msg = q.get(timeout=0.5)
+                done[slot][k] = frac * len(plan[slot][1][k])
+                if bar is not None:
+                    bar.n = base + sum(map(sum, done))
+                    bar.set_postfix_str(f"{len(plan)} devices, {plan[slot][0]}: {msg}", refresh=False)
+                    bar.refresh()
+            except queue_mod.Empty:
+                if all(f.done() for f in futures):
+                    break
+        for i, f in enumerate(futures):
+            try:
+                results[i] = f.result()
+            except Exception as e:  # noqa: BLE001 - kept, raised after every device has finished
+                errors.append((plan[i][0], e))
+    _results_csv(study, out)
+    for (d, bs), r in zip(plan, results):
+        if r is not None and r["walls"]:
+            log(f"{study.name}: {d}: " + ", ".join(f"{len(b)} worlds in {w:.1f} s" for b, w in zip(bs, r["walls"])))
+    if errors:
+        d, e = errors[0]
+        raise type(e)(f"{d}: {e}") if isinstance(e, sp.StudyError) else e
+    stops = [r["stopped"] for r in results if r and r["stopped"]]
+    return "; ".join(stops) or None
+
+
 def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, analyze_after: bool = True,
               verify: bool = True, log=print, checkpoint_every: float = 60.0, stop_after: float = 0.0) -> dict:
     """Run (or resume) ``study`` (a path or a StudySpec) into ``out_dir`` (default ``runs/<name>``).
@@ -144,7 +284,9 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
     worlds of one launch). A launch also checkpoints every ``checkpoint_every`` wall seconds into
     ``OUT/launches/<id>/`` (id: hash of its point ids), so a crash mid-launch resumes there. Then, unless
     disabled, the analysis (:func:`analyze`) and the verification
-    runs at the chosen optimum. With ``stop_after`` (wall seconds, 0: none) the study stops by itself
+    runs at the chosen optimum. ``device`` may name several devices (:func:`parse_devices`): the runs are then
+    split into one launch per device, run at once, one process per device; the verification runs (one
+    launch) use the first device. With ``stop_after`` (wall seconds, 0: none) the study stops by itself
     once that much wall time has passed: a launch then saves its checkpoint at its next output tick, no
     further launch starts, and ``stopped`` in the result says where; the same call resumes. Returns
     {"out", "runs", "ran", "skipped", "wall_s", "batches", "analysis", "verification", "stopped"}.
@@ -165,15 +307,18 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
     for _, r in table.iterrows():
         rows.append({"run": int(r["run"]), "point_id": r["point_id"], "world_seed": int(r["world_seed"]),
                      "overrides": sp.run_overrides(study, r), "row": r.to_dict()})
+    devices = parse_devices(device)
     pending = [r for r in rows if not (runs_dir / f"{r['point_id']}.json").exists()]
     done0 = len(rows) - len(pending)
     if done0:
         log(f"{study.name}: {done0} of {len(rows)} runs already finished in {out}; running {len(pending)}")
     t0 = time.perf_counter()
     bar = _progress_bar(len(rows), done0, study.name, progress)
-    batches = _batches(study, pending) if pending else []
+    batches = _batches(study, pending, len(devices)) if pending else []
     stopped = None
-    for k, batch in enumerate(batches):
+    if len(devices) > 1 and batches:
+        stopped = _run_parallel(study, out, batches, devices, bar, t0, checkpoint_every, stop_after, log)
+    for k, batch in enumerate(batches if len(devices) == 1 else []):
         base = bar.n if bar is not None else 0
 
         def tick(frac, msg, n=len(batch), base=base):
@@ -189,18 +334,12 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
             stopped = f"the wall-time limit ({stop_after:.0f} s) came before launch {k + 1} of {len(batches)}"
             break
         try:
-            records = run_batch(study, batch, device, progress=tick, out_dir=launch,
+            records = run_batch(study, batch, devices[0], progress=tick, out_dir=launch,
                                 checkpoint_every=checkpoint_every, stop_after=_time_left(stop_after, t0))
         except RunStopped as e:
             stopped = f"launch {k + 1} of {len(batches)}: {e}"
             break
-        wall = time.perf_counter() - tb
-        for row, rec in zip(batch, records):
-            _write_json(runs_dir / f"{row['point_id']}.json", {
-                "study": study.name, "run": row["run"], "point_id": row["point_id"], "world_seed": row["world_seed"],
-                "design": row["row"], "overrides": row["overrides"], "responses": rec["responses"],
-                "metrics": rec["metrics"], "info": rec["info"] | {"batch_worlds": len(batch), "batch_wall_s": wall},
-                "device": device})
+        _save_batch(study, runs_dir, batch, records, time.perf_counter() - tb, devices[0])
         if bar is not None:
             bar.n = base + len(batch)
             bar.refresh()
@@ -220,7 +359,7 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
         result["analysis"] = analyze(out, study)
         if verify and study.verification.replicates > 0:
             try:
-                result["verification"] = run_verification(study, out, result["analysis"], device, progress, log,
+                result["verification"] = run_verification(study, out, result["analysis"], devices[0], progress, log,
                                                            checkpoint_every=checkpoint_every,
                                                            stop_after=_time_left(stop_after, t0))
             except RunStopped as e:
