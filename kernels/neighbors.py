@@ -32,9 +32,12 @@ def cell_bucket(c: wp.vec3i, world: int, mask: int):
 
 
 @wp.kernel
-def clear_cells(cell_head: wp.array[int]):
-    """Empty every bucket (-1 ends a list)."""
-    cell_head[wp.tid()] = -1
+def clear_cells(cell_head: wp.array[int], rebuild_count: wp.array[int]):
+    """Empty every bucket (-1 ends a list) and count the rebuild (one thread: no atomic needed)."""
+    t = wp.tid()
+    cell_head[t] = -1
+    if t == 0:
+        rebuild_count[0] = rebuild_count[0] + 1
 
 
 @wp.kernel

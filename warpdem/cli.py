@@ -29,6 +29,8 @@ def _quiet_warp():
     import warp as wp
 
     wp.config.quiet = True
+    if hasattr(wp.config, "log_level"):  # Warp >= 1.19 prints its banner and module loads by log level
+        wp.config.log_level = wp.LOG_WARNING
     wp.init()
 
 

@@ -191,7 +191,8 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     piston = names.index(m.piston) if m.kind == "press" else None
     phase_ends = list(m.phase_ends) if m.kind == "impacts" else []
     phase_snap = []
-    series = {"time": [], "kinetic_energy": [], "wall_force": []}
+    # tick_wall_s and rebuilds say where the wall time of a long run went (a dense pile, a flowing stream)
+    series = {"time": [], "kinetic_energy": [], "wall_force": [], "tick_wall_s": [], "rebuilds": []}
     if piston is not None:
         series.update(piston_z=[], piston_force=[], bed_top=[])
     impulse_prev = state.wall_impulse.numpy().copy()
@@ -210,6 +211,8 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             series, impulse_prev, t_prev = book["series"], book["impulse_prev"], book["t_prev"]
             phase_snap, settled_since = book["phase_snap"], book["settled_since"]
             resumed_from = state.time
+            series.setdefault("tick_wall_s", [])
+            series.setdefault("rebuilds", [])
     t_ckpt = time.perf_counter()
     if writer is not None:
         _frame(writer, model, state, h, spec, 0.0)
@@ -219,8 +222,12 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
         for te in phase_ends:
             if state.time + eps < te < t_next - eps:
                 t_next = te
+        step0, rebuilds0 = state.step, solver.rebuild_count
         state = solver.advance(state, contacts, t_next - state.time)
         t = state.time
+        rebuilds = solver.rebuild_count - rebuilds0
+        series["tick_wall_s"].append(time.perf_counter() - t_tick)
+        series["rebuilds"].append(rebuilds)
         imp = state.wall_impulse.numpy()
         force = (imp - impulse_prev) / max(t - t_prev, 1e-300)
         impulse_prev, t_prev = imp.copy(), t
@@ -242,7 +249,10 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
         if writer is not None:
             _frame(writer, model, state, h, spec, t)
         if progress:
-            progress(min(t / run.duration, 1.0), f"t = {t:.3f} s")
+            steps = state.step - step0
+            progress(min(t / run.duration, 1.0),
+                     f"t = {t:.3f} s, {steps / max(series['tick_wall_s'][-1], 1e-9):.0f} steps/s, "
+                     f"a rebuild every {steps / max(rebuilds, 1):.1f} steps")
         if piston is not None and m.force_limit > 0 and series["piston_force"][-1] >= m.force_limit:
             stop_reason = "force_limit"
             break
@@ -298,7 +308,9 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     info = {"rig": spec.rig, "device": str(device), "worlds": W, "spheres": model.sphere_count,
             "clumps": model.clump_count, "glued_spheres": model.attached_count, "dt_s": solver.dt,
             "steps": state.step, "simulated_s": state.time, "wall_s": wall_s, "stop": stop_reason,
-            "resumed_from_s": resumed_from}
+            "resumed_from_s": resumed_from, "rebuilds": int(sum(series.get("rebuilds", []))),
+            "tick_time_s": list(series["time"]), "tick_wall_s": list(series.get("tick_wall_s", [])),
+            "tick_rebuilds": list(series.get("rebuilds", []))}
     result = RunResult(metrics, info, series)
     if out is not None:
         files = {}

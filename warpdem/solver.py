@@ -120,6 +120,7 @@ class Solver:
         self.control = model.control()
         """The wall motion used when run or step get no Control."""
         self._no_rebuild = wp.zeros(1, dtype=int, device=model.device)
+        self._rebuild_count = wp.zeros(1, dtype=int, device=model.device)
         self._blowup = wp.array([2**31 - 1, 2**31 - 1], dtype=int, device=model.device)
         self._spare: State | None = None
         # host copy of the rebuild flag, read between captured steps on CUDA (pinned: an async 4-byte copy)
@@ -192,7 +193,7 @@ class Solver:
         reach = m.contact_reach
         inv_cell = CELLS_PER_REACH / (2.0 * m.radius_max + self.skin + reach)
         head, nxt = c.cells["head"], c.cells["next"]
-        wp.launch(_nb.clear_cells, dim=head.shape[0], inputs=[head], device=m.device)
+        wp.launch(_nb.clear_cells, dim=head.shape[0], inputs=[head, self._rebuild_count], device=m.device)
         wp.launch(_nb.bin_spheres, dim=m.sphere_count, inputs=[state.sphere_x, state.sphere_active, m.sphere_world,
                                                                inv_cell], outputs=[head, nxt], device=m.device)
         s = c.scratch
@@ -472,6 +473,11 @@ class Solver:
                   outputs=[state.sphere_x, state.sphere_v, state.sphere_w, state.sphere_active, state.clump_x,
                            state.clump_q, state.clump_v, state.clump_angmom, contacts.rebuild],
                   device=dev)
+
+    @property
+    def rebuild_count(self) -> int:
+        """Neighbour-list rebuilds this solver has made (a host read: synchronises)."""
+        return int(self._rebuild_count.numpy()[0])
 
     def advance(self, state: State, contacts: Contacts, duration: float, control: Control | None = None) -> State:
         """Run for ``duration`` [s], releasing the model's dynamic factories on their schedules.

@@ -139,6 +139,29 @@ def test_blowup_with_overflow_names_both():
         s.run(m.state(), s.contacts(), 3)
 
 
+def test_rebuild_count_follows_the_skin():
+    """A lone sphere coasting at v (no gravity) rebuilds its lists each time it has moved half the Verlet
+    skin since the last build: with v dt = (skin / 2) / 10.5 that is every 11th step, so 110 steps (builds
+    at steps 0, 11, ..., 99) make 10 rebuilds; a solver at rest after the first build makes none."""
+    r = 1e-3
+    b = wd.ModelBuilder(gravity=(0, 0, 0))
+    b.add_material(wd.Material("a", density=2500, youngs_modulus=1e7, poisson_ratio=0.3))
+    b.add_sphere((0, 0, 0), r, "a")
+    m = b.finalize("cpu")
+    probe = wd.Solver(m)
+    v = 0.5 * probe.skin / 10.5 / probe.dt
+    b = wd.ModelBuilder(gravity=(0, 0, 0))
+    b.add_material(wd.Material("a", density=2500, youngs_modulus=1e7, poisson_ratio=0.3))
+    b.add_sphere((0, 0, 0), r, "a", velocity=(v, 0, 0))
+    m = b.finalize("cpu")
+    s = wd.Solver(m)
+    s.run(m.state(), s.contacts(), 110)
+    assert s.rebuild_count == 10
+    still = wd.Solver(probe.model)
+    still.run(probe.model.state(), still.contacts(), 110)
+    assert still.rebuild_count == 1
+
+
 def _raft(r: float = 1e-3):
     """A flat 3 x 3 raft of spheres of radius r [m], 1.6 r apart: nine spheres touch a plane at once."""
     offsets = np.array([(i * 1.6 * r, j * 1.6 * r, 0.0) for i in (-1, 0, 1) for j in (-1, 0, 1)])

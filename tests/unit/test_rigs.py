@@ -548,6 +548,9 @@ def test_run_resumes_from_checkpoint_bit_identical(tmp_path):
     xa = np.load(tmp_path / "a" / "final.npz")["sphere_x"]
     xb = np.load(tmp_path / "b" / "final.npz")["sphere_x"]
     assert np.array_equal(xa, xb)
+    # the per-tick records span the whole run across the resume, and its rebuilds are the same ones
+    assert len(b.info["tick_wall_s"]) == len(b.info["tick_time_s"]) == len(a.info["tick_time_s"])
+    assert b.info["tick_rebuilds"] == a.info["tick_rebuilds"] and a.info["rebuilds"] >= len(a.info["tick_time_s"])
     assert not (tmp_path / "b" / "checkpoint.npz").exists()
     with pytest.raises(Crash):
         runner.run_scene(spec, out_dir=tmp_path / "c", frames=False, checkpoint_every=1e-9, progress=kill)

@@ -193,15 +193,18 @@ def _save_batch(study, runs_dir: Path, batch: list[dict], records: list[dict], w
 
 
 def _device_worker(study, out: str, batches: list[list[dict]], device: str, deadline: float,
-                   checkpoint_every: float, queue, slot: int, quiet: bool) -> dict:
+                   checkpoint_every: float, queue, slot: int, quiet: tuple) -> dict:
     """One device's launches, in order, in a process of its own (see :func:`run_study`). ``deadline`` is a
     ``time.time()`` (0: none): no launch starts after it, and the running one stops at it with a checkpoint.
-    Reports (slot, launch, fraction, message) on ``queue``; returns {"ran", "stopped", "walls"}."""
+    Reports (slot, launch, fraction, message) on ``queue``; ``quiet`` is the parent's Warp (quiet, log_level).
+    Returns {"ran", "stopped", "walls"}."""
     import warp as wp
 
     from ..runner import RunStopped
 
-    wp.config.quiet = quiet
+    wp.config.quiet = quiet[0]
+    if quiet[1] is not None:
+        wp.config.log_level = quiet[1]
     runs_dir = Path(out) / "runs"
     ran, walls = 0, []
     for k, batch in enumerate(batches):
@@ -248,7 +251,8 @@ def _run_parallel(study, out: Path, batches: list[list[dict]], devices: list[str
     with ctx.Manager() as manager, ProcessPoolExecutor(len(plan), mp_context=ctx) as pool:
         q = manager.Queue()
         futures = [pool.submit(_device_worker, study, str(out), bs, d, deadline, checkpoint_every, q, i,
-                               bool(wp.config.quiet)) for i, (d, bs) in enumerate(plan)]
+                               (bool(wp.config.quiet), getattr(wp.config, "log_level", None)))
+                   for i, (d, bs) in enumerate(plan)]
         while True:
             try:
                 slot, k, frac, msg = q.get(timeout=0.5)

@@ -1,0 +1,79 @@
+"""Where the time of a full-size pellet funnel goes as its pile builds: the rig that the Box-Behnken study
+runs (seed 000's pellets, 141-sphere clumps), built and stepped exactly as ``run_scene`` does, with
+``--worlds`` design points at the study's centre. Prints per output interval: wall seconds, steps per second,
+steps per neighbour-list rebuild and contacts per sphere; then, at each ``--profile-at`` time, per-kernel
+GPU time over ``--steps`` eager steps (Warp's timing API, CUDA only).
+
+    python benchmarks/profile_funnel.py --device cuda --worlds 4 --until 1.6 --profile-at 0.4 --profile-at 1.5
+
+The 4-world study launch on an NVIDIA H200 took 3.1 ms per step up to 1.15 s and 15.5 ms per step from
+1.7 s to 2.15 s; this script is meant to say why.
+"""
+
+import argparse
+import dataclasses
+import time
+
+import warp as wp
+
+wp.config.quiet = True
+
+from warpdem import rigs  # noqa: E402
+from warpdem.bench import contacts_per_sphere  # noqa: E402
+from warpdem.scene import build  # noqa: E402
+from warpdem.solver import Solver, SolverOptions  # noqa: E402
+
+p = argparse.ArgumentParser()
+p.add_argument("--device", default="cuda")
+p.add_argument("--worlds", type=int, default=1)
+p.add_argument("--until", type=float, default=1.6, help="simulated seconds [s]")
+p.add_argument("--interval", type=float, default=0.1, help="report every this many simulated seconds [s]")
+p.add_argument("--profile-at", type=float, action="append", default=[], help="profile kernels at this time [s]")
+p.add_argument("--steps", type=int, default=100, help="eager steps per kernel profile")
+p.add_argument("--smoke", action="store_true", help="the CPU smoke size instead of the full size")
+p.add_argument("--count", type=int, help="pellets per world (default: the rig's)")
+a = p.parse_args()
+wp.init()
+params = {"particle": "pellet", "material": "pellet"} | ({"count": a.count} if a.count else {})
+spec = rigs.spec("funnel", params, a.smoke)
+run = spec.run
+model = build(spec, a.worlds).finalize(a.device)
+solver = Solver(model, SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min,
+                                     mesh_capacity=32, clump_contact_mass=run.clump_contact_mass))
+solver.options = dataclasses.replace(solver.options, neighbor_capacity=max(32, solver.default_neighbor_capacity()))
+state, contacts = model.state(), solver.contacts()
+print(f"{a.worlds} world(s), {model.sphere_count} spheres, {model.clump_count} clumps, dt {solver.dt:.3g} s, "
+      f"skin {solver.skin * 1e3:.3f} mm, neighbour slots {solver.options.neighbor_capacity}, "
+      f"{wp.get_device(a.device).name}")
+print(f"{'t [s]':>6} {'wall [s]':>9} {'steps/s':>8} {'steps/rebuild':>14} {'contacts/sphere':>16} {'active':>9}")
+pending = sorted(a.profile_at)
+t_wall0 = time.perf_counter()
+while state.time < a.until - 1e-9:
+    t_next = min(state.time + a.interval, a.until)
+    if pending and pending[0] < t_next:
+        t_next = max(pending[0], state.time + solver.dt)
+    step0, reb0, t0 = state.step, solver.rebuild_count, time.perf_counter()
+    state = solver.advance(state, contacts, t_next - state.time)
+    wp.synchronize()
+    wall = time.perf_counter() - t0
+    steps, reb = state.step - step0, solver.rebuild_count - reb0
+    active = int(state.sphere_active.numpy().sum())
+    print(f"{state.time:6.3f} {wall:9.2f} {steps / max(wall, 1e-9):8.0f} {steps / max(reb, 1):14.1f} "
+          f"{contacts_per_sphere(state, contacts, model):16.2f} {active:9d}", flush=True)
+    if pending and state.time >= pending[0] - 1e-9:
+        pending.pop(0)
+        if not wp.get_device(a.device).is_cuda:
+            continue
+        wp.timing_begin(cuda_filter=wp.TIMING_KERNEL)
+        state = solver.run(state, contacts, a.steps, use_graph=False)
+        results = wp.timing_end()
+        per = {}
+        for r in results:
+            per.setdefault(r.name, [0, 0.0])
+            per[r.name][0] += 1
+            per[r.name][1] += r.elapsed
+        total = sum(v[1] for v in per.values())
+        print(f"  kernels at t = {state.time:.3f} s: {total / a.steps:.3f} ms/step over {a.steps} eager steps")
+        for name, (count, ms) in sorted(per.items(), key=lambda kv: -kv[1][1])[:12]:
+            print(f"    {name[:60]:60s} {count:6d} launches {ms:9.2f} ms {100 * ms / total:5.1f} %")
+print(f"total wall {time.perf_counter() - t_wall0:.1f} s")
