@@ -19,7 +19,7 @@ import warp as wp
 wp.config.quiet = True
 
 from warpdem import rigs  # noqa: E402
-from warpdem.bench import contacts_per_sphere  # noqa: E402
+from warpdem.bench import contacts_per_sphere, kernel_profile  # noqa: E402
 from warpdem.scene import build  # noqa: E402
 from warpdem.solver import Solver, SolverOptions  # noqa: E402
 
@@ -64,16 +64,7 @@ while state.time < a.until - 1e-9:
         pending.pop(0)
         if not wp.get_device(a.device).is_cuda:
             continue
-        wp.timing_begin(cuda_filter=wp.TIMING_KERNEL)
-        state = solver.run(state, contacts, a.steps, use_graph=False)
-        results = wp.timing_end()
-        per = {}
-        for r in results:
-            per.setdefault(r.name, [0, 0.0])
-            per[r.name][0] += 1
-            per[r.name][1] += r.elapsed
-        total = sum(v[1] for v in per.values())
-        print(f"  kernels at t = {state.time:.3f} s: {total / a.steps:.3f} ms/step over {a.steps} eager steps")
-        for name, (count, ms) in sorted(per.items(), key=lambda kv: -kv[1][1])[:12]:
-            print(f"    {name[:60]:60s} {count:6d} launches {ms:9.2f} ms {100 * ms / total:5.1f} %")
+        print(f"  kernels at t = {state.time:.3f} s, over {a.steps} eager steps:")
+        state, ms = kernel_profile(solver, state, contacts, a.steps)
+        print(f"  {ms:.3f} ms of kernel time per step")
 print(f"total wall {time.perf_counter() - t_wall0:.1f} s")

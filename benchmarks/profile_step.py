@@ -14,6 +14,7 @@ import warp as wp
 wp.config.quiet = True
 
 import warpdem as wd  # noqa: E402
+from warpdem.bench import kernel_profile  # noqa: E402
 from warpdem.clumps import pellet_template  # noqa: E402
 
 p = argparse.ArgumentParser()
@@ -55,17 +56,8 @@ for worlds in a.worlds or [1, 17]:
     state = s.run(state, c, 2048)
     wp.synchronize()
     rate = 2048 / (time.perf_counter() - t0)
-    wp.timing_begin(cuda_filter=wp.TIMING_KERNEL)
-    state = s.run(state, c, a.steps, use_graph=False)
-    results = wp.timing_end()
-    per = {}
-    for r in results:
-        per.setdefault(r.name, [0, 0.0])
-        per[r.name][0] += 1
-        per[r.name][1] += r.elapsed
-    total = sum(v[1] for v in per.values())
     print(f"{worlds} worlds, {m.sphere_count} spheres ({m.clump_count} clumps), dt {s.dt:.3g} s, "
           f"{wp.get_device(a.device).name}: {rate:.0f} graph steps/s = {rate * m.sphere_count / 1e6:.0f} M sphere-steps/s; "
-          f"eager kernel time {total / a.steps:.3f} ms/step")
-    for name, (count, ms) in sorted(per.items(), key=lambda kv: -kv[1][1]):
-        print(f"   {name[:60]:60s} {count:6d} launches {ms:9.2f} ms {100 * ms / total:5.1f} %")
+          f"eager kernels over {a.steps} steps:")
+    state, ms = kernel_profile(s, state, c, a.steps, top=100)
+    print(f"   {ms:.3f} ms of kernel time per step")

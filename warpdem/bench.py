@@ -117,6 +117,22 @@ def contacts_per_sphere(state, contacts, model) -> float:
     return total / len(x)
 
 
+def kernel_profile(solver, state, contacts, steps: int, top: int = 12):
+    """Run ``steps`` eager steps under Warp's kernel timer (CUDA only) and print the kernels by GPU time.
+    Returns (state, milliseconds of kernel time per step)."""
+    wp.timing_begin(cuda_filter=wp.TIMING_KERNEL)
+    state = solver.run(state, contacts, steps, use_graph=False)
+    per = {}
+    for r in wp.timing_end():
+        per.setdefault(r.name, [0, 0.0])
+        per[r.name][0] += 1
+        per[r.name][1] += r.elapsed
+    total = sum(v[1] for v in per.values())
+    for name, (count, ms) in sorted(per.items(), key=lambda kv: -kv[1][1])[:top]:
+        print(f"   {name[:60]:60s} {count:6d} launches {ms:9.2f} ms {100 * ms / max(total, 1e-12):5.1f} %")
+    return state, total / steps
+
+
 def device_bytes(obj) -> int:
     """Bytes of every Warp array held by a Model/State/Contacts (hash grid excluded)."""
     total = 0
