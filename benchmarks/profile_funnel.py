@@ -32,6 +32,7 @@ p.add_argument("--profile-at", type=float, action="append", default=[], help="pr
 p.add_argument("--steps", type=int, default=100, help="eager steps per kernel profile")
 p.add_argument("--smoke", action="store_true", help="the CPU smoke size instead of the full size")
 p.add_argument("--count", type=int, help="pellets per world (default: the rig's)")
+p.add_argument("--skin", type=float, help="Verlet skin [m] (default: the solver's, 0.4 x the smallest radius)")
 a = p.parse_args()
 wp.init()
 params = {"particle": "pellet", "material": "pellet"} | ({"count": a.count} if a.count else {})
@@ -39,7 +40,8 @@ spec = rigs.spec("funnel", params, a.smoke)
 run = spec.run
 model = build(spec, a.worlds).finalize(a.device)
 solver = Solver(model, SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min,
-                                     mesh_capacity=32, clump_contact_mass=run.clump_contact_mass))
+                                     mesh_capacity=32, clump_contact_mass=run.clump_contact_mass,
+                                     skin_fraction=run.skin_fraction, skin=a.skin))
 solver.options = dataclasses.replace(solver.options, neighbor_capacity=max(32, solver.default_neighbor_capacity()))
 state, contacts = model.state(), solver.contacts()
 print(f"{a.worlds} world(s), {model.sphere_count} spheres, {model.clump_count} clumps, dt {solver.dt:.3g} s, "
@@ -48,7 +50,7 @@ print(f"{a.worlds} world(s), {model.sphere_count} spheres, {model.clump_count} c
 print(f"{'t [s]':>6} {'wall [s]':>9} {'steps/s':>8} {'steps/rebuild':>14} {'contacts/sphere':>16} {'active':>9}")
 pending = sorted(a.profile_at)
 t_wall0 = time.perf_counter()
-while state.time < a.until - 1e-9:
+while state.time < a.until - 0.5 * solver.dt:
     t_next = min(state.time + a.interval, a.until)
     if pending and pending[0] < t_next:
         t_next = max(pending[0], state.time + solver.dt)
@@ -60,7 +62,7 @@ while state.time < a.until - 1e-9:
     active = int(state.sphere_active.numpy().sum())
     print(f"{state.time:6.3f} {wall:9.2f} {steps / max(wall, 1e-9):8.0f} {steps / max(reb, 1):14.1f} "
           f"{contacts_per_sphere(state, contacts, model):16.2f} {active:9d}", flush=True)
-    if pending and state.time >= pending[0] - 1e-9:
+    if pending and state.time >= pending[0] - 0.5 * solver.dt:
         pending.pop(0)
         if not wp.get_device(a.device).is_cuda:
             continue

@@ -166,7 +166,8 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     run = spec.run
     # rig meshes have fans and seams where one sphere may touch many triangles
     solver = Solver(model, SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min,
-                                         mesh_capacity=32, clump_contact_mass=run.clump_contact_mass))
+                                         mesh_capacity=32, clump_contact_mass=run.clump_contact_mass,
+                                         skin_fraction=run.skin_fraction))
     # a compacted bed (die press) or glued layers hold more partners per sphere than a loose packing
     solver.options = dataclasses.replace(solver.options,
                                          neighbor_capacity=max(32, solver.default_neighbor_capacity()))

@@ -115,8 +115,8 @@ class RunSpec:
     """Run settings: ``duration`` [s]; ``dt_fraction`` of the Rayleigh time; a run stops early once the mean
     kinetic energy per particle stays below ``settle_energy`` [J] (0: never) for three outputs after
     ``settle_after`` [s] with every factory done; ``output_interval`` [s] between frames;
-    ``impact_speed_min`` [m/s] and ``clump_contact_mass`` ("shared" or "body", a token in USD) as in
-    SolverOptions."""
+    ``impact_speed_min`` [m/s], ``clump_contact_mass`` ("shared" or "body", a token in USD) and
+    ``skin_fraction`` (the Verlet skin over the smallest radius) as in SolverOptions."""
 
     duration: float = 1.0
     dt_fraction: float = 0.2
@@ -125,6 +125,7 @@ class RunSpec:
     output_interval: float = 0.05
     impact_speed_min: float = 0.05
     clump_contact_mass: str = "shared"
+    skin_fraction: float = 0.4
 
 
 @dataclass
@@ -500,6 +501,9 @@ def read_stage(path_or_stage) -> SceneSpec:
         r.fail(world, NS + "run:dtFraction", f"= {run.dt_fraction} is not allowed; expected a fraction in (0, 1]")
     if run.output_interval <= 0:
         r.fail(world, NS + "run:outputInterval", f"= {run.output_interval} is not allowed; expected > 0 s")
+    if not (math.isfinite(run.skin_fraction) and run.skin_fraction > 0):
+        r.fail(world, NS + "run:skinFraction", f"= {run.skin_fraction} is not allowed; expected a fraction of the "
+               "smallest radius > 0")
 
     kind = r.get(world, NS + "measure:kind", "token", required=False, default="none")
     measure = MeasureSpec(

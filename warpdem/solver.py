@@ -29,7 +29,11 @@ class SolverOptions:
     Attributes:
         dt: time step [s]; None chooses ``dt_fraction`` of the Rayleigh time.
         dt_fraction: fraction of the Rayleigh time used for the automatic step, in (0, 1] (EDEM's 20 %).
-        skin: Verlet skin [m]; None uses 0.4 x the smallest radius.
+        skin: Verlet skin [m]; None uses ``skin_fraction`` x the smallest radius.
+        skin_fraction: the automatic skin as a fraction of the smallest radius, > 0 (default 0.4). The lists
+            are rebuilt whenever any sphere of the launch has moved half the skin, so a fast stream (pellets
+            leaving a funnel) rebuilds every few steps; a larger skin rebuilds less often but lists more
+            candidates per sphere.
         neighbor_capacity: candidate slots per sphere; None derives it from the radius ratio.
         mesh_capacity: candidate triangle slots per sphere.
         velocity_limit: a sphere faster than this [m/s] stops the run as a blow-up.
@@ -48,6 +52,7 @@ class SolverOptions:
     dt: float | None = None
     dt_fraction: float = 0.2
     skin: float | None = None
+    skin_fraction: float = 0.4
     neighbor_capacity: int | None = None
     mesh_capacity: int = 16
     velocity_limit: float = 500.0
@@ -64,6 +69,8 @@ class SolverOptions:
             bad("dt_fraction", self.dt_fraction, "a fraction of the Rayleigh time in (0, 1]")
         if self.skin is not None and not (math.isfinite(self.skin) and self.skin > 0):
             bad("skin", self.skin, "a skin > 0 m or None (automatic)")
+        if not (math.isfinite(self.skin_fraction) and self.skin_fraction > 0):
+            bad("skin_fraction", self.skin_fraction, "a fraction of the smallest radius > 0")
         if self.neighbor_capacity is not None and not (int(self.neighbor_capacity) >= 1):
             bad("neighbor_capacity", self.neighbor_capacity, "an integer >= 1 or None (automatic)")
         if int(self.mesh_capacity) < 1:
@@ -110,7 +117,7 @@ class Solver:
                 warnings.warn(
                     f"time step {self.dt:.3g} s exceeds {self.options.dt_fraction:.0%} of the Rayleigh time "
                     f"({model.rayleigh_time:.3g} s): contacts may be under-resolved", stacklevel=2)
-        self.skin = self.options.skin if self.options.skin is not None else 0.4 * model.radius_min
+        self.skin = self.options.skin if self.options.skin is not None else self.options.skin_fraction * model.radius_min
         self._clock = wp.zeros(1, dtype=int, device=model.device)
         self._wall_lanes = wp.zeros((max(model.plane_count + model.wall_count, 1), int(_st.WALL_LANES)),
                                     dtype=wp.vec3, device=model.device)

@@ -142,7 +142,7 @@ def test_blowup_with_overflow_names_both():
 def test_rebuild_count_follows_the_skin():
     """A lone sphere coasting at v (no gravity) rebuilds its lists each time it has moved half the Verlet
     skin since the last build: with v dt = (skin / 2) / 10.5 that is every 11th step, so 110 steps (builds
-    at steps 0, 11, ..., 99) make 10 rebuilds; a solver at rest after the first build makes none."""
+    at steps 0, 11, ..., 99) make 10 rebuilds; a sphere at rest builds once; skin_fraction scales the skin."""
     r = 1e-3
     b = wd.ModelBuilder(gravity=(0, 0, 0))
     b.add_material(wd.Material("a", density=2500, youngs_modulus=1e7, poisson_ratio=0.3))
@@ -160,6 +160,10 @@ def test_rebuild_count_follows_the_skin():
     still = wd.Solver(probe.model)
     still.run(probe.model.state(), still.contacts(), 110)
     assert still.rebuild_count == 1
+    # a skin of 0.6 r instead of 0.4 r: half of it is 15.75 steps of travel, so builds at 0, 16, ..., 96
+    wide = wd.Solver(m, wd.SolverOptions(skin_fraction=0.6))
+    wide.run(m.state(), wide.contacts(), 110)
+    assert wide.skin == pytest.approx(0.6 * r) and wide.rebuild_count == 7
 
 
 def _raft(r: float = 1e-3):

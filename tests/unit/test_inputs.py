@@ -83,6 +83,8 @@ def test_solver_options_checked():
         wd.SolverOptions(dt=-1)
     with pytest.raises(ValueError, match="clump_contact_mass = 'half'.*\"shared\" or \"body\""):
         wd.SolverOptions(clump_contact_mass="half")
+    with pytest.raises(ValueError, match="skin_fraction = 0.0 is not allowed; expected a fraction of the smallest"):
+        wd.SolverOptions(skin_fraction=0.0)
 
 
 def test_large_dt_warns():

@@ -136,7 +136,8 @@ def test_stage_round_trip(rig):
             else:
                 assert g.sizes[k] == pytest.approx(v, rel=1e-12), (w.name, k)
 
-    for f in ("duration", "dt_fraction", "settle_energy", "settle_after", "output_interval", "impact_speed_min"):
+    for f in ("duration", "dt_fraction", "settle_energy", "settle_after", "output_interval", "impact_speed_min",
+              "skin_fraction"):
         assert getattr(got.run, f) == pytest.approx(getattr(want.run, f), rel=1e-12, abs=0), f
     assert got.run.clump_contact_mass == want.run.clump_contact_mass == "shared"
 
@@ -349,6 +350,22 @@ def test_stage_clump_contact_mass(funnel_stage):
     assert apply_overrides(spec, {"run.clump_contact_mass": "body"}).run.clump_contact_mass == "body"
     with pytest.raises(StageError, match="'half' is not allowed; expected shared or body"):
         apply_overrides(spec, {"run.clump_contact_mass": "half"})
+
+
+def test_stage_skin_fraction(funnel_stage):
+    """warpdem:run:skinFraction (the Verlet skin over the smallest radius) reads back and reaches the solver
+    through --set; a fraction <= 0 names /World, the attribute and what is allowed."""
+    path, stage = funnel_stage
+    attr = stage.GetPrimAtPath("/World").GetAttribute("warpdem:run:skinFraction")
+    assert attr.Get() == pytest.approx(0.4)
+    attr.Set(1.0)
+    stage.GetRootLayer().Save()
+    assert read_stage(str(path)).run.skin_fraction == 1.0
+    attr.Set(-0.2)
+    msg = _read_error(path, stage)
+    assert "/World" in msg and "warpdem:run:skinFraction" in msg and "smallest radius > 0" in msg
+    spec = apply_overrides(rigs.spec("funnel", smoke=True), {"run.skin_fraction": "0.8"})
+    assert spec.run.skin_fraction == 0.8
 
 
 def test_stage_negative_friction(funnel_stage):
