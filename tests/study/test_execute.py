@@ -257,3 +257,20 @@ def test_runs_split_evenly_over_devices(tmp_path):
 def test_bad_device_names_the_value(device):
     with pytest.raises(ValueError, match=f"device = {device!r}: .* is not a device; expected 'cpu', 'cuda'"):
         execute.parse_devices(device)
+
+
+def test_two_processes_stop_and_resume(finished, tmp_path):
+    """With a wall-time limit already spent, each of the two CPU processes stops its launch after its first
+    output tick, saving a checkpoint; the rerun resumes both launches from their checkpoints and ends with
+    the one-launch responses to the last bit."""
+    study, out1, _ = finished
+    out2 = tmp_path / "out"
+    res = _run(study, out2, device="cpu,cpu", analyze_after=False, stop_after=1e-6)
+    assert res["stopped"] and res["stopped"].count("checkpoint saved") == 2 and res["ran"] == 0
+    assert len(list((out2 / "launches").glob("*/checkpoint.npz"))) == 2
+    res = _run(study, out2, device="cpu,cpu", analyze_after=False)
+    assert res["stopped"] is None and res["ran"] == 6
+    for pid in execute.load_results(out2, study)["point_id"]:
+        rec = json.loads((out2 / "runs" / f"{pid}.json").read_text())
+        assert 0 < rec["info"]["resumed_from_s"] < 0.3
+    assert list(execute.load_results(out1, study)["height"]) == list(execute.load_results(out2, study)["height"])
