@@ -6,12 +6,11 @@ GPU time over ``--steps`` eager steps (Warp's timing API, CUDA only).
 
     python benchmarks/profile_funnel.py --device cuda --worlds 4 --until 1.6 --profile-at 0.4 --profile-at 1.5
 
-The 4-world study launch on an NVIDIA H200 took 3.1 ms per step up to 1.15 s and 15.5 ms per step from
-1.7 s to 2.15 s; this script is meant to say why.
+The 5-world launch of the Box-Behnken study on an NVIDIA H200 took 3.2 ms per step up to 1.15 s and
+15.6 ms per step from 1.7 s to 2.1 s; this script is meant to say why.
 """
 
 import argparse
-import dataclasses
 import time
 
 import warp as wp
@@ -20,8 +19,8 @@ wp.config.quiet = True
 
 from warpdem import rigs  # noqa: E402
 from warpdem.bench import contacts_per_sphere, kernel_profile  # noqa: E402
+from warpdem.runner import scene_solver  # noqa: E402
 from warpdem.scene import build  # noqa: E402
-from warpdem.solver import Solver, SolverOptions  # noqa: E402
 
 p = argparse.ArgumentParser()
 p.add_argument("--device", default="cuda")
@@ -37,12 +36,8 @@ a = p.parse_args()
 wp.init()
 params = {"particle": "pellet", "material": "pellet"} | ({"count": a.count} if a.count else {})
 spec = rigs.spec("funnel", params, a.smoke)
-run = spec.run
 model = build(spec, a.worlds).finalize(a.device)
-solver = Solver(model, SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min,
-                                     mesh_capacity=32, clump_contact_mass=run.clump_contact_mass,
-                                     skin_fraction=run.skin_fraction, skin=a.skin))
-solver.options = dataclasses.replace(solver.options, neighbor_capacity=max(32, solver.default_neighbor_capacity()))
+solver = scene_solver(model, spec.run, skin=a.skin)
 state, contacts = model.state(), solver.contacts()
 print(f"{a.worlds} world(s), {model.sphere_count} spheres, {model.clump_count} clumps, dt {solver.dt:.3g} s, "
       f"skin {solver.skin * 1e3:.3f} mm, neighbour slots {solver.options.neighbor_capacity}, "

@@ -133,6 +133,21 @@ def check_stop_after(stop_after: float, out_dir, frames: bool) -> None:
                          "(it stops by saving a checkpoint)")
 
 
+def scene_solver(model, run, skin: float | None = None):
+    """The Solver a scene's run uses: ``run`` (RunSpec) sets the step, impact threshold, clump damping
+    convention and skin (``skin`` [m] overrides it), with room for the contacts of rig meshes and dense beds."""
+    from .solver import Solver, SolverOptions
+
+    # rig meshes have fans and seams where one sphere may touch many triangles
+    solver = Solver(model, SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min,
+                                         mesh_capacity=32, clump_contact_mass=run.clump_contact_mass,
+                                         skin_fraction=run.skin_fraction, skin=skin))
+    # a compacted bed (die press) or glued layers hold more partners per sphere than a loose packing
+    solver.options = dataclasses.replace(solver.options,
+                                         neighbor_capacity=max(32, solver.default_neighbor_capacity()))
+    return solver
+
+
 def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: int = 1,
               variations: dict | None = None, frames: bool = True, progress=None, quiet: bool = False,
               world_seeds=None, checkpoint_every: float = 0.0, stop_after: float = 0.0) -> RunResult:
@@ -157,20 +172,12 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     Returns:
         RunResult with one metrics dict per world.
     """
-    from .solver import Solver, SolverOptions
-
     check_stop_after(stop_after, out_dir, frames)
     t_wall0 = time.perf_counter()
     builder = build(spec, world_count, variations, world_seeds)
     model = builder.finalize(device)
     run = spec.run
-    # rig meshes have fans and seams where one sphere may touch many triangles
-    solver = Solver(model, SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min,
-                                         mesh_capacity=32, clump_contact_mass=run.clump_contact_mass,
-                                         skin_fraction=run.skin_fraction))
-    # a compacted bed (die press) or glued layers hold more partners per sphere than a loose packing
-    solver.options = dataclasses.replace(solver.options,
-                                         neighbor_capacity=max(32, solver.default_neighbor_capacity()))
+    solver = scene_solver(model, run)
     state, contacts = model.state(), solver.contacts()
     h = _host(model)
     W = model.world_count
@@ -215,6 +222,7 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             series.setdefault("tick_wall_s", [])
             series.setdefault("rebuilds", [])
     t_ckpt = time.perf_counter()
+    rebuilds_total = solver.rebuild_count
     if writer is not None:
         _frame(writer, model, state, h, spec, 0.0)
     while state.time < run.duration - eps:
@@ -223,10 +231,10 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
         for te in phase_ends:
             if state.time + eps < te < t_next - eps:
                 t_next = te
-        step0, rebuilds0 = state.step, solver.rebuild_count
+        step0 = state.step
         state = solver.advance(state, contacts, t_next - state.time)
         t = state.time
-        rebuilds = solver.rebuild_count - rebuilds0
+        rebuilds, rebuilds_total = solver.rebuild_count - rebuilds_total, solver.rebuild_count
         series["tick_wall_s"].append(time.perf_counter() - t_tick)
         series["rebuilds"].append(rebuilds)
         imp = state.wall_impulse.numpy()
