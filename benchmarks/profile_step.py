@@ -23,6 +23,8 @@ p.add_argument("--pellets", type=int, default=1500)
 p.add_argument("--worlds", type=int, action="append")
 p.add_argument("--fall", type=float, default=0.15, help="simulated seconds before profiling [s]")
 p.add_argument("--steps", type=int, default=100, help="eager steps profiled")
+p.add_argument("--skin-fraction", type=float, default=0.4, help="Verlet skin / smallest sphere radius")
+p.add_argument("--capacity", type=int, help="neighbour slots per sphere (default: the solver's estimate)")
 a = p.parse_args()
 wp.init()
 template = pellet_template()
@@ -47,17 +49,20 @@ for worlds in a.worlds or [1, 17]:
             b.add_plane(-n * half, n, "steel")
     b.replicate(worlds)
     m = b.finalize(a.device)
-    s = wd.Solver(m, wd.SolverOptions(neighbor_capacity=32))
+    s = wd.Solver(m, wd.SolverOptions(neighbor_capacity=a.capacity, skin_fraction=a.skin_fraction))
     state, c = m.state(), s.contacts()
     steps = int(a.fall / s.dt)
     state = s.run(state, c, steps)
     wp.synchronize()
+    rebuilds = s.rebuild_count
     t0 = time.perf_counter()
     state = s.run(state, c, 2048)
     wp.synchronize()
     rate = 2048 / (time.perf_counter() - t0)
+    rebuilds = s.rebuild_count - rebuilds
     print(f"{worlds} worlds, {m.sphere_count} spheres ({m.clump_count} clumps), dt {s.dt:.3g} s, "
-          f"{wp.get_device(a.device).name}: {rate:.0f} graph steps/s = {rate * m.sphere_count / 1e6:.0f} M sphere-steps/s; "
+          f"skin {s.skin * 1e3:.3f} mm, {c.neighbor_capacity} slots, {wp.get_device(a.device).name}: {rate:.0f} graph steps/s = "
+          f"{rate * m.sphere_count / 1e6:.0f} M sphere-steps/s, {2048 / max(rebuilds, 1):.1f} steps per rebuild; "
           f"eager kernels over {a.steps} steps:")
     state, ms = kernel_profile(s, state, c, a.steps, top=100)
     print(f"   {ms:.3f} ms of kernel time per step")

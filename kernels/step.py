@@ -553,8 +553,11 @@ def integrate_clumps(
             q_out[c] = q_c
             v_out[c] = v_in[c]
             angmom_out[c] = angmom_in[c]
+        # parked (not released yet) or removed (left the domain): at rest where it is
         for s in range(first + lane, last, lanes):
             sphere_x_out[s] = x_c + wp.quat_rotate(q_c, sphere_offset[s])
+            sphere_v_out[s] = v_in[c]
+            sphere_w_out[s] = wp.vec3(0.0)
         return
     world = clump_world[c]
     rho = material_density[world % material_density.shape[0], clump_material[c]]
@@ -815,3 +818,48 @@ def place_bodies(
             w_out[s] = wp.vec3(0.0)
             active_out[s] = 1
     rebuild_out[0] = 1
+
+
+@wp.kernel
+def retire_escaped(
+    # Model:
+    low: wp.vec3,
+    high: wp.vec3,
+    sphere_clump: wp.array[int],
+    sphere_world: wp.array[int],
+    sphere_wall: wp.array[int],
+    clump_sphere_start: wp.array[int],
+    # State in/out:
+    x: wp.array[wp.vec3],
+    clump_x: wp.array[wp.vec3],
+    active: wp.array[int],
+    v: wp.array[wp.vec3],
+    w: wp.array[wp.vec3],
+    clump_v: wp.array[wp.vec3],
+    clump_angmom: wp.array[wp.vec3],
+    clump_w: wp.array[wp.vec3],
+    world_removed: wp.array[int],
+):
+    """Remove the bodies whose centre is outside the domain box [low, high]: their spheres become inactive
+    and at rest (so they neither touch anything nor flag rebuilds); each removed body counts once in its
+    world. Every sphere of a clump tests the clump's centre, so a clump leaves whole."""
+    i = wp.tid()
+    if active[i] == 0 or sphere_wall[i] >= 0:
+        return
+    c = sphere_clump[i]
+    p = x[i]
+    if c >= 0:
+        p = clump_x[c]
+    inside = p[0] >= low[0] and p[1] >= low[1] and p[2] >= low[2]
+    inside = inside and p[0] <= high[0] and p[1] <= high[1] and p[2] <= high[2]
+    if inside:
+        return
+    active[i] = 0
+    v[i] = wp.vec3(0.0)
+    w[i] = wp.vec3(0.0)
+    if c < 0 or i == clump_sphere_start[c]:
+        wp.atomic_add(world_removed, sphere_world[i] % world_removed.shape[0], 1)
+        if c >= 0:
+            clump_v[c] = wp.vec3(0.0)
+            clump_angmom[c] = wp.vec3(0.0)
+            clump_w[c] = wp.vec3(0.0)

@@ -118,9 +118,9 @@ def contacts_per_sphere(state, contacts, model) -> float:
 
 
 def kernel_profile(solver, state, contacts, steps: int, top: int = 12):
-    """Run ``steps`` eager steps under Warp's kernel timer (CUDA only) and print the kernels by GPU time.
+    """Run ``steps`` eager steps under Warp's timer (CUDA only) and print kernels, copies and fills by GPU time.
     Returns (state, milliseconds of kernel time per step)."""
-    wp.timing_begin(cuda_filter=wp.TIMING_KERNEL)
+    wp.timing_begin(cuda_filter=wp.TIMING_KERNEL | wp.TIMING_MEMCPY | wp.TIMING_MEMSET)
     state = solver.run(state, contacts, steps, use_graph=False)
     per = {}
     for r in wp.timing_end():

@@ -63,6 +63,7 @@ class ModelBuilder:
         self.world_count = 1
         self._variations = {}
         self._world_seeds = None
+        self._domain = None
 
     # materials -------------------------------------------------------------------------------
     def add_material(self, material: Material) -> int:
@@ -386,6 +387,16 @@ class ModelBuilder:
         return len(self._r)
 
     # batching --------------------------------------------------------------------------------
+    def set_domain(self, low, high) -> None:
+        """Simulation domain: the box from ``low`` to ``high`` ((x, y, z) [m]), the same in every world. A body
+        (clump or free sphere) whose centre leaves it is removed at the next list rebuild and counted in
+        ``State.world_removed``. Without a domain nothing is removed."""
+        lo, hi = _vec3(low, "set_domain", "low"), _vec3(high, "set_domain", "high")
+        if not np.all(lo < hi):
+            raise ValueError(f"set_domain: low = {tuple(lo.tolist())} and high = {tuple(hi.tolist())} are not "
+                             "allowed; expected low < high on every axis")
+        self._domain = (tuple(float(v) for v in lo), tuple(float(v) for v in hi))
+
     def replicate(self, world_count: int) -> None:
         """Make ``world_count`` identical copies of the scene, all at the origin (kept apart by world id)."""
         if int(world_count) < 1:
@@ -577,6 +588,7 @@ class ModelBuilder:
             clump_template=np.tile(tpl, W),
             clump_scale=np.tile(cscale, W),
             factories=list(self._factories),
+            domain=self._domain,
             world_seed=np.asarray(self._world_seeds if self._world_seeds is not None else [0] * W, dtype=np.int64),
         )
 

@@ -75,6 +75,15 @@ def _sizes(radius: float, spread: float) -> dict:
             "high": radius * (1 + 2 * spread)}
 
 
+def _plate_domain(size_x: float, size_y: float, center, margin: float, top: float) -> tuple:
+    """Domain over an open plate of ``size_x`` x ``size_y`` [m] whose top is at ``center`` [m]: a body that
+    rolls off an edge is removed once its centre is ``2 margin`` beyond it or ``4 margin`` below the plate
+    (``margin``: about a body's bounding radius [m]), instead of falling for ever; ``top``: its upper z [m]."""
+    cx, cy, cz = center
+    hx, hy = size_x / 2 + 2 * margin, size_y / 2 + 2 * margin
+    return (cx - hx, cy - hy, cz - 4 * margin), (cx + hx, cy + hy, top)
+
+
 def _settle_energy(material: Material, radius: float) -> float:
     """Kinetic energy per particle [J] below which a bed counts as settled: m g r / 1000, a thousandth of the
     work to lift the particle by its own radius."""
@@ -228,6 +237,7 @@ class Funnel:
                         settle_energy=_settle_energy(grain, radius), settle_after=self.count / self.rate,
                         output_interval=0.05),
             measure=MeasureSpec("angle_of_repose", base_height=0.0, center=(0.0, 0.0)),
+            domain=_plate_domain(self.plate_size, self.plate_size, (0.0, 0.0, 0.0), bound, top_z + 0.5),
         )
 
 
@@ -316,6 +326,8 @@ class LiftingCylinder:
             run=RunSpec(duration=t1 + self.after_lift, dt_fraction=self.dt_fraction,
                         settle_energy=_settle_energy(ore, r), settle_after=t1, output_interval=0.05),
             measure=MeasureSpec("angle_of_repose", base_height=2 * coat_r if self.coated else 0.0),
+            domain=_plate_domain(self.base_size, self.base_size, (0.0, 0.0, 0.0), margin,
+                                 H + lift + self.pour_height + 0.5),
         )
 
 
@@ -519,6 +531,8 @@ class TruckTipper:
             run=RunSpec(duration=end, dt_fraction=self.dt_fraction, output_interval=0.1),
             measure=MeasureSpec("impacts", walls=["Body", "Tailgate"], phase_names=["loading", "discharge"],
                                 phase_ends=[t_load, end]),
+            domain=_plate_domain(L + 12.0, W + 4.0, (L / 2 + 4.0, 0.0, -self.chassis_height), margin,
+                                 self.lip_height + bh + self.pour_height + 4.0),
         )
 
 

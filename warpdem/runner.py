@@ -285,8 +285,10 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     wall_s = time.perf_counter() - t_wall0
 
     metrics = []
+    removed = state.world_removed.numpy()
     for w in range(W):
-        mw = {"world": w, "time_s": state.time, "stop": stop_reason}
+        # removed: bodies that left the scene's domain (e.g. rolled off the plate's edge)
+        mw = {"world": w, "time_s": state.time, "stop": stop_reason, "removed": int(removed[w])}
         if m.kind == "angle_of_repose":
             x, r = _particles(model, state, h, w)
             # what rolled off the base is not part of the pile

@@ -160,6 +160,9 @@ class SceneSpec:
     measure: MeasureSpec
     gravity: tuple = (0.0, 0.0, -9.81)
     authoring: dict = field(default_factory=dict)
+    domain: tuple | None = None
+    """((x, y, z) low, (x, y, z) high) [m]: bodies whose centre leaves this box are removed (see
+    ``Model.domain``); None removes nothing. In USD: ``warpdem:domainMin`` and ``warpdem:domainMax`` on /World."""
 
     def material(self, name: str) -> Material:
         for m in self.materials:
@@ -200,7 +203,8 @@ FACTORY_FIELDS = ["mode", "material", "shape", "count", "mass", "rate", "mass_ra
 COAT_FIELDS = ["radius", "material", "side", "seed", "spacing"]
 
 KNOWN = {
-    "world": {NS + "rig", NS + "authoring"} | {NS + "run:" + _camel(f) for f in RUN_FIELDS}
+    "world": {NS + "rig", NS + "authoring", NS + "domainMin", NS + "domainMax"}
+    | {NS + "run:" + _camel(f) for f in RUN_FIELDS}
     | {NS + "measure:" + _camel(f) for f in MEASURE_SCALARS},
     "material": {NS + "youngsModulus", NS + "shearModulus", NS + "poissonRatio"},
     "pair": {NS + "pair:materials"} | {NS + "pair:" + _camel(f) for f in PAIR_FIELDS},
@@ -235,6 +239,9 @@ def write_stage(spec: SceneSpec, path=None):
     wp_ = world.GetPrim()
     wp_.CreateAttribute(NS + "rig", Sdf.ValueTypeNames.Token).Set(spec.rig)
     wp_.CreateAttribute(NS + "authoring", Sdf.ValueTypeNames.String).Set(json.dumps(spec.authoring, sort_keys=True))
+    if spec.domain is not None:
+        wp_.CreateAttribute(NS + "domainMin", Sdf.ValueTypeNames.Double3).Set(Gf.Vec3d(*spec.domain[0]))
+        wp_.CreateAttribute(NS + "domainMax", Sdf.ValueTypeNames.Double3).Set(Gf.Vec3d(*spec.domain[1]))
     for f in RUN_FIELDS:
         if f in RUN_TOKENS:
             wp_.CreateAttribute(NS + "run:" + _camel(f), Sdf.ValueTypeNames.Token).Set(str(getattr(spec.run, f)))
@@ -505,6 +512,18 @@ def read_stage(path_or_stage) -> SceneSpec:
         r.fail(world, NS + "run:skinFraction", f"= {run.skin_fraction} is not allowed; expected a fraction of the "
                "smallest radius > 0")
 
+    lo = r.get(world, NS + "domainMin", "vec3", required=False)
+    hi = r.get(world, NS + "domainMax", "vec3", required=False)
+    domain = None
+    if (lo is None) != (hi is None):
+        missing = "domainMax" if hi is None else "domainMin"
+        r.fail(world, NS + missing, "is missing; a domain needs both warpdem:domainMin and warpdem:domainMax (double3)")
+    if lo is not None:
+        if not all(a < b for a, b in zip(lo, hi)):
+            r.fail(world, NS + "domainMax", f"= {hi} is not allowed; expected greater than warpdem:domainMin = "
+                   f"{lo} on every axis")
+        domain = (lo, hi)
+
     kind = r.get(world, NS + "measure:kind", "token", required=False, default="none")
     measure = MeasureSpec(
         kind=kind,
@@ -629,7 +648,7 @@ def read_stage(path_or_stage) -> SceneSpec:
         factories.append(_read_factory(r, prim))
 
     spec = SceneSpec(rig=rig, materials=materials, pairs=pairs, shapes=shapes, walls=walls, factories=factories,
-                     run=run, measure=measure, gravity=gravity, authoring=authoring)
+                     run=run, measure=measure, gravity=gravity, authoring=authoring, domain=domain)
     for w in walls:
         spec.material(w.material)
     if kind == "press":
@@ -855,6 +874,8 @@ def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None,
     from .motion import WallMotion
 
     b = ModelBuilder(gravity=spec.gravity)
+    if spec.domain is not None:
+        b.set_domain(*spec.domain)
     for m in spec.materials:
         b.add_material(m)
     for a, c, ia in spec.pairs:

@@ -89,6 +89,9 @@ CUDA_GRAPH_STEPS = 32
 # neighbour cells per longest reach (2 r_max + skin + cohesive reach): 2 makes the walked box of cells hug
 # each sphere's own reach
 CELLS_PER_REACH = 2.0
+LIST_ARRAYS = ("neighbor_count", "neighbor_index", "neighbor_spring", "neighbor_roll", "neighbor_aux",
+               "mesh_count", "mesh_face", "mesh_spring", "mesh_roll", "mesh_aux")
+"""The Contacts arrays a rebuild writes (into ``Contacts.scratch``, then committed)."""
 
 
 class Solver:
@@ -185,8 +188,7 @@ class Solver:
             partner_key=wp.full(max(m.clump_count, 1) * _st.PARTNER_SLOTS, -1, dtype=int, device=dev),
             partner_count=wp.zeros(max(m.clump_count, 1) * _st.PARTNER_SLOTS, dtype=int, device=dev),
         )
-        for name in ("neighbor_count", "neighbor_index", "neighbor_spring", "neighbor_roll", "neighbor_aux",
-                     "mesh_count", "mesh_face", "mesh_spring", "mesh_roll", "mesh_aux"):
+        for name in LIST_ARRAYS:
             c.scratch[name] = wp.zeros_like(getattr(c, name))
         # about two buckets per sphere keeps the lists short without a large table to clear
         buckets = 1 << max(10, int(math.ceil(math.log2(max(2 * n, 1)))))
@@ -195,8 +197,15 @@ class Solver:
 
     # launchers ------------------------------------------------------------------------------
     def rebuild(self, state: State, contacts: Contacts) -> None:
-        """Rebuild the candidate lists from ``state`` and carry the history over."""
+        """Remove the bodies that left the domain, rebuild the candidate lists from ``state`` and carry the
+        history over."""
         m, c = self.model, contacts
+        if m.domain is not None:
+            wp.launch(_st.retire_escaped, dim=m.sphere_count,
+                      inputs=[wp.vec3(*m.domain[0]), wp.vec3(*m.domain[1]), m.sphere_clump, m.sphere_world,
+                              m.sphere_wall, m.clump_sphere_start, state.sphere_x, state.clump_x],
+                      outputs=[state.sphere_active, state.sphere_v, state.sphere_w, state.clump_v,
+                               state.clump_angmom, state.clump_w, state.world_removed], device=m.device)
         reach = m.contact_reach
         inv_cell = CELLS_PER_REACH / (2.0 * m.radius_max + self.skin + reach)
         head, nxt = c.cells["head"], c.cells["next"]
@@ -221,15 +230,15 @@ class Solver:
             ],
             device=m.device,
         )
-        for name, buf in s.items():
-            wp.copy(getattr(c, name), buf)
+        wp.launch(_nb.commit_contacts, dim=m.sphere_count, inputs=[s[k] for k in LIST_ARRAYS],
+                  outputs=[getattr(c, k) for k in LIST_ARRAYS], device=m.device)
         wp.copy(c.wall_build_pose, state.wall_pose)
         c.rebuild.zero_()
 
     def step(self, state_in: State, state_out: State, control: Control | None, contacts: Contacts,
              dt: float | None = None) -> None:
         """Advance ``state_in`` by one step into ``state_out`` (rebuilding the lists first if due)."""
-        for name in State.SHARED_RECORDS:
+        for name in State.TWIN_SHARED:
             setattr(state_out, name, getattr(state_in, name))
         self._set_time(state_in.time)
         self._step(state_in, state_out, control, contacts, dt)
@@ -355,10 +364,10 @@ class Solver:
         t0, step0 = state.time, state.step
         if self._spare is None or self._spare.sphere_x.shape != state.sphere_x.shape:
             self._spare = self.model.state()
-        # the twin shares the activity flags (they change only at a release, never within a step) and the
-        # impact records (running sums every step adds to)
+        # the twin shares the activity flags (they change only at a release or a removal, never within a
+        # step), the impact records (running sums every step adds to) and the removal counts
         self._spare.sphere_active = state.sphere_active
-        for name in State.SHARED_RECORDS:
+        for name in State.TWIN_SHARED:
             setattr(self._spare, name, getattr(state, name))
         a, b = state, self._spare
         if use_graph is None:

@@ -146,6 +146,11 @@ class Model:
     """Host array: placement seed of each world's dynamic factories, shape (world_count,) (0: the factory's
     own stream, the same in every world)."""
     initial: dict = field(default_factory=dict)
+    domain: tuple | None = None
+    """Simulation domain ((x, y, z) low, (x, y, z) high) [m], the same box in every world: a body whose centre
+    leaves it is removed at the next list rebuild (as EDEM deletes particles that leave its domain), so a
+    particle that falls off an open plate neither falls for ever, forcing a rebuild every step, nor keeps a
+    settled world moving. None: no domain, nothing is removed."""
     """Host copies of the initial state arrays (sphere_x/v/w, sphere_active, clump_x/q/v/w)."""
 
     @property
@@ -192,6 +197,7 @@ class Model:
             face_impact_count=wp.zeros(faces, dtype=int, device=dev),
             face_impact_energy=wp.zeros(faces, dtype=wp.float64, device=dev),
             face_impact_speed=wp.zeros(faces, dtype=float, device=dev),
+            world_removed=wp.zeros(self.world_count, dtype=int, device=dev),
         )
 
     def control(self) -> "Control":
@@ -260,6 +266,9 @@ class State:
     """Sum of the normal impact energies 0.5 m u_n^2 (m the body's mass) [J], same shape, float64."""
     face_impact_speed: wp.array = None
     """Largest normal impact speed u_n [m/s], same shape, float32."""
+    world_removed: wp.array = None
+    """Bodies (clumps or free spheres) removed for leaving ``Model.domain``, per world, shape (world_count,),
+    int32. A removed body's spheres are inactive (``sphere_active`` 0) and at rest where they left."""
     time: float = 0.0
     """Simulated time [s] (host-side)."""
     step: int = 0
@@ -273,6 +282,8 @@ class State:
 
     SHARED_RECORDS: ClassVar[tuple] = ("face_impact_count", "face_impact_energy", "face_impact_speed")
     """Running records a solver's twin states share (every step adds to them)."""
+    TWIN_SHARED: ClassVar[tuple] = SHARED_RECORDS + ("world_removed",)
+    """Arrays a solver's twin states share: the running records and the removal counts."""
 
     def reset_impacts(self) -> None:
         """Zero the impact records (e.g. between the loading and the discharge of a tipper)."""

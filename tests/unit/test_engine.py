@@ -264,3 +264,53 @@ def test_wall_forces_carry_the_weight():
     np.testing.assert_allclose(wf.sum(axis=0), mass * g, atol=2e-3 * mass * 9.81)
     # floor friction may share the sideways push (statically indeterminate), but the ramp must take a real part
     assert wf[1][0] > 0.2 * mass * g[0]
+
+
+def test_bodies_leaving_the_domain_are_removed():
+    """A free sphere and a clump fall from rest out of the domain's floor (z = -0.05 m): each is removed at
+    the first list rebuild after its free-fall time sqrt(2 h / g), never before it, at most half the skin
+    beyond the floor; a clump leaves whole; each world counts its own (world 1 has no gravity, so nothing
+    leaves); once both are gone no rebuild is flagged and they stay put."""
+    r, g, floor = 0.005, 9.81, -0.05
+    b = wd.ModelBuilder()
+    b.add_material(wd.Material("a", density=2500, youngs_modulus=1e7, poisson_ratio=0.3))
+    b.add_sphere((0, 0, 0), r, "a")
+    b.add_clump(wd.ClumpTemplate.from_spheres("pair", [[-r, 0, 0], [r, 0, 0]], [r, r]), (0.1, 0, 0.02), "a")
+    b.set_domain((-1, -1, floor), (1, 1, 1))
+    b.replicate(2)
+    b.vary("gravity", [[0, 0, -g], [0, 0, 0]])
+    m = b.finalize("cpu")
+    s = wd.Solver(m)
+    st, c = m.state(), s.contacts()
+    t_sphere, t_clump = math.sqrt(2 * -floor / g), math.sqrt(2 * (0.02 - floor) / g)
+    # half a skin at the speed it leaves with: the latest a rebuild can come after the crossing
+    lag = 0.5 * s.skin / (g * t_sphere)
+
+    def alive():
+        act = st.sphere_active.numpy().reshape(2, 3)
+        return act[0, 0], act[0, 1:], act[1]
+
+    st = s.advance(st, c, t_sphere - 2 * s.dt)
+    assert alive()[0] == 1 and st.world_removed.numpy().tolist() == [0, 0]
+    st = s.advance(st, c, t_clump - st.time - 2 * s.dt)
+    sphere, clump, other = alive()
+    assert sphere == 0 and clump.tolist() == [1, 1] and st.world_removed.numpy().tolist() == [1, 0]
+    z = st.sphere_x.numpy()[0, 2]
+    assert floor - 0.5 * s.skin - g * t_clump * s.dt <= z < floor
+    st = s.advance(st, c, 2 * lag + 4 * s.dt)
+    sphere, clump, other = alive()
+    assert clump.tolist() == [0, 0] and other.tolist() == [1, 1, 1]
+    assert st.world_removed.numpy().tolist() == [2, 0]
+    assert np.all(st.clump_v.numpy()[0] == 0) and np.all(st.sphere_v.numpy()[:3] == 0)
+    x_gone, rebuilds = st.sphere_x.numpy()[:3].copy(), s.rebuild_count
+    st = s.advance(st, c, 0.05)
+    assert s.rebuild_count == rebuilds and np.array_equal(st.sphere_x.numpy()[:3], x_gone)
+
+
+def test_domain_is_validated():
+    b = wd.ModelBuilder()
+    with pytest.raises(ValueError, match=r"set_domain: low = \(0.0, 0.0, 1.0\) and high = \(1.0, 1.0, 1.0\) "
+                                         r"are not allowed; expected low < high on every axis"):
+        b.set_domain((0, 0, 1), (1, 1, 1))
+    with pytest.raises(ValueError, match="set_domain: high = .* is not allowed; expected three finite numbers"):
+        b.set_domain((0, 0, 0), (1, 1, float("nan")))

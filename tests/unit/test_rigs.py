@@ -83,6 +83,7 @@ def test_stage_round_trip(rig):
 
     assert got.rig == want.rig
     assert got.authoring == want.authoring
+    assert (got.domain is None) == (want.domain is None) and (want.domain is None or _close(got.domain, want.domain))
     assert _close(got.gravity, want.gravity)
 
     assert [m.name for m in got.materials] == [m.name for m in want.materials]
@@ -366,6 +367,26 @@ def test_stage_skin_fraction(funnel_stage):
     assert "/World" in msg and "warpdem:run:skinFraction" in msg and "smallest radius > 0" in msg
     spec = apply_overrides(rigs.spec("funnel", smoke=True), {"run.skin_fraction": "0.8"})
     assert spec.run.skin_fraction == 0.8
+
+
+def test_stage_domain(funnel_stage):
+    """The funnel's domain (warpdem:domainMin/Max on /World) frames the plate and reaches the Model; a stage
+    with only one of the two, or with max not above min, is refused naming /World and the attribute."""
+    path, stage = funnel_stage
+    spec = read_stage(str(path))
+    half = rigs.spec("funnel", smoke=True).authoring["plate_size"] / 2
+    (lo, hi) = spec.domain
+    assert half < hi[0] < half + 0.02 and lo[0] == -hi[0] and -0.02 < lo[2] < 0 < hi[2]
+    from warpdem.scene import build
+
+    assert build(spec).finalize("cpu").domain == spec.domain
+    world = stage.GetPrimAtPath("/World")
+    world.GetAttribute("warpdem:domainMax").Set((1.0, 1.0, -1.0))
+    msg = _read_error(path, stage)
+    assert "/World" in msg and "warpdem:domainMax" in msg and "expected greater than warpdem:domainMin" in msg
+    world.RemoveProperty("warpdem:domainMax")
+    msg = _read_error(path, stage)
+    assert "warpdem:domainMax" in msg and "missing" in msg
 
 
 def test_stage_negative_friction(funnel_stage):
