@@ -146,12 +146,12 @@ class Model:
     """Host array: placement seed of each world's dynamic factories, shape (world_count,) (0: the factory's
     own stream, the same in every world)."""
     initial: dict = field(default_factory=dict)
+    """Host copies of the initial state arrays (sphere_x/v/w, sphere_active, clump_x/q/v/w)."""
     domain: tuple | None = None
     """Simulation domain ((x, y, z) low, (x, y, z) high) [m], the same box in every world: a body whose centre
     leaves it is removed at the next list rebuild (as EDEM deletes particles that leave its domain), so a
     particle that falls off an open plate neither falls for ever, forcing a rebuild every step, nor keeps a
     settled world moving. None: no domain, nothing is removed."""
-    """Host copies of the initial state arrays (sphere_x/v/w, sphere_active, clump_x/q/v/w)."""
 
     @property
     def plane_count(self) -> int:
