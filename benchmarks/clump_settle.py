@@ -5,13 +5,19 @@ convention of SolverOptions.clump_contact_mass.
     python benchmarks/clump_settle.py shared 60
     python benchmarks/clump_settle.py body 60
 """
-import sys, time, numpy as np, warp as wp
+import sys
+import time
+
+import numpy as np
+import warp as wp
+
 wp.config.quiet = True
-from warpdem.builder import ModelBuilder
-from warpdem.materials import Material, Interaction, RollingModel
-from warpdem.clumps import pellet_template
-from warpdem.solver import Solver, SolverOptions
-from warpdem.rigs import STEEL
+from warpdem.engine.builder import ModelBuilder
+from warpdem.engine.clumps import pellet_template
+from warpdem.engine.materials import Interaction, Material, RollingModel
+from warpdem.engine.solver import Solver, SolverOptions
+from warpdem.scene.rigs import STEEL
+
 mode = sys.argv[1] if len(sys.argv) > 1 else "shared"
 n = int(sys.argv[2]) if len(sys.argv) > 2 else 60
 tpl = pellet_template()

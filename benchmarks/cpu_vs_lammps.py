@@ -14,9 +14,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import warp as wp  # noqa: E402
-
 from lammps_bed import run_lammps_bed  # noqa: E402
-from warpdem.bench import run_bench  # noqa: E402
+
+from warpdem.verify.bench import run_bench  # noqa: E402
 
 
 def main():

@@ -15,8 +15,9 @@ import warp as wp
 
 wp.config.quiet = True
 
-from warpdem import rigs, solver  # noqa: E402
-from warpdem.runner import run_scene  # noqa: E402
+from warpdem.engine import solver  # noqa: E402
+from warpdem.scene import rigs
+from warpdem.scene.runner import run_scene  # noqa: E402
 
 p = argparse.ArgumentParser()
 p.add_argument("--rig", default="die_press")

@@ -10,7 +10,7 @@ mu_s = 0.5, no rolling friction; dt = 1e-5 s; gravity 9.81 m/s^2 along -z. A 0.1
 open-top box (floor z = 0, side walls x, y = 0 and 0.1) of frictional granular walls of the same
 material; not periodic. The spheres start on a 20 x 20 x 5 lattice (5 mm pitch in x and y,
 5.5 mm in z, lowest centres 3.0 mm up), jittered in x and y by +-0.2 mm with a fixed seed, are
-dropped for ``settle_steps`` and then timed for ``steps``. This is warpdem.bench.build_bed's bed;
+dropped for ``settle_steps`` and then timed for ``steps``. This is warpdem.verify.bench.build_bed's bed;
 only the random stream differs (stdlib ``random`` here, numpy's there).
 
 Contact law: ``hertz/material`` normal, ``mindlin`` tangential with history, and by default
@@ -194,7 +194,7 @@ run             {steps}
 print           "WARPDEM_TIMED_RUN_END"
 
 # coordination number: mean particle-particle contacts per sphere (c_z), and with the five wall
-# contacts added (c_zw, what warpdem.bench.contacts_per_sphere counts)
+# contacts added (c_zw, what warpdem.verify.bench.contacts_per_sphere counts)
 compute         contacts all contact/atom
 variable        walls atom (z<radius)+(x<radius)+(x>{BOX!r}-radius)+(y<radius)+(y>{BOX!r}-radius)
 variable        touching atom c_contacts+v_walls
@@ -271,7 +271,7 @@ def run_lammps_bed(steps: int = 20000, settle_steps: int = 30000, ranks: int = 1
     Returns:
         {"particle_steps_per_s", "loop_time_s", "steps", "atoms", "coordination" (mean particle-
         particle contacts per sphere after the timed run), "coordination_with_walls" (the same
-        plus wall contacts, as warpdem.bench counts), "ranks", "lammps_version",
+        plus wall contacts, as warpdem.verify.bench counts), "ranks", "lammps_version",
         "kinetic_energy_J", "bed_top_m"}.
 
     Raises:

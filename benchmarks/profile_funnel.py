@@ -17,10 +17,10 @@ import warp as wp
 
 wp.config.quiet = True
 
-from warpdem import rigs  # noqa: E402
-from warpdem.bench import contacts_per_sphere, kernel_profile  # noqa: E402
-from warpdem.runner import scene_solver  # noqa: E402
-from warpdem.scene import build  # noqa: E402
+from warpdem.scene import rigs  # noqa: E402
+from warpdem.scene.runner import scene_solver  # noqa: E402
+from warpdem.scene.stage import build  # noqa: E402
+from warpdem.verify.bench import contacts_per_sphere, kernel_profile  # noqa: E402
 
 p = argparse.ArgumentParser()
 p.add_argument("--device", default="cuda")

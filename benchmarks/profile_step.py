@@ -14,8 +14,8 @@ import warp as wp
 wp.config.quiet = True
 
 import warpdem as wd  # noqa: E402
-from warpdem.bench import kernel_profile  # noqa: E402
-from warpdem.clumps import pellet_template  # noqa: E402
+from warpdem.engine.clumps import pellet_template  # noqa: E402
+from warpdem.verify.bench import kernel_profile  # noqa: E402
 
 p = argparse.ArgumentParser()
 p.add_argument("--device", default="cuda")

@@ -12,8 +12,8 @@ import warp as wp
 
 wp.config.quiet = True
 
-from warpdem import rigs  # noqa: E402
-from warpdem.runner import run_scene  # noqa: E402
+from warpdem.scene import rigs  # noqa: E402
+from warpdem.scene.runner import run_scene  # noqa: E402
 
 p = argparse.ArgumentParser()
 p.add_argument("--device", default="cuda")

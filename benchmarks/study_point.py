@@ -5,11 +5,16 @@ world releases the same particles.
     python benchmarks/study_point.py studies/pellets_bbd.toml 2        # design run 2 on CUDA
     python benchmarks/study_point.py studies/pellets_bbd.toml 1,2 cpu
 """
-import sys, time, json
+import json
+import sys
+import time
+
 import warp as wp
+
 wp.config.quiet = True
-from warpdem.study import spec as sp
 from warpdem.study import execute as ex
+from warpdem.study import spec as sp
+
 study = sp.load_study(sys.argv[1])
 table = sp.design_table(study)
 runs = [int(a) for a in sys.argv[2].split(",")]

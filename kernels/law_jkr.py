@@ -9,7 +9,7 @@ Convention for gamma: it is the *surface energy* of EDEM's GUI ("Surface Energy"
 the work of adhesion of the pair is W = 2 gamma (JKR 1971 write F with W: 4E*a^3/(3R) - sqrt(8 pi W E* a^3),
 the same curve). Peak attraction F_min = -3 pi gamma R* (= -1.5 pi W R*, classical JKR pull-off) at a
 negative overlap; F(delta = 0) = -(8/3) pi gamma R*; EDEM's quoted "pull-out force" 1.5 pi gamma R* is the
-force at its radius a_c (see warpdem/analytic.py for all of these in closed form).
+force at its radius a_c (see warpdem/engine/analytic.py for all of these in closed form).
 
 Hysteresis (the caller keeps a per-contact "in contact" flag, see ``jkr_in_contact``): on approach the
 contact forms at delta = 0 (the force jumps from 0 to -(8/3) pi gamma R*); on separation it persists into

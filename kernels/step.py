@@ -9,7 +9,7 @@ history identical and makes the forces exactly equal and opposite.
 Spheres that belong to a clump only gather forces here; :func:`integrate_clumps` then reduces them
 to their clump (one thread per clump, fixed order), integrates the rigid body and places the
 component spheres. Mesh walls move rigidly: each keeps its triangles in its own frame and a pose
-per step (see warpdem/motion.py), so no BVH refit is needed.
+per step (see warpdem/engine/motion.py), so no BVH refit is needed.
 """
 
 import warp as wp

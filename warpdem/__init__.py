@@ -3,18 +3,29 @@
 The public API, listed once in ``__all__``.
 """
 
-from . import geometry, measure, rigs
-from .builder import ModelBuilder
-from .clumps import ClumpTemplate, pellet_template, phosphate_template
-from .factories import (Box, Cone, Cylinder, DynamicFactory, FixedSize, LogNormal, SieveTable, TruncatedNormal,
-                        fill_region, random_quaternions)
-from .materials import Interaction, InteractionTable, Material, effective_moduli
-from .motion import Segment, WallMotion
-from .solver import SimulationError, Solver, SolverOptions
-from .types import ContactLaw, Contacts, Control, Model, Overflow, RollingModel, State
-from .export import ResultWriter, ShapeGeometry, WallGeometry, side_view_png
-from .runner import RunResult, RunStopped, run_scene
-from .scene import SceneSpec, StageError, read_stage, write_stage
+from .engine import geometry
+from .engine.builder import ModelBuilder
+from .engine.clumps import ClumpTemplate, pellet_template, phosphate_template
+from .engine.factories import (
+                        Box,
+                        Cone,
+                        Cylinder,
+                        DynamicFactory,
+                        FixedSize,
+                        LogNormal,
+                        SieveTable,
+                        TruncatedNormal,
+                        fill_region,
+                        random_quaternions,
+)
+from .engine.materials import Interaction, InteractionTable, Material, effective_moduli
+from .engine.motion import Segment, WallMotion
+from .engine.solver import SimulationError, Solver, SolverOptions
+from .engine.types import ContactLaw, Contacts, Control, Model, Overflow, RollingModel, State
+from .scene import measure, rigs
+from .scene.export import ResultWriter, ShapeGeometry, WallGeometry, side_view_png
+from .scene.runner import RunResult, RunStopped, run_scene
+from .scene.stage import SceneSpec, StageError, read_stage, write_stage
 
 __version__ = "0.1.0"
 

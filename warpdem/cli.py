@@ -36,7 +36,7 @@ def _quiet_warp():
 
 def cmd_verify(args) -> int:
     _quiet_warp()
-    from . import verify
+    from .verify import cases as verify
 
     records = verify.run_all(args.device, args.case or None)
     rows = [(r.case, r.name, f"{r.value:.6g}", f"{r.expected:.6g}", r.unit,
@@ -54,7 +54,7 @@ def cmd_verify(args) -> int:
 
 def cmd_bench(args) -> int:
     _quiet_warp()
-    from .bench import run_bench
+    from .verify.bench import run_bench
 
     res = run_bench(args.device, args.count, args.steps, args.settle_steps, clumps=args.clumps, walls=args.walls,
                     law=args.law)
@@ -84,9 +84,9 @@ def _sets(items) -> dict:
 
 def cmd_run(args) -> int:
     _quiet_warp()
-    from . import rigs
-    from .runner import RunStopped, check_stop_after, run_scene
-    from .scene import StageError
+    from .scene import rigs
+    from .scene.runner import RunStopped, check_stop_after, run_scene
+    from .scene.stage import StageError
 
     try:
         spec = rigs.load(args.scene, _sets(args.set))
@@ -213,8 +213,8 @@ def cmd_analyze(args) -> int:
 
 
 def cmd_scene(args) -> int:
-    from . import rigs
-    from .scene import StageError
+    from .scene import rigs
+    from .scene.stage import StageError
 
     try:
         rigs.new(args.rig, args.output, _sets(args.set), smoke=args.smoke)

@@ -12,8 +12,16 @@ import statsmodels.formula.api as smf
 from statsmodels.stats.anova import anova_lm
 from statsmodels.stats.outliers_influence import OLSInfluence
 
-from warpdem.study.analysis import (backward_eliminate, effects_table, fit_model, lenth_pse,
-                                    model_terms, parse_term, solve_target, term_label)
+from warpdem.study.analysis import (
+    backward_eliminate,
+    effects_table,
+    fit_model,
+    lenth_pse,
+    model_terms,
+    parse_term,
+    solve_target,
+    term_label,
+)
 from warpdem.study.designs import Factor, box_behnken, central_composite, full_factorial
 
 REF = Path(__file__).resolve().parents[2] / "studies" / "reference"

@@ -9,10 +9,22 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from warpdem.study.designs import (Factor, alias_structure, box_behnken, ccd_alpha,
-                                   central_composite, design_counts, factor_names,
-                                   fractional_factorial, full_factorial, plackett_burman,
-                                   randomize, steepest_path, to_actual, to_coded)
+from warpdem.study.designs import (
+    Factor,
+    alias_structure,
+    box_behnken,
+    ccd_alpha,
+    central_composite,
+    design_counts,
+    factor_names,
+    fractional_factorial,
+    full_factorial,
+    plackett_burman,
+    randomize,
+    steepest_path,
+    to_actual,
+    to_coded,
+)
 
 REF = Path(__file__).resolve().parents[2] / "studies" / "reference"
 

@@ -186,7 +186,7 @@ def _assert_resumed_like_uninterrupted(study, tmp_path):
 def test_crash_inside_a_launch_resumes_from_its_checkpoint(tmp_path, monkeypatch):
     """A launch killed half way (after some checkpoints) is resumed from its checkpoint by the rerun, not
     started again, and gives the same responses as an uninterrupted study."""
-    from warpdem import runner
+    from warpdem.scene import runner
 
     study = _study(tmp_path)
     real = runner.run_scene

@@ -11,8 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from warpdem.study.spec import (StudyError, batch_key, design_table, load_study, run_overrides,
-                                varies_per_world)
+from warpdem.study.spec import StudyError, batch_key, design_table, load_study, run_overrides, varies_per_world
 
 ROOT = Path(__file__).resolve().parents[2]
 STUDIES = ROOT / "studies"

@@ -2,12 +2,12 @@
 
 Tolerances are the acceptance limits of the engine issue (Chung & Ooi 1-3: 1 %; test 4: 3 %;
 rolling deceleration: 2 %; batch invariance: 1e-6 relative) and live with each record in
-warpdem/verify.py, next to the closed form they are compared with.
+warpdem/verify/cases.py, next to the closed form they are compared with.
 """
 
 import pytest
 
-from warpdem import verify
+from warpdem.verify import cases as verify
 
 
 def _assert_records(records):

@@ -2,9 +2,8 @@
 
 import pytest
 
-from warpdem import verify
-
-from ..conftest import requires_cuda
+from tests.conftest import requires_cuda
+from warpdem.verify import cases as verify
 
 
 @requires_cuda

@@ -13,14 +13,38 @@
 Everything but ``execute`` needs only numpy, scipy, pandas, statsmodels (and matplotlib for plots).
 """
 
-from .analysis import (ModelFit, TargetSolution, backward_eliminate, effects_table, fit_model,
-                       lenth_pse, model_terms, parse_term, response_range, solve_target, term_label)
+from .analysis import (
+                       ModelFit,
+                       TargetSolution,
+                       backward_eliminate,
+                       effects_table,
+                       fit_model,
+                       lenth_pse,
+                       model_terms,
+                       parse_term,
+                       response_range,
+                       solve_target,
+                       term_label,
+)
+from .designs import (
+                       AliasStructure,
+                       Factor,
+                       alias_structure,
+                       box_behnken,
+                       ccd_alpha,
+                       central_composite,
+                       design_counts,
+                       factor_names,
+                       fractional_factorial,
+                       full_factorial,
+                       plackett_burman,
+                       randomize,
+                       steepest_path,
+                       to_actual,
+                       to_coded,
+)
 from .report import anova_frame, format_anova, write_report
-from .spec import (StudyError, StudySpec, batch_key, design_table, load_study, run_overrides,
-                   varies_per_world)
-from .designs import (AliasStructure, Factor, alias_structure, box_behnken, ccd_alpha,
-                      central_composite, design_counts, factor_names, fractional_factorial,
-                      full_factorial, plackett_burman, randomize, steepest_path, to_actual, to_coded)
+from .spec import StudyError, StudySpec, batch_key, design_table, load_study, run_overrides, varies_per_world
 
 __all__ = [
     "StudyError",

@@ -43,8 +43,8 @@ import math
 import os
 import re
 import sys
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -55,10 +55,8 @@ try:  # Python >= 3.11
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli backport
     import tomli as tomllib
 
-from .analysis import (ModelFit, backward_eliminate, effects_table, fit_model, parse_term,
-                       solve_target, term_label)
-from .designs import (Factor, alias_structure, box_behnken, ccd_alpha, central_composite,
-                      plackett_burman)
+from .analysis import ModelFit, backward_eliminate, effects_table, fit_model, parse_term, solve_target, term_label
+from .designs import Factor, alias_structure, box_behnken, ccd_alpha, central_composite, plackett_burman
 
 __all__ = [
     "REFERENCE_ENV",

@@ -32,8 +32,8 @@ from __future__ import annotations
 import itertools
 import math
 import re
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -94,7 +94,7 @@ class Factor:
                              f"got {self.low!r}, {self.high!r}")
 
     @classmethod
-    def from_centre_step(cls, name: str, centre: float, step: float, unit: str = "") -> "Factor":
+    def from_centre_step(cls, name: str, centre: float, step: float, unit: str = "") -> Factor:
         """Factor whose coded 0 is ``centre`` and coded +1 is ``centre + step``."""
         return cls(name, centre - step, centre + step, unit)
 

@@ -37,7 +37,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..runner import _json_default
+from warpdem.scene.runner import _json_default
+
 from . import spec as sp
 
 
@@ -50,8 +51,8 @@ def _write_json(path: Path, data) -> None:
 
 def _scene(study: sp.StudySpec, overrides: dict):
     """SceneSpec with the overrides that must be shared by a batch (rig parameters first, then the rest)."""
-    from .. import rigs
-    from ..scene import apply_overrides
+    from warpdem.scene import rigs
+    from warpdem.scene.stage import apply_overrides
 
     rig_vals = {k: v for k, v in overrides.items() if sp.is_rig_key(k)}
     if study.rig is not None:
@@ -140,7 +141,7 @@ def run_batch(study: sp.StudySpec, rows: list[dict], device: str, progress=None,
     record per row: responses, the world's metrics, run info. With ``out_dir`` the launch checkpoints every
     ``checkpoint_every`` wall seconds there and resumes from its checkpoint (see ``run_scene``); with
     ``stop_after`` it saves a checkpoint and raises ``runner.RunStopped`` after that many wall seconds."""
-    from ..runner import run_scene
+    from warpdem.scene.runner import run_scene
 
     scene = _scene(study, rows[0]["overrides"])
     varying = sorted({k for r in rows for k in r["overrides"] if sp.varies_per_world(k)})
@@ -200,7 +201,7 @@ def _device_worker(study, out: str, batches: list[list[dict]], device: str, dead
     Returns {"ran", "stopped", "walls"}."""
     import warp as wp
 
-    from ..runner import RunStopped
+    from warpdem.scene.runner import RunStopped
 
     wp.config.quiet = quiet[0]
     if quiet[1] is not None:
@@ -295,7 +296,7 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
     further launch starts, and ``stopped`` in the result says where; the same call resumes. Returns
     {"out", "runs", "ran", "skipped", "wall_s", "batches", "analysis", "verification", "stopped"}.
     """
-    from ..runner import RunStopped
+    from warpdem.scene.runner import RunStopped
 
     study = study if isinstance(study, sp.StudySpec) else sp.load_study(study)
     out = Path(out_dir) if out_dir else Path("runs") / study.name

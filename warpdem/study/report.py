@@ -23,15 +23,24 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 from scipy import stats
 
-from .analysis import (ModelFit, Term, _columns, backward_eliminate, effects_table, fit_model,
-                       model_terms, solve_target, term_label)
+from .analysis import (
+    ModelFit,
+    Term,
+    _columns,
+    backward_eliminate,
+    effects_table,
+    fit_model,
+    model_terms,
+    solve_target,
+    term_label,
+)
 from .designs import Factor
 
 __all__ = ["ANOVA_COLUMNS", "anova_frame", "format_anova", "format_p", "write_report"]

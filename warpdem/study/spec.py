@@ -1,6 +1,6 @@
 """Study definitions: a TOML file per calibration stage, loaded into frozen, validated dataclasses.
 
-A study names a scene (a rig of :mod:`warpdem.rigs`, or a USD stage), the overrides every run shares,
+A study names a scene (a rig of :mod:`warpdem.scene.rigs`, or a USD stage), the overrides every run shares,
 the factors (each one override key with its low and high actual value), a design of experiments, the
 responses to read from each run's metrics, the regression to fit and the verification runs.
 :func:`load_study` reads one; :func:`design_table` expands it into runs; :func:`run_overrides` gives
@@ -15,7 +15,7 @@ Schema (``studies/*.toml``)::
     name = "pellets_pb"             # identifier, [a-z0-9_]+ (required)
     title = "..."                   # free text
     source = "000_9053eeef0bc95e7d.txt"   # seed paper (free text)
-    rig = "funnel"                  # one of warpdem.rigs.RIGS, or
+    rig = "funnel"                  # one of warpdem.scene.rigs.RIGS, or
     # scene = "../scenes/funnel.usda"     # a stage, relative to the TOML (exactly one of rig / scene)
     smoke = false                   # start from rigs.SMOKE[rig] (rig only)
     seed = 1                        # run-order randomisation seed, integer >= 0 (default 1)
@@ -53,7 +53,7 @@ Schema (``studies/*.toml``)::
 
     [[responses]]                   # at least one
     name = "aor_deg"                # [A-Za-z][A-Za-z0-9_]* (required)
-    measure = "angle_fit_deg"       # a metric key of warpdem.runner (MEASURES), or a dotted path into
+    measure = "angle_fit_deg"       # a metric key of warpdem.scene.runner (MEASURES), or a dotted path into
                                     # the metrics (e.g. "phases.load.Body.max_speed_m_s") (required)
     unit = "deg"
     target = 28.27                  # measured value to calibrate to (optional)
@@ -68,13 +68,13 @@ Schema (``studies/*.toml``)::
     [verification]
     replicates = 0                  # verification runs at the chosen optimum, >= 0
 
-Override keys (``[fixed]`` keys and factor parameters) follow :func:`warpdem.scene.apply_overrides`:
+Override keys (``[fixed]`` keys and factor parameters) follow :func:`warpdem.scene.stage.apply_overrides`:
 ``material.NAME.FIELD`` (density, youngs_modulus, shear_modulus, poisson_ratio),
-``interaction.A.B.FIELD`` (any :class:`~warpdem.materials.Interaction` field; a factor only the numeric
+``interaction.A.B.FIELD`` (any :class:`~warpdem.engine.materials.Interaction` field; a factor only the numeric
 ones of ``builder.INTERACTION_SCALARS``), ``run.FIELD``, ``measure.FIELD`` and ``factory.NAME.FIELD``
 (``[fixed]`` only), and any other key is a rig parameter (with ``rig``, checked against the rig's
 parameters; a factor must name a numeric one). Only ``material.*`` and ``interaction.*`` scalars can
-differ between the batched worlds of one launch (:meth:`warpdem.builder.ModelBuilder.vary`); a factor on
+differ between the batched worlds of one launch (:meth:`warpdem.engine.builder.ModelBuilder.vary`); a factor on
 anything else makes each of its levels a launch of its own (:func:`batch_key`).
 
 :func:`load_study` also builds the scene once (the rig from its parameters, or the stage) and applies
@@ -104,9 +104,10 @@ import hashlib
 import json
 import math
 import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -152,7 +153,7 @@ DESIGN_KINDS = ("plackett_burman", "full_factorial", "fractional_factorial", "bo
 MEASURES = ("angle_fit_deg", "angle_fit_sd_deg", "angle_image_deg", "angle_image_sd_deg", "angle_cone_deg",
             "pile_height_m", "particles", "max_displacement_m", "compression_ratio", "max_force_n",
             "final_height_m", "fill_height_m", "inertial_number_max", "time_s")
-"""Scalar metric keys that :func:`warpdem.runner.run_scene` writes per world (``metrics.json``)."""
+"""Scalar metric keys that :func:`warpdem.scene.runner.run_scene` writes per world (``metrics.json``)."""
 
 MATERIAL_SCALARS = ("density", "youngs_modulus", "shear_modulus", "poisson_ratio")
 """Material fields an override (and a per-world variation) can set."""
@@ -171,25 +172,25 @@ _DIGITS = 12  # significant digits of actual values in the table and in point id
 # --------------------------------------------------------------------------------------------------
 
 def _interaction_fields():
-    from ..scene import PAIR_FIELDS
+    from warpdem.scene.stage import PAIR_FIELDS
 
     return tuple(PAIR_FIELDS)
 
 
 def _interaction_scalars():
-    from ..builder import INTERACTION_SCALARS
+    from warpdem.engine.builder import INTERACTION_SCALARS
 
     return tuple(INTERACTION_SCALARS)
 
 
 def _run_fields():
-    from ..scene import RUN_FIELDS
+    from warpdem.scene.stage import RUN_FIELDS
 
     return tuple(RUN_FIELDS)
 
 
 def _rigs():
-    from .. import rigs
+    from warpdem.scene import rigs
 
     return rigs
 
@@ -738,7 +739,7 @@ class StudySpec:
         raise KeyError(f"no factor {name!r}; factors: {', '.join(self.factor_names)}")
 
     @classmethod
-    def from_dict(cls, data: Mapping, path: str | Path | None = None) -> "StudySpec":
+    def from_dict(cls, data: Mapping, path: str | Path | None = None) -> StudySpec:
         """Study from parsed TOML ``data``; errors are prefixed with ``path`` (or ``<dict>``)."""
         where = str(path) if path is not None else "<dict>"
         try:
@@ -852,7 +853,7 @@ def load_study(path: str | Path, check_scene: bool = True) -> StudySpec:
 def check_scene_overrides(spec: StudySpec) -> None:
     """Build the study's scene and apply ``[fixed]`` and every factor's lowest and highest design value
     to it; raise :class:`StudyError` naming the key and value the scene or the contact law refuses."""
-    from ..scene import StageError, apply_overrides
+    from warpdem.scene.stage import StageError, apply_overrides
 
     rigs = _rigs()
     rig_vals = {k: v for k, v in spec.fixed.items() if is_rig_key(k)}

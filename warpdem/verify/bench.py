@@ -13,16 +13,16 @@ import time
 import numpy as np
 import warp as wp
 
-from .builder import ModelBuilder
-from .materials import Material
-from .solver import Solver, SolverOptions
+from warpdem.engine.builder import ModelBuilder
+from warpdem.engine.materials import Material
+from warpdem.engine.solver import Solver, SolverOptions
 
 DIAMETER = 0.005
 
 
 def bench_template(spheres: int):
     """A clump of ``spheres`` (8: a 2 x 2 x 2 block of overlapping spheres) that fits a sphere of d = 5 mm."""
-    from .clumps import ClumpTemplate
+    from warpdem.engine.clumps import ClumpTemplate
 
     if spheres != 8:
         raise ValueError(f"bench: clumps = {spheres} is not allowed; expected 8 (the issue's benchmark clump)")
@@ -90,7 +90,7 @@ def build_bed(count: int, device: str, seed: int = 1, clumps: int = 0, walls: st
     else:
         raise ValueError(f"bench: walls = {walls!r} is not allowed; expected planes or mesh")
     if clumps:
-        from .factories import random_quaternions
+        from warpdem.engine.factories import random_quaternions
 
         b.add_clumps(bench_template(clumps), pts, "bed", orientations=random_quaternions(rng, len(pts)))
     else:

@@ -1,7 +1,7 @@
 """The four test rigs of the seed papers, generated as scenes from a few parameters.
 
 Each rig is a frozen dataclass of parameters (SI units; defaults are the full-size rig) whose ``spec()``
-returns a :class:`warpdem.scene.SceneSpec`; :func:`new` writes it as a USD stage. ``SMOKE`` holds, per rig,
+returns a :class:`warpdem.scene.stage.SceneSpec`; :func:`new` writes it as a USD stage. ``SMOKE`` holds, per rig,
 the overrides of a CPU-sized version (a few hundred particles) used by the tests and the main job.
 
 * funnel (seeds 000, 001): ISO 4324:1977 funnel method -- outlet 10 mm, 75 mm above the base plate; a
@@ -22,10 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import geometry as geo
-from .materials import Interaction, Material
-from .scene import FactorySpec, MeasureSpec, RunSpec, SceneSpec, ShapeSpec, StageError, WallSpec
-from .types import ContactLaw, RollingModel
+from warpdem.engine import geometry as geo
+from warpdem.engine.materials import Interaction, Material
+from warpdem.engine.types import ContactLaw, RollingModel
+
+from .stage import FactorySpec, MeasureSpec, RunSpec, SceneSpec, ShapeSpec, StageError, WallSpec
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -55,7 +56,7 @@ def _bound3(shape: ShapeSpec) -> float:
 
 def _shape(kind: str, where: str) -> tuple[ShapeSpec, float]:
     """Shape spec and its volume-equivalent radius at template scale [m]."""
-    from .clumps import pellet_template, phosphate_template
+    from warpdem.engine.clumps import pellet_template, phosphate_template
 
     if kind == "sphere":
         return ShapeSpec("sphere", "sphere"), 1.0
@@ -601,7 +602,7 @@ def spec(rig: str, values: dict | None = None, smoke: bool = False) -> SceneSpec
 
 def new(rig: str, path, values: dict | None = None, smoke: bool = False):
     """Write the stage of ``rig`` with parameter ``values`` to ``path``; returns the stage."""
-    from .scene import write_stage
+    from .stage import write_stage
 
     return write_stage(spec(rig, values, smoke), path)
 
@@ -609,7 +610,7 @@ def new(rig: str, path, values: dict | None = None, smoke: bool = False):
 def load(path, overrides: dict | None = None) -> SceneSpec:
     """Read a stage and apply ``--set`` overrides. A rig parameter among them regenerates the scene from
     the parameters recorded in the stage (``warpdem:authoring``) before the other overrides apply."""
-    from .scene import apply_overrides, read_stage
+    from .stage import apply_overrides, read_stage
 
     spec_ = read_stage(path)
     overrides = dict(overrides or {})

@@ -3,7 +3,7 @@
 Quasi-static, displacement-controlled tests: a mesh plate with prescribed motion presses into a
 sphere so heavy that it does not move (1e12 kg/m^3) and withdraws, with e = 1 (no dashpot); the
 plate's reported force against the measured overlap is compared with the closed forms of
-warpdem/analytic.py. Then dynamic checks: the sticking speed of a JKR sphere against the energy
+warpdem/engine/analytic.py. Then dynamic checks: the sticking speed of a JKR sphere against the energy
 balance, and a dense cohesive pile at a large step that must stay finite.
 """
 
@@ -13,12 +13,13 @@ import math
 
 import numpy as np
 
-from . import analytic
-from .builder import ModelBuilder
-from .materials import Material, effective_moduli
-from .motion import Segment, WallMotion
+from warpdem.engine import analytic
+from warpdem.engine.builder import ModelBuilder
+from warpdem.engine.materials import Material, effective_moduli
+from warpdem.engine.motion import Segment, WallMotion
+from warpdem.engine.solver import SimulationError, Solver, SolverOptions
+
 from .record import Record
-from .solver import SimulationError, Solver, SolverOptions
 
 R = 1.0e-3
 """Sphere radius of the quasi-static tests [m]."""
@@ -218,7 +219,7 @@ def case_cohesive_stress(device: str = "cpu", steps: int = 100_000) -> list[Reco
     b.add_spheres(pts, r * rng.uniform(0.9, 1.0, len(pts)), "ore",
                   velocities=rng.normal(0.0, 0.3, pts.shape))
     # cohesive clumps mixed with the spheres, dropped on top
-    from .clumps import phosphate_template
+    from warpdem.engine.clumps import phosphate_template
 
     tpl = phosphate_template()
     on_top = [(-0.003, -0.003, 0.011), (0.003, 0.0, 0.012), (0.0, 0.003, 0.015)]

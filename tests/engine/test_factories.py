@@ -12,7 +12,7 @@ import pytest
 from scipy import integrate, stats
 from scipy.spatial import cKDTree
 
-from warpdem.factories import (
+from warpdem.engine.factories import (
     Box,
     Cone,
     Cylinder,

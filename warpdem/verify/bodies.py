@@ -11,11 +11,12 @@ import math
 
 import numpy as np
 
-from .builder import ModelBuilder
-from .materials import Material
-from .motion import WallMotion, quat_rotate
-from .solver import Solver, SolverOptions
-from .record import RIGID, Record
+from warpdem.engine.builder import ModelBuilder
+from warpdem.engine.materials import Material
+from warpdem.engine.motion import WallMotion, quat_rotate
+from warpdem.engine.solver import Solver, SolverOptions
+
+from .record import Record
 
 
 def _box_mesh(half: float):
@@ -193,7 +194,7 @@ def case_thin_shell(device: str = "cpu") -> list[Record]:
 def case_clump_box(device: str = "cpu") -> list[Record]:
     """A box auto-filled with spheres at fine resolution has the mass and principal inertia of the solid box
     within 1 %; for overlapping spheres the union (used) differs from the plain sum of sphere volumes."""
-    from .clumps import ClumpTemplate, sum_of_spheres_properties
+    from warpdem.engine.clumps import ClumpTemplate, sum_of_spheres_properties
 
     a, b_, c = 6.18e-3, 6.34e-3, 3.41e-3
     rho = 1330.0
@@ -216,7 +217,7 @@ def case_clump_box(device: str = "cpu") -> list[Record]:
 
 
 def _irregular_template():
-    from .clumps import ClumpTemplate
+    from warpdem.engine.clumps import ClumpTemplate
 
     offsets = np.array([(0, 0, 0), (2.0, 0.3, 0), (-1.6, 0.5, 0.4), (0.4, 1.7, -0.2), (0.2, -1.2, 0.9),
                         (1.1, 0.9, 1.0), (-0.8, -0.9, -0.8), (0.6, 0.2, -1.4)]) * 1e-3
@@ -267,7 +268,7 @@ def case_clump_free_flight(device: str = "cpu") -> list[Record]:
 def case_clump_incline(device: str = "cpu") -> list[Record]:
     """A flat clump on a 20 deg incline: with mu_s = 0.5 > tan 20 and strong rolling resistance it stays put;
     with mu_s = 0.2 it slides at a = g (sin 20 - mu cos 20) within 2 %."""
-    from .clumps import ClumpTemplate
+    from warpdem.engine.clumps import ClumpTemplate
 
     theta = math.radians(20.0)
     g = 9.81
@@ -306,7 +307,7 @@ def case_clump_flat_drop(device: str = "cpu") -> list[Record]:
     with the clump's mass shared among them each is a single contact on a ninth of the mass and the raft
     rebounds with the pair's restitution (as a sphere does). Giving each sub-contact the whole clump mass
     (``clump_contact_mass="body"``) overdamps the face about threefold (rebound near 0.02 for e = 0.45)."""
-    from .clumps import ClumpTemplate
+    from warpdem.engine.clumps import ClumpTemplate
 
     r, v0 = 1e-3, 0.5
     es = (0.2, 0.45, 0.8)
@@ -332,7 +333,7 @@ def case_clump_flat_drop(device: str = "cpu") -> list[Record]:
 def case_factory(device: str = "cpu") -> list[Record]:
     """A dynamic factory releases exactly the count asked for (and a mass target within one particle), at its
     rate, with zero overlap at release; a static fill gives exactly its count with zero overlap."""
-    from .factories import Box, DynamicFactory, FixedSize, TruncatedNormal
+    from warpdem.engine.factories import Box, DynamicFactory, FixedSize, TruncatedNormal
 
     out = []
     b = ModelBuilder()

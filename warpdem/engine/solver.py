@@ -9,10 +9,10 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .types import ContactLaw, Contacts, Control, Model, Overflow, State
-
 from warpdem.kernels import neighbors as _nb
 from warpdem.kernels import step as _st
+
+from .types import ContactLaw, Contacts, Control, Model, Overflow, State
 
 
 class SimulationError(RuntimeError):

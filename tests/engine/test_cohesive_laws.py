@@ -1,4 +1,4 @@
-"""Cohesive contact laws (JKR, EEPA) in Warp against the float64 closed forms of warpdem.analytic.
+"""Cohesive contact laws (JKR, EEPA) in Warp against the float64 closed forms of warpdem.engine.analytic.
 
 Displacement-controlled: a tiny kernel evaluates the law along a prescribed overlap path (one thread walks
 the path and carries the per-contact history, as the contact kernel does from step to step).
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from warpdem import analytic as an
+from warpdem.engine import analytic as an
 from warpdem.kernels.law_eepa import (
     eepa_damping_coefficient,
     eepa_normal_force,

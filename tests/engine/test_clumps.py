@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numpy.polynomial import Polynomial
 
-from warpdem.clumps import (
+from warpdem.engine.clumps import (
     PELLET_SIZE,
     PHOSPHATE_MEDIAN_DIAMETER,
     ClumpTemplate,

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import measure as ms
-from .scene import SceneSpec, build
+from .stage import SceneSpec, build
 
 
 @dataclass
@@ -136,7 +136,7 @@ def check_stop_after(stop_after: float, out_dir, frames: bool) -> None:
 def scene_solver(model, run, skin: float | None = None):
     """The Solver a scene's run uses: ``run`` (RunSpec) sets the step, impact threshold, clump damping
     convention and skin (``skin`` [m] overrides it), with room for the contacts of rig meshes and dense beds."""
-    from .solver import Solver, SolverOptions
+    from warpdem.engine.solver import Solver, SolverOptions
 
     # rig meshes have fans and seams where one sphere may touch many triangles
     solver = Solver(model, SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min,
@@ -457,7 +457,7 @@ def _piston_radius(model, name) -> float:
 
 def _impact_metrics(model, names, m, snaps, w) -> dict:
     """Per phase and wall: impact summary from the snapshots taken at each phase end."""
-    from .geometry import face_areas
+    from warpdem.engine.geometry import face_areas
 
     start = model.wall_face_start.numpy()
     out = {}

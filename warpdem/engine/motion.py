@@ -123,27 +123,27 @@ class WallMotion:
                 raise ValueError("WallMotion: keyframe_translations and keyframe_rotations need one entry per time")
 
     @staticmethod
-    def static() -> "WallMotion":
+    def static() -> WallMotion:
         return WallMotion()
 
     @staticmethod
-    def linear(velocity, start: float = 0.0, end: float = math.inf) -> "WallMotion":
+    def linear(velocity, start: float = 0.0, end: float = math.inf) -> WallMotion:
         """Translation at constant ``velocity`` [m/s] from ``start`` to ``end`` [s]."""
         return WallMotion((Segment(start, end, velocity=velocity),))
 
     @staticmethod
-    def rotation(angular_velocity, pivot, start: float = 0.0, end: float = math.inf) -> "WallMotion":
+    def rotation(angular_velocity, pivot, start: float = 0.0, end: float = math.inf) -> WallMotion:
         """Rotation at constant ``angular_velocity`` [rad/s, vector along the axis] about the axis through ``pivot`` [m]."""
         return WallMotion((Segment(start, end, angular_velocity=angular_velocity, pivot=pivot),))
 
     @staticmethod
-    def schedule(segments) -> "WallMotion":
+    def schedule(segments) -> WallMotion:
         """A piecewise schedule of :class:`Segment` (or dicts of its fields)."""
         segs = tuple(s if isinstance(s, Segment) else Segment(**s) for s in segments)
         return WallMotion(segs)
 
     @staticmethod
-    def keyframes(times, translations, rotations=None) -> "WallMotion":
+    def keyframes(times, translations, rotations=None) -> WallMotion:
         """Absolute poses at ``times`` [s]: translations (n, 3) [m], rotations (n, 4) quaternions (x, y, z, w)."""
         t = tuple(float(x) for x in np.asarray(times, dtype=np.float64).reshape(-1))
         tr = np.asarray(translations, dtype=np.float64).reshape(len(t), 3)
@@ -216,7 +216,7 @@ class MotionTable:
     pose_rotation: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
 
     @staticmethod
-    def build(motions: list[WallMotion]) -> "MotionTable":
+    def build(motions: list[WallMotion]) -> MotionTable:
         rows, start = [], [0]
         for m in motions:
             rows.extend(m.table())

@@ -614,7 +614,7 @@ class ClumpTemplate:
     # -- construction -------------------------------------------------------------------------
     @classmethod
     def from_spheres(cls, name: str, offsets, radii, resolution: int = 32, *,
-                     volume_target: float | None = None) -> "ClumpTemplate":
+                     volume_target: float | None = None) -> ClumpTemplate:
         """A template from spheres given in any frame.
 
         Integrates the union (:func:`union_volume_properties`, grid cell = smallest radius /
@@ -648,7 +648,7 @@ class ClumpTemplate:
     @classmethod
     def from_box(cls, name: str, size, *, cells=30, min_radius: float | None = None, smoothing: float = 1.0,
                  overlap: float | None = None, sphere_count: int | None = None,
-                 resolution: int = 8) -> "ClumpTemplate":
+                 resolution: int = 8) -> ClumpTemplate:
         """Auto-fill a box of edge lengths ``size`` = (a, b, c) [m], centred at the origin, with spheres.
 
         Algorithm (after EDEM's "generate particle from template": spheres on a grid, then an
@@ -705,7 +705,7 @@ class ClumpTemplate:
     @classmethod
     def from_mesh(cls, name: str, vertices, faces, *, cells=30, min_radius: float | None = None,
                   smoothing: float = 1.0, overlap: float | None = None, sphere_count: int | None = None,
-                  resolution: int = 8) -> "ClumpTemplate":
+                  resolution: int = 8) -> ClumpTemplate:
         """Auto-fill a closed triangle mesh with spheres (an STL or CAD particle template).
 
         The mesh must be closed: every edge shared by exactly two triangles, consistently oriented
@@ -791,7 +791,7 @@ class ClumpTemplate:
                "a density > 0 kg/m^3")
         return float(density) * np.array(self.inertia_unit)
 
-    def scaled(self, factor: float, name: str | None = None) -> "ClumpTemplate":
+    def scaled(self, factor: float, name: str | None = None) -> ClumpTemplate:
         """The same shape scaled by ``factor`` > 0: lengths x s, volumes x s^3, inertia per density x s^5."""
         _check(_finite(factor) and float(factor) > 0, f"ClumpTemplate {self.name!r}", "factor", factor,
                "a scale factor > 0")
@@ -823,7 +823,7 @@ PELLET_SIZE = (6.18e-3, 6.34e-3, 3.41e-3)
 PHOSPHATE_MEDIAN_DIAMETER = 400e-6
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def pellet_template() -> ClumpTemplate:
     """Seed 000 ruminant feed pellet, 6.18 x 6.34 x 3.41 mm, auto-filled like the paper's EDEM model.
 
@@ -863,7 +863,7 @@ def _convex_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return points, faces
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def phosphate_template() -> ClumpTemplate:
     """Seed 002 phosphate grain: an irregular multi-sphere particle of volume-equivalent diameter 400 um.
 

@@ -8,12 +8,12 @@ import math
 import numpy as np
 import warp as wp
 
+from warpdem.kernels.params import PairParams
+
 from . import analytic
 from .materials import Interaction, InteractionTable, Material, pair_table
-from .motion import WallMotion, quat_rotate
+from .motion import WallMotion
 from .types import ContactLaw, Model
-
-from warpdem.kernels.params import PairParams
 
 GLUED_VOLUME = 1.0e12
 """Body volume [m^3] of a sphere glued to a wall: its mass exceeds any particle's by > 1e10, so a contact's

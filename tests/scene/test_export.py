@@ -6,7 +6,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from warpdem.export import ResultWriter, ShapeGeometry, WallGeometry, expand_clumps, side_view_png
+from warpdem.scene.export import ResultWriter, ShapeGeometry, WallGeometry, expand_clumps, side_view_png
 
 pxr = pytest.importorskip("pxr")
 from pxr import Sdf, Usd, UsdGeom  # noqa: E402

@@ -37,9 +37,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .materials import Interaction, Material
-from .solver import CLUMP_CONTACT_MASSES
-from .types import ContactLaw, RollingModel
+from warpdem.engine.materials import Interaction, Material
+from warpdem.engine.solver import CLUMP_CONTACT_MASSES
+from warpdem.engine.types import ContactLaw, RollingModel
 
 TIME_CODES_PER_SECOND = 100.0
 NS = "warpdem:"
@@ -67,7 +67,7 @@ class ShapeSpec:
         """The ClumpTemplate of a clump shape (None for spheres)."""
         if self.kind == "sphere":
             return None
-        from .clumps import ClumpTemplate
+        from warpdem.engine.clumps import ClumpTemplate
 
         return ClumpTemplate.from_spheres(self.name, self.sphere_offset, self.sphere_radius)
 
@@ -770,7 +770,7 @@ def _read_factory(r: _Reader, prim) -> FactorySpec:
 def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
     """Apply ``--set`` style overrides (values as strings or numbers) to a spec, in place:
     ``material.NAME.FIELD``, ``interaction.A.B.FIELD``, ``run.FIELD``, ``measure.FIELD``,
-    ``factory.NAME.FIELD``. Rig parameters (any other key) are handled by :func:`warpdem.rigs.load`."""
+    ``factory.NAME.FIELD``. Rig parameters (any other key) are handled by :func:`warpdem.scene.rigs.load`."""
     for key, raw in overrides.items():
         parts = key.split(".")
         value = _parse(raw)
@@ -841,7 +841,7 @@ def _parse(raw):
 
 
 def _sizes(d: dict):
-    from .factories import FixedSize, LogNormal, TruncatedNormal
+    from warpdem.engine.factories import FixedSize, LogNormal, TruncatedNormal
 
     dist = d["distribution"]
     if dist == "fixed":
@@ -852,7 +852,7 @@ def _sizes(d: dict):
 
 
 def _region(region):
-    from .factories import Box, Cone, Cylinder
+    from warpdem.engine.factories import Box, Cone, Cylinder
 
     if region[0] == "box":
         return Box(region[1], region[2])
@@ -869,9 +869,9 @@ def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None,
     design point per world (see :meth:`warpdem.ModelBuilder.vary`); ``world_seeds`` gives each world's dynamic
     factories a placement seed (see :meth:`warpdem.ModelBuilder.seed_worlds`).
     """
-    from .builder import ModelBuilder
-    from .factories import DynamicFactory
-    from .motion import WallMotion
+    from warpdem.engine.builder import ModelBuilder
+    from warpdem.engine.factories import DynamicFactory
+    from warpdem.engine.motion import WallMotion
 
     b = ModelBuilder(gravity=spec.gravity)
     if spec.domain is not None:

@@ -1,4 +1,4 @@
-"""Post-processing measures (warpdem.measure): angle of repose on synthetic cones of known slope,
+"""Post-processing measures (warpdem.scene.measure): angle of repose on synthetic cones of known slope,
 die-press curves, wall impact summaries, the settling monitor, the plots and the input checks."""
 
 import math
@@ -7,9 +7,20 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from warpdem.measure import (SettleMonitor, angle_cone, angle_image, angle_surface_fit, impact_phases,
-                             impact_summary, plot_angles, plot_press, press_curve, press_summary, silhouette,
-                             synthetic_cone)
+from warpdem.scene.measure import (
+    SettleMonitor,
+    angle_cone,
+    angle_image,
+    angle_surface_fit,
+    impact_phases,
+    impact_summary,
+    plot_angles,
+    plot_press,
+    press_curve,
+    press_summary,
+    silhouette,
+    synthetic_cone,
+)
 
 R_BASE = 0.06  # cone base radius [m]
 R_SPHERE = 0.002  # sphere radius [m]
@@ -379,7 +390,7 @@ def test_pile_spheres_drops_grains_off_the_pile():
     to a lifted cylinder) and a lone sphere in flight are not connected to the base and are dropped, and the
     surface fit of what is kept returns the cone's 30 deg within the method's 0.5 deg. The synthetic lattice
     leaves up to 0.4 r between neighbours (its spheres never overlap), so touching is taken within 30 %."""
-    from warpdem.measure import angle_surface_fit, pile_spheres
+    from warpdem.scene.measure import angle_surface_fit, pile_spheres
 
     x, r = _cone(30.0, 0.0, 0.0, (0.0, 0.0), 0)
     assert pile_spheres(x, r, gap=0.3).all()

@@ -2,10 +2,8 @@
 
 import math
 
-import numpy as np
-
 import warpdem as wd
-from warpdem import geometry as geo
+from warpdem.engine import geometry as geo
 
 
 def _builder(e=0.5):

@@ -12,12 +12,11 @@ import warnings
 
 import numpy as np
 
-from .builder import ModelBuilder
-from .materials import Material, effective_moduli
-from .solver import Solver, SolverOptions
+from warpdem.engine.builder import ModelBuilder
+from warpdem.engine.materials import Material, effective_moduli
+from warpdem.engine.solver import Solver, SolverOptions
 
 from .record import RIGID, Record
-
 
 # ------------------------------------------------------------------------------------------------
 # helpers
@@ -412,9 +411,9 @@ def run_all(device: str = "cpu", only: list[str] | None = None) -> list[Record]:
 
 
 # cases of the other capabilities live beside this module; they import Record from here
-from .verify_bodies import BODY_CASES  # noqa: E402
+from .bodies import BODY_CASES  # noqa: E402
 
 CASES.update(BODY_CASES)
-from .verify_cohesion import COHESION_CASES  # noqa: E402
+from .cohesion import COHESION_CASES  # noqa: E402
 
 CASES.update(COHESION_CASES)

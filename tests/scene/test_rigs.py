@@ -9,8 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from warpdem import geometry, rigs, runner
-from warpdem.scene import StageError, apply_overrides, read_stage, write_stage
+from warpdem.engine import geometry
+from warpdem.scene import rigs, runner
+from warpdem.scene.stage import StageError, apply_overrides, read_stage, write_stage
 
 pytest.importorskip("pxr")
 from pxr import Sdf, Usd, UsdGeom  # noqa: E402
@@ -377,7 +378,7 @@ def test_stage_domain(funnel_stage):
     half = rigs.spec("funnel", smoke=True).authoring["plate_size"] / 2
     (lo, hi) = spec.domain
     assert half < hi[0] < half + 0.02 and lo[0] == -hi[0] and -0.02 < lo[2] < 0 < hi[2]
-    from warpdem.scene import build
+    from warpdem.scene.stage import build
 
     assert build(spec).finalize("cpu").domain == spec.domain
     world = stage.GetPrimAtPath("/World")
@@ -537,8 +538,8 @@ def test_world_seeds_make_repeats_differ():
     """The engine is deterministic: two worlds with the same parameters and the same placement seed end
     bit-identical, while a world with another seed has its particles placed elsewhere (so batched centre
     points give a pure error)."""
-    from warpdem.scene import build
-    from warpdem.solver import Solver, SolverOptions
+    from warpdem.engine.solver import Solver, SolverOptions
+    from warpdem.scene.stage import build
 
     spec = rigs.spec("funnel", {"count": 30}, smoke=True)
     model = build(spec, 3, world_seeds=[0, 0, 7]).finalize("cpu")
@@ -552,7 +553,7 @@ def test_world_seeds_make_repeats_differ():
 
 
 def test_world_seeds_input_errors():
-    from warpdem.scene import build
+    from warpdem.scene.stage import build
 
     spec = rigs.spec("funnel", {"count": 30}, smoke=True)
     with pytest.raises(ValueError, match="seed_worlds: 2 seeds given; expected world_count = 3"):
@@ -602,7 +603,7 @@ def test_stop_after_stops_before_the_tick_that_would_overrun(tmp_path, monkeypat
     after its second tick (2 T, since a third would end at 3 T), not after the first tick past the limit."""
     import types
 
-    from warpdem.solver import Solver
+    from warpdem.engine.solver import Solver
 
     spec = rigs.spec("funnel", {"count": 60, "duration": 0.2}, smoke=True)
     tick, clock = 10.0, [0.0]

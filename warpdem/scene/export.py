@@ -206,7 +206,7 @@ class ShapeGeometry:
         object.__setattr__(self, "sphere_radius", _readonly(r))
 
     @classmethod
-    def from_template(cls, template) -> "ShapeGeometry":
+    def from_template(cls, template) -> ShapeGeometry:
         """The geometry of a :class:`warpdem.ClumpTemplate` (anything with ``name``, ``sphere_offset``,
         ``sphere_radius``)."""
         return cls(template.name, template.sphere_offset, template.sphere_radius)
@@ -769,7 +769,7 @@ class ResultWriter:
                             "frames": len(self._times)}
         return dict(self._result)
 
-    def __enter__(self) -> "ResultWriter":
+    def __enter__(self) -> ResultWriter:
         return self
 
     def __exit__(self, *exc) -> None:

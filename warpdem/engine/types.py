@@ -161,7 +161,7 @@ class Model:
     def wall_count(self) -> int:
         return self.wall_material.shape[0]
 
-    def state(self) -> "State":
+    def state(self) -> State:
         """A new State holding the initial positions and velocities given to the builder."""
         n, nc, dev = self.sphere_count, max(self.clump_count, 1), self.device
 
@@ -200,7 +200,7 @@ class Model:
             world_removed=wp.zeros(self.world_count, dtype=int, device=dev),
         )
 
-    def control(self) -> "Control":
+    def control(self) -> Control:
         """The wall motions given to the builder, on the device (a solver uses it when run without one)."""
         from .motion import MotionTable, WallMotion
 
@@ -293,7 +293,7 @@ class State:
 
 @dataclass
 class Control:
-    """What moves the mesh walls: their prescribed motion as constant-twist segments (warpdem/motion.py).
+    """What moves the mesh walls: their prescribed motion as constant-twist segments (warpdem/engine/motion.py).
 
     Segment ``s`` of wall ``k`` is row ``segment_start[k] + s``; the rows of a wall cover [0, inf).
     """
@@ -314,7 +314,7 @@ class Control:
     """Wall pose at the segment's start, shape (segment_count,), transform."""
 
     @staticmethod
-    def from_table(table, device) -> "Control":
+    def from_table(table, device) -> Control:
         pose = np.concatenate([table.pose_translation, table.pose_rotation], axis=1).astype(np.float32)
         if len(pose) == 0:
             pose = np.array([[0, 0, 0, 0, 0, 0, 1]], dtype=np.float32)
