@@ -29,10 +29,14 @@ def main():
     ours = run_bench("cpu", 2000, a.steps, a.settle_steps)
     theirs = run_lammps_bed(steps=a.steps, settle_steps=a.settle_steps, ranks=1)
     ratio = theirs["particle_steps_per_s"] / ours["particle_steps_per_s"]
-    print(f"warpdem (cpu, 1 process): {ours['particle_steps_per_s']:.3e} particle-steps/s, "
-          f"Z = {ours['contacts_per_sphere']:.2f}")
-    print(f"LAMMPS  ({theirs['lammps_version']}, 1 rank): {theirs['particle_steps_per_s']:.3e} particle-steps/s, "
-          f"Z = {theirs.get('coordination_with_walls') or theirs.get('coordination')}")
+    print(
+        f"warpdem (cpu, 1 process): {ours['particle_steps_per_s']:.3e} particle-steps/s, "
+        f"Z = {ours['contacts_per_sphere']:.2f}"
+    )
+    print(
+        f"LAMMPS  ({theirs['lammps_version']}, 1 rank): {theirs['particle_steps_per_s']:.3e} particle-steps/s, "
+        f"Z = {theirs.get('coordination_with_walls') or theirs.get('coordination')}"
+    )
     print(f"LAMMPS / warpdem = {ratio:.2f} (goal: <= 2)")
     if a.json:
         Path(a.json).write_text(json.dumps({"warpdem": ours, "lammps": theirs, "ratio": ratio}, indent=1))

@@ -45,8 +45,23 @@ for block in (solver.CUDA_GRAPH_STEPS, 0):
     wall = time.perf_counter() - t0
     i = res.info
     final[block] = np.load(f"{a.out}/{block}/final.npz")
-    print(json.dumps({"rig": a.rig, "device": wp.get_device("cuda").name, "graph_steps": block,
-                      "spheres": i["spheres"], "steps": i["steps"], "wall_s": round(wall, 1),
-                      "steps_per_s": round(i["steps"] / wall)}), flush=True)
+    print(
+        json.dumps(
+            {
+                "rig": a.rig,
+                "device": wp.get_device("cuda").name,
+                "graph_steps": block,
+                "spheres": i["spheres"],
+                "steps": i["steps"],
+                "wall_s": round(wall, 1),
+                "steps_per_s": round(i["steps"] / wall),
+            }
+        ),
+        flush=True,
+    )
 x, y = final.values()
-print(json.dumps({k: float(np.max(np.abs(x[k] - y[k]))) for k in x.files if x[k].dtype.kind == "f" and x[k].shape == y[k].shape}))
+print(
+    json.dumps(
+        {k: float(np.max(np.abs(x[k] - y[k]))) for k in x.files if x[k].dtype.kind == "f" and x[k].shape == y[k].shape}
+    )
+)

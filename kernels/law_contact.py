@@ -62,12 +62,14 @@ def contact_force(
         return int(0), wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.vec3(0.0), 0.0, 0.0
     if p.law == LAW_EEPA:
         # aux: the largest overlap of this contact (its plastic overlap follows from it)
-        f_hys, d_max, k_damp, load = eepa_normal_force(overlap, aux, r_star, p.e_star, p.f0, p.eepa_n, p.lambda_p,
-                                                       p.chi, p.gamma)
+        f_hys, d_max, k_damp, load = eepa_normal_force(
+            overlap, aux, r_star, p.e_star, p.f0, p.eepa_n, p.lambda_p, p.chi, p.gamma
+        )
         f_n = f_hys + eepa_damping_coefficient(k_damp, m_star, p.beta, p.eepa_n) * v_n
         k_t = eepa_tangential_stiffness(overlap, r_star, p.e_star, p.g_star, p.eepa_n, p.ks_fac)
-        f_t, xi = mindlin_tangential(spring, n, v_rel - v_n * n, k_t,
-                                     eepa_damping_coefficient(k_t, m_star, p.beta, p.eepa_n), p.mu_s * load, dt)
+        f_t, xi = mindlin_tangential(
+            spring, n, v_rel - v_n * n, k_t, eepa_damping_coefficient(k_t, m_star, p.beta, p.eepa_n), p.mu_s * load, dt
+        )
         return int(1), -f_n * n + f_t, load, f_t, xi, d_max, k_damp / p.eepa_n
     f_a, f_n, f_t, xi, k_n = hertz_mindlin(overlap, n, v_rel, spring, r_star, m_star, p, dt)
     return int(1), f_a, f_n, f_t, xi, aux, k_n

@@ -198,8 +198,9 @@ def build_contacts(
                                     wp.atomic_or(overflow_out, 0, 1)
                     j = cell_next[j]
     sort_column(new_index, count, i)
-    carry_history(old_index, old_count[i], old_spring, old_roll, old_aux, new_index, count, new_spring, new_roll,
-                  new_aux, i)
+    carry_history(
+        old_index, old_count[i], old_spring, old_roll, old_aux, new_index, count, new_spring, new_roll, new_aux, i
+    )
     new_count[i] = count
 
     mesh_capacity = new_mesh_face.shape[0]
@@ -226,10 +227,20 @@ def build_contacts(
                 else:
                     wp.atomic_or(overflow_out, 0, 2)
     sort_column(new_mesh_face, mcount, i)
-    carry_history(old_mesh_face, old_mesh_count[i], old_mesh_spring, old_mesh_roll, old_mesh_aux, new_mesh_face,
-                  mcount, new_mesh_spring, new_mesh_roll, new_mesh_aux, i)
+    carry_history(
+        old_mesh_face,
+        old_mesh_count[i],
+        old_mesh_spring,
+        old_mesh_roll,
+        old_mesh_aux,
+        new_mesh_face,
+        mcount,
+        new_mesh_spring,
+        new_mesh_roll,
+        new_mesh_aux,
+        i,
+    )
     new_mesh_count[i] = mcount
-
 
 
 @wp.kernel

@@ -122,8 +122,9 @@ def wall_contact(
     active, f_a, f_n, f_t, xi, aux_new, k_n = contact_force(overlap, n, v_rel, spring, aux, r_i, m_i, p, dt)
     if active == 0:
         return int(0), wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), 0.0
-    m_roll, roll_new = rolling_resistance(p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i,
-                                          p.rolling_damping, roll, dt)
+    m_roll, roll_new = rolling_resistance(
+        p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i, p.rolling_damping, roll, dt
+    )
     return int(1), f_a, wp.cross(arm * n, f_t) + m_roll, xi, roll_new, aux_new
 
 
@@ -323,8 +324,9 @@ def step_spheres(
             neighbor_roll[k, i] = wp.vec3(0.0)
             # a contact due within one step counts already, so a clump's mass is shared from its first step
             if tally >= 0 and dist > 0.0 and overlap + dt * wp.dot(v_in[a] - v_in[b], d / dist) > 0.0:
-                run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n,
-                                               body_key(j, sphere_clump, clump_total))
+                run_key, run_n = partner_tally(
+                    partner_key_out, partner_count_out, tally, run_key, run_n, body_key(j, sphere_clump, clump_total)
+                )
             continue
         if dist <= 0.0 or active_in[j] == 0:
             neighbor_spring[k, i] = wp.vec3(0.0)
@@ -336,10 +338,22 @@ def step_spheres(
         mat_b = sphere_material[b]
         key_a = body_key(a, sphere_clump, clump_total)
         key_b = body_key(b, sphere_clump, clump_total)
-        m_a = contact_mass(material_density[mw, mat_a] * sphere_body_volume[a], sphere_clump[a], key_b,
-                           partner_key, partner_count, share_mass)
-        m_b = contact_mass(material_density[mw, mat_b] * sphere_body_volume[b], sphere_clump[b], key_a,
-                           partner_key, partner_count, share_mass)
+        m_a = contact_mass(
+            material_density[mw, mat_a] * sphere_body_volume[a],
+            sphere_clump[a],
+            key_b,
+            partner_key,
+            partner_count,
+            share_mass,
+        )
+        m_b = contact_mass(
+            material_density[mw, mat_b] * sphere_body_volume[b],
+            sphere_clump[b],
+            key_a,
+            partner_key,
+            partner_count,
+            share_mass,
+        )
         r_star = r_a * r_b / (r_a + r_b)
         m_star = m_a * m_b / (m_a + m_b)
         arm_a = r_a - 0.5 * overlap
@@ -348,8 +362,9 @@ def step_spheres(
         w_b = w_in[b]
         v_rel = (v_in[a] + wp.cross(w_a, arm_a * n)) - (v_in[b] - wp.cross(w_b, arm_b * n))
         p = pair_params[pw, mat_a, mat_b]
-        active, f_a, f_n, f_t, xi, aux, k_n = contact_force(overlap, n, v_rel, neighbor_spring[k, i],
-                                                            neighbor_aux[k, i], r_star, m_star, p, dt)
+        active, f_a, f_n, f_t, xi, aux, k_n = contact_force(
+            overlap, n, v_rel, neighbor_spring[k, i], neighbor_aux[k, i], r_star, m_star, p, dt
+        )
         if active == 0:
             neighbor_spring[k, i] = wp.vec3(0.0)
             neighbor_roll[k, i] = wp.vec3(0.0)
@@ -357,13 +372,15 @@ def step_spheres(
             continue
         neighbor_spring[k, i] = xi
         neighbor_aux[k, i] = aux
-        run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n,
-                                       body_key(j, sphere_clump, clump_total))
+        run_key, run_n = partner_tally(
+            partner_key_out, partner_count_out, tally, run_key, run_n, body_key(j, sphere_clump, clump_total)
+        )
         i_roll = 0.0
         if p.rolling_model == ROLLING_EPSD:
             i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
-        m_roll, roll = rolling_resistance(p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll,
-                                          p.rolling_damping, neighbor_roll[k, i], dt)
+        m_roll, roll = rolling_resistance(
+            p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, neighbor_roll[k, i], dt
+        )
         neighbor_roll[k, i] = roll
         f_i = f_a
         if i == a:
@@ -390,9 +407,20 @@ def step_spheres(
         p = pair_params[pw, mat_i, plane_material[p_id]]
         key_w = wall_key0 + p_id
         mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
-        active, f_a, t_a, xi, roll, aux = wall_contact(r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p,
-                                                       plane_spring[p_id, i], plane_roll[p_id, i],
-                                                       plane_aux[p_id, i], dt)
+        active, f_a, t_a, xi, roll, aux = wall_contact(
+            r_i - gap,
+            -n_p,
+            v_i,
+            w_i,
+            wp.vec3(0.0),
+            r_i,
+            mc_i,
+            p,
+            plane_spring[p_id, i],
+            plane_roll[p_id, i],
+            plane_aux[p_id, i],
+            dt,
+        )
         plane_spring[p_id, i] = xi
         plane_roll[p_id, i] = roll
         plane_aux[p_id, i] = aux
@@ -415,8 +443,21 @@ def step_spheres(
         gap = wp.length(dq)
         skip = gap <= 0.0
         if not skip and feature != FEATURE_FACE and gap < r_i:
-            skip = mesh_contact_shadowed(wall_mesh, wall_face_start, wall_pose, x_i, r_i, k, q, feature, wall, i,
-                                         mesh_count, mesh_face, triangle_wall)
+            skip = mesh_contact_shadowed(
+                wall_mesh,
+                wall_face_start,
+                wall_pose,
+                x_i,
+                r_i,
+                k,
+                q,
+                feature,
+                wall,
+                i,
+                mesh_count,
+                mesh_face,
+                triangle_wall,
+            )
         if skip:
             mesh_spring[k, i] = wp.vec3(0.0)
             mesh_roll[k, i] = wp.vec3(0.0)
@@ -427,8 +468,9 @@ def step_spheres(
         p = pair_params[pw, mat_i, wall_material[wall]]
         key_w = wall_key0 + plane_total + wall
         mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
-        active, f_a, t_a, xi, roll, aux = wall_contact(r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p,
-                                                       mesh_spring[k, i], mesh_roll[k, i], mesh_aux[k, i], dt)
+        active, f_a, t_a, xi, roll, aux = wall_contact(
+            r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, mesh_spring[k, i], mesh_roll[k, i], mesh_aux[k, i], dt
+        )
         mesh_spring[k, i] = xi
         mesh_roll[k, i] = roll
         mesh_aux[k, i] = aux

@@ -7,16 +7,16 @@ from .engine import geometry
 from .engine.builder import ModelBuilder
 from .engine.clumps import ClumpTemplate, pellet_template, phosphate_template
 from .engine.factories import (
-                        Box,
-                        Cone,
-                        Cylinder,
-                        DynamicFactory,
-                        FixedSize,
-                        LogNormal,
-                        SieveTable,
-                        TruncatedNormal,
-                        fill_region,
-                        random_quaternions,
+    Box,
+    Cone,
+    Cylinder,
+    DynamicFactory,
+    FixedSize,
+    LogNormal,
+    SieveTable,
+    TruncatedNormal,
+    fill_region,
+    random_quaternions,
 )
 from .engine.materials import Interaction, InteractionTable, Material, effective_moduli
 from .engine.motion import Segment, WallMotion

@@ -39,11 +39,24 @@ def cmd_verify(args) -> int:
     from .verify import cases as verify
 
     records = verify.run_all(args.device, args.case or None)
-    rows = [(r.case, r.name, f"{r.value:.6g}", f"{r.expected:.6g}", r.unit,
-             f"{r.error:.2e}" + ("" if not r.absolute else " abs"), f"{r.tolerance:.2e}",
-             "pass" if r.passed else "FAIL") for r in records]
-    _table(f"warpdem verify (device {args.device})",
-           ["case", "quantity", "value", "expected", "unit", "error", "tolerance", "pass"], rows)
+    rows = [
+        (
+            r.case,
+            r.name,
+            f"{r.value:.6g}",
+            f"{r.expected:.6g}",
+            r.unit,
+            f"{r.error:.2e}" + ("" if not r.absolute else " abs"),
+            f"{r.tolerance:.2e}",
+            "pass" if r.passed else "FAIL",
+        )
+        for r in records
+    ]
+    _table(
+        f"warpdem verify (device {args.device})",
+        ["case", "quantity", "value", "expected", "unit", "error", "tolerance", "pass"],
+        rows,
+    )
     failed = [r for r in records if not r.passed]
     print(f"{len(records) - len(failed)} passed, {len(failed)} failed")
     if args.json:
@@ -56,8 +69,9 @@ def cmd_bench(args) -> int:
     _quiet_warp()
     from .verify.bench import run_bench
 
-    res = run_bench(args.device, args.count, args.steps, args.settle_steps, clumps=args.clumps, walls=args.walls,
-                    law=args.law)
+    res = run_bench(
+        args.device, args.count, args.steps, args.settle_steps, clumps=args.clumps, walls=args.walls, law=args.law
+    )
     rows = [(k, f"{v:.4g}" if isinstance(v, float) else str(v)) for k, v in res.items()]
     _table("warpdem bench: settled bed, Hertz-Mindlin with history", ["figure", "value"], rows)
     if args.json:
@@ -114,8 +128,15 @@ def cmd_run(args) -> int:
             bar.refresh()
 
     try:
-        res = run_scene(spec, device=args.device, out_dir=out, frames=not args.no_frames, progress=progress,
-                        checkpoint_every=args.checkpoint, stop_after=args.stop_after)
+        res = run_scene(
+            spec,
+            device=args.device,
+            out_dir=out,
+            frames=not args.no_frames,
+            progress=progress,
+            checkpoint_every=args.checkpoint,
+            stop_after=args.stop_after,
+        )
     except RunStopped as e:
         if bar is not None:
             bar.close()
@@ -124,19 +145,32 @@ def cmd_run(args) -> int:
     if bar is not None:
         bar.close()
     info = res.info
-    print(f"{info['rig']}: {info['spheres']} spheres ({info['clumps']} clumps, {info['glued_spheres']} glued), "
-          f"{info['simulated_s']:.3f} s simulated in {info['wall_s']:.1f} s wall on {info['device']} "
-          f"({info['steps']} steps, stop: {info['stop']})"
-          + (f"; resumed from the checkpoint at {info['resumed_from_s']:.3f} s" if info.get("resumed_from_s") else ""))
+    print(
+        f"{info['rig']}: {info['spheres']} spheres ({info['clumps']} clumps, {info['glued_spheres']} glued), "
+        f"{info['simulated_s']:.3f} s simulated in {info['wall_s']:.1f} s wall on {info['device']} "
+        f"({info['steps']} steps, stop: {info['stop']})"
+        + (f"; resumed from the checkpoint at {info['resumed_from_s']:.3f} s" if info.get("resumed_from_s") else "")
+    )
     m = res.metrics[0]
-    for k in ("angle_fit_deg", "angle_fit_sd_deg", "angle_image_deg", "angle_cone_deg", "max_displacement_m",
-              "compression_ratio", "max_force_n", "fill_height_m", "inertial_number_max"):
+    for k in (
+        "angle_fit_deg",
+        "angle_fit_sd_deg",
+        "angle_image_deg",
+        "angle_cone_deg",
+        "max_displacement_m",
+        "compression_ratio",
+        "max_force_n",
+        "fill_height_m",
+        "inertial_number_max",
+    ):
         if k in m and m[k] is not None:
             print(f"  {k}: {m[k]:.4g}")
     for phase, walls in m.get("phases", {}).items():
         for wall, s in walls.items():
-            print(f"  {phase} / {wall}: {s['total_count']} impacts, max normal speed {s['max_speed_m_s']:.3g} m/s, "
-                  f"energy {s['total_energy_j']:.4g} J")
+            print(
+                f"  {phase} / {wall}: {s['total_count']} impacts, max normal speed {s['max_speed_m_s']:.3g} m/s, "
+                f"energy {s['total_energy_j']:.4g} J"
+            )
     print(f"results in {out}/ (metrics.json, result.usdc, pile.png)")
     return 0
 
@@ -161,14 +195,18 @@ def _print_analysis(out, summary: dict) -> None:
         def f(v):
             return "n/a" if v is None else f"{v:.4f}"
 
-        print(f"R^2 {f(s['r2'])}, adjusted R^2 {f(s['adj_r2'])}, predicted R^2 {f(s['pred_r2'])}, "
-              f"adequate precision {f(s['adeq_precision'])}")
+        print(
+            f"R^2 {f(s['r2'])}, adjusted R^2 {f(s['adj_r2'])}, predicted R^2 {f(s['pred_r2'])}, "
+            f"adequate precision {f(s['adeq_precision'])}"
+        )
         if s.get("equation_actual"):
             print(s["equation_actual"] if "=" in s["equation_actual"] else f"{name} = {s['equation_actual']}")
         if s.get("chosen"):
-            print("chosen settings (nearest the design centre on the target contour): "
-                  + ", ".join(f"{k} = {v:.4g}" for k, v in s["chosen"].items())
-                  + f"; predicted {s['predicted']:.4g}")
+            print(
+                "chosen settings (nearest the design centre on the target contour): "
+                + ", ".join(f"{k} = {v:.4g}" for k, v in s["chosen"].items())
+                + f"; predicted {s['predicted']:.4g}"
+            )
 
 
 def cmd_study(args) -> int:
@@ -177,24 +215,37 @@ def cmd_study(args) -> int:
     from .study.spec import StudyError
 
     try:
-        res = run_study(args.study, args.out, device=args.device, progress=not args.no_progress,
-                        verify=not args.no_verify, checkpoint_every=args.checkpoint, stop_after=args.stop_after)
+        res = run_study(
+            args.study,
+            args.out,
+            device=args.device,
+            progress=not args.no_progress,
+            verify=not args.no_verify,
+            checkpoint_every=args.checkpoint,
+            stop_after=args.stop_after,
+        )
     except StudyError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     if res["stopped"]:
-        print(f"{res['ran'] + res['skipped']} of {res['runs']} design runs finished; stopped at the wall-time "
-              f"limit ({res['stopped']}); run the same command again to resume")
+        print(
+            f"{res['ran'] + res['skipped']} of {res['runs']} design runs finished; stopped at the wall-time "
+            f"limit ({res['stopped']}); run the same command again to resume"
+        )
         return 3
-    print(f"{res['runs']} runs ({res['ran']} run now in {res['batches']} batch(es), {res['skipped']} already "
-          f"finished) in {res['wall_s']:.1f} s on {args.device}; results in {res['out']}/")
+    print(
+        f"{res['runs']} runs ({res['ran']} run now in {res['batches']} batch(es), {res['skipped']} already "
+        f"finished) in {res['wall_s']:.1f} s on {args.device}; results in {res['out']}/"
+    )
     if res["analysis"]:
         _print_analysis(res["out"], res["analysis"])
         print(f"report: {res['out']}/analysis/report.md")
     v = res.get("verification")
     if v:
-        print(f"verification: {len(v['values'])} runs, mean {v['mean']:.4g} (SD {v['sd']:.3g}), target "
-              f"{v['target']}, relative error {v['relative_error_pct']:.3g} %")
+        print(
+            f"verification: {len(v['values'])} runs, mean {v['mean']:.4g} (SD {v['sd']:.3g}), target "
+            f"{v['target']}, relative error {v['relative_error_pct']:.3g} %"
+        )
     return 0
 
 
@@ -248,32 +299,59 @@ def main(argv=None) -> int:
     au.set_defaults(fn=cmd_audit)
     r = sub.add_parser("run", help="run a scene (USD stage) and write metrics.json, result.usdc, pile.png")
     r.add_argument("scene")
-    r.add_argument("--set", action="append", metavar="NAME=VALUE",
-                   help="override: material.NAME.FIELD, interaction.A.B.FIELD, run.FIELD, measure.FIELD, "
-                        "factory.NAME.FIELD, or a rig parameter (regenerates the scene)")
+    r.add_argument(
+        "--set",
+        action="append",
+        metavar="NAME=VALUE",
+        help="override: material.NAME.FIELD, interaction.A.B.FIELD, run.FIELD, measure.FIELD, "
+        "factory.NAME.FIELD, or a rig parameter (regenerates the scene)",
+    )
     r.add_argument("--device", default="cpu")
     r.add_argument("--out", help="output folder (default runs/RIG)")
     r.add_argument("--no-frames", action="store_true", help="skip the time-sampled USD and VTK")
-    r.add_argument("--checkpoint", type=float, default=60.0, metavar="SECONDS",
-                   help="with --no-frames: save the run's state every SECONDS of wall time to DIR/checkpoint.npz; "
-                        "the same command resumes from it (default 60, 0: never)")
-    r.add_argument("--stop-after", type=float, default=0.0, metavar="SECONDS",
-                   help="with --no-frames: stop by itself after SECONDS of wall time, saving a checkpoint "
-                        "(exit code 3); the same command resumes (0: no limit)")
+    r.add_argument(
+        "--checkpoint",
+        type=float,
+        default=60.0,
+        metavar="SECONDS",
+        help="with --no-frames: save the run's state every SECONDS of wall time to DIR/checkpoint.npz; "
+        "the same command resumes from it (default 60, 0: never)",
+    )
+    r.add_argument(
+        "--stop-after",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="with --no-frames: stop by itself after SECONDS of wall time, saving a checkpoint "
+        "(exit code 3); the same command resumes (0: no limit)",
+    )
     r.set_defaults(fn=cmd_run)
     st = sub.add_parser("study", help="run (or resume) a design of experiments, then analyse and verify it")
     st.add_argument("study", help="study file, e.g. studies/main_funnel_pb.toml")
-    st.add_argument("--device", default="cpu",
-                    help="cpu, cuda, cuda:N, cuda:all, or a comma-separated list (cuda:0,cuda:1; cpu,cpu): with "
-                         "several, the runs are split into one launch per device, run at once, one process each")
+    st.add_argument(
+        "--device",
+        default="cpu",
+        help="cpu, cuda, cuda:N, cuda:all, or a comma-separated list (cuda:0,cuda:1; cpu,cpu): with "
+        "several, the runs are split into one launch per device, run at once, one process each",
+    )
     st.add_argument("--out", help="output folder (default runs/NAME); rerunning resumes it")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
     st.add_argument("--no-verify", action="store_true", help="skip the verification runs at the optimum")
-    st.add_argument("--checkpoint", type=float, default=60.0, metavar="SECONDS",
-                    help="save each launch's state every SECONDS of wall time (0: never); a rerun resumes from it")
-    st.add_argument("--stop-after", type=float, default=0.0, metavar="SECONDS",
-                    help="stop by itself after SECONDS of wall time, saving the running launch's checkpoint "
-                         "(exit code 3); the same command resumes (0: no limit)")
+    st.add_argument(
+        "--checkpoint",
+        type=float,
+        default=60.0,
+        metavar="SECONDS",
+        help="save each launch's state every SECONDS of wall time (0: never); a rerun resumes from it",
+    )
+    st.add_argument(
+        "--stop-after",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="stop by itself after SECONDS of wall time, saving the running launch's checkpoint "
+        "(exit code 3); the same command resumes (0: no limit)",
+    )
     st.set_defaults(fn=cmd_study)
     an = sub.add_parser("analyze", help="fit, ANOVA, plots and report.md of a study folder")
     an.add_argument("out", help="a study's output folder")

@@ -35,8 +35,12 @@ def test_wall_motion_is_validated():
 
 def test_wall_motion_host_pose_is_rigid_kinematics():
     """A constant velocity then a quarter turn about z through (1, 0, 0): poses follow the formulas."""
-    m = wd.WallMotion.schedule([wd.Segment(0.0, 1.0, velocity=(0.5, 0, 0)),
-                                wd.Segment(2.0, 3.0, angular_velocity=(0, 0, np.pi / 2), pivot=(1.0, 0, 0))])
+    m = wd.WallMotion.schedule(
+        [
+            wd.Segment(0.0, 1.0, velocity=(0.5, 0, 0)),
+            wd.Segment(2.0, 3.0, angular_velocity=(0, 0, np.pi / 2), pivot=(1.0, 0, 0)),
+        ]
+    )
     pos, q = m.pose(1.5)
     assert np.allclose(pos, (0.5, 0, 0)) and np.allclose(q, (0, 0, 0, 1))
     pos, q = m.pose(5.0)

@@ -23,8 +23,22 @@ def _box_mesh(size):
     """Closed, outward-oriented 12-triangle mesh of a box centred at the origin."""
     half = 0.5 * np.asarray(size)
     v = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float) * half
-    f = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
-                  [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+    f = np.array(
+        [
+            [0, 1, 3],
+            [0, 3, 2],
+            [4, 6, 7],
+            [4, 7, 5],
+            [0, 4, 5],
+            [0, 5, 1],
+            [2, 3, 7],
+            [2, 7, 6],
+            [0, 2, 6],
+            [0, 6, 4],
+            [1, 5, 7],
+            [1, 7, 3],
+        ]
+    )
     return v, f
 
 
@@ -50,8 +64,8 @@ def _lens_union(r, d):
         return 2.0 * (q(top) - q(0.0))
 
     volume = math.pi * integral(rho2)
-    i_zz = 0.5 * math.pi * integral(rho2 ** 2)
-    i_xx = math.pi * integral(0.25 * rho2 ** 2 + rho2 * z2)
+    i_zz = 0.5 * math.pi * integral(rho2**2)
+    i_xx = math.pi * integral(0.25 * rho2**2 + rho2 * z2)
     return volume, i_xx, i_zz
 
 
@@ -199,13 +213,16 @@ def test_open_or_inconsistent_mesh_rejected():
         ClumpTemplate.from_mesh("flat", v, np.vstack([f[:3], [[0, 0, 1]], f[4:]]))
 
 
-@pytest.mark.parametrize("offsets,radii,pattern", [
-    ([[0, 0, 0], [1e-3, 0, 0]], [1e-3, -1e-3], r"sphere_radius\[1\] = -0\.001 is not allowed.*> 0"),
-    ([[0, 0, 0], [1e-3, 0, 0]], [1e-3, 1e-3, 1e-3], r"sphere_radius\.shape = \(3,\).*\(2,\)"),
-    ([[0, 0, 0], [np.nan, 0, 0]], [1e-3, 1e-3], r"sphere_offset\[1\] = .*finite"),
-    ([[0, 0], [1, 0]], [1e-3, 1e-3], r"sphere_offset\.shape = \(2, 2\).*\(n, 3\)"),
-    ([[0, 0, 0]], [0.0], r"sphere_radius\[0\] = 0\.0"),
-])
+@pytest.mark.parametrize(
+    "offsets,radii,pattern",
+    [
+        ([[0, 0, 0], [1e-3, 0, 0]], [1e-3, -1e-3], r"sphere_radius\[1\] = -0\.001 is not allowed.*> 0"),
+        ([[0, 0, 0], [1e-3, 0, 0]], [1e-3, 1e-3, 1e-3], r"sphere_radius\.shape = \(3,\).*\(2,\)"),
+        ([[0, 0, 0], [np.nan, 0, 0]], [1e-3, 1e-3], r"sphere_offset\[1\] = .*finite"),
+        ([[0, 0], [1, 0]], [1e-3, 1e-3], r"sphere_offset\.shape = \(2, 2\).*\(n, 3\)"),
+        ([[0, 0, 0]], [0.0], r"sphere_radius\[0\] = 0\.0"),
+    ],
+)
 def test_template_fields_validated(offsets, radii, pattern):
     """Radii must be finite and > 0, offsets finite with shape (n, 3), one radius per sphere;
     the error names the field and the value."""

@@ -35,9 +35,16 @@ _trapz = getattr(np, "trapezoid", None) or np.trapz  # NumPy < 2 has only trapz
 
 
 @wp.kernel
-def _jkr_kernel(overlap: wp.array[float], r_star: float, e_star: float, gamma: float,
-                a_out: wp.array[float], f_out: wp.array[float], load_out: wp.array[float],
-                break_out: wp.array[float]):
+def _jkr_kernel(
+    overlap: wp.array[float],
+    r_star: float,
+    e_star: float,
+    gamma: float,
+    a_out: wp.array[float],
+    f_out: wp.array[float],
+    load_out: wp.array[float],
+    break_out: wp.array[float],
+):
     i = wp.tid()
     a_out[i] = jkr_contact_radius(overlap[i], r_star, e_star, gamma)
     f = jkr_normal_force(overlap[i], r_star, e_star, gamma)
@@ -47,15 +54,15 @@ def _jkr_kernel(overlap: wp.array[float], r_star: float, e_star: float, gamma: f
 
 
 @wp.kernel
-def _jkr_radius_force_kernel(a: wp.array[float], r_star: float, e_star: float, gamma: float,
-                             f_out: wp.array[float]):
+def _jkr_radius_force_kernel(a: wp.array[float], r_star: float, e_star: float, gamma: float, f_out: wp.array[float]):
     i = wp.tid()
     f_out[i] = jkr_force_of_radius(a[i], r_star, e_star, gamma)
 
 
 @wp.kernel
-def _jkr_stiffness_kernel(a: wp.array[float], e_star: float, g_star: float, sn_out: wp.array[float],
-                          st_out: wp.array[float]):
+def _jkr_stiffness_kernel(
+    a: wp.array[float], e_star: float, g_star: float, sn_out: wp.array[float], st_out: wp.array[float]
+):
     i = wp.tid()
     sn, st = jkr_stiffness(a[i], e_star, g_star)
     sn_out[i] = sn
@@ -63,8 +70,14 @@ def _jkr_stiffness_kernel(a: wp.array[float], e_star: float, g_star: float, sn_o
 
 
 @wp.kernel
-def _jkr_path_kernel(overlap: wp.array[float], r_star: float, e_star: float, gamma: float,
-                     flag_out: wp.array[int], f_out: wp.array[float]):
+def _jkr_path_kernel(
+    overlap: wp.array[float],
+    r_star: float,
+    e_star: float,
+    gamma: float,
+    flag_out: wp.array[int],
+    f_out: wp.array[float],
+):
     # one thread walks the path and carries the "in contact" flag, as the contact list does
     flag = int(0)
     for i in range(overlap.shape[0]):
@@ -77,10 +90,20 @@ def _jkr_path_kernel(overlap: wp.array[float], r_star: float, e_star: float, gam
 
 
 @wp.kernel
-def _eepa_path_kernel(overlap: wp.array[float], r_star: float, e_star: float, f0: float, n: float,
-                      lambda_p: float, chi: float, gamma: float,
-                      f_out: wp.array[float], dmax_out: wp.array[float], kd_out: wp.array[float],
-                      load_out: wp.array[float]):
+def _eepa_path_kernel(
+    overlap: wp.array[float],
+    r_star: float,
+    e_star: float,
+    f0: float,
+    n: float,
+    lambda_p: float,
+    chi: float,
+    gamma: float,
+    f_out: wp.array[float],
+    dmax_out: wp.array[float],
+    kd_out: wp.array[float],
+    load_out: wp.array[float],
+):
     d_max = float(0.0)
     for i in range(overlap.shape[0]):
         f, d_new, kd, load = eepa_normal_force(overlap[i], d_max, r_star, e_star, f0, n, lambda_p, chi, gamma)
@@ -92,9 +115,19 @@ def _eepa_path_kernel(overlap: wp.array[float], r_star: float, e_star: float, f0
 
 
 @wp.kernel
-def _eepa_aux_kernel(k: wp.array[float], overlap: wp.array[float], m_star: float, beta: float, n: float,
-                     r_star: float, e_star: float, g_star: float, ks_fac: float,
-                     c_out: wp.array[float], kt_out: wp.array[float]):
+def _eepa_aux_kernel(
+    k: wp.array[float],
+    overlap: wp.array[float],
+    m_star: float,
+    beta: float,
+    n: float,
+    r_star: float,
+    e_star: float,
+    g_star: float,
+    ks_fac: float,
+    c_out: wp.array[float],
+    kt_out: wp.array[float],
+):
     i = wp.tid()
     c_out[i] = eepa_damping_coefficient(k[i], m_star, beta, n)
     kt_out[i] = eepa_tangential_stiffness(overlap[i], r_star, e_star, g_star, n, ks_fac)
@@ -103,25 +136,44 @@ def _eepa_aux_kernel(k: wp.array[float], overlap: wp.array[float], m_star: float
 def _jkr(overlap, r_star=R_STAR, e_star=E_STAR, gamma=GAMMA):
     k = len(overlap)
     outs = [wp.zeros(k, dtype=float, device="cpu") for _ in range(4)]
-    wp.launch(_jkr_kernel, dim=k, inputs=[wp.array(np.asarray(overlap, np.float32), dtype=float, device="cpu"),
-                                          r_star, e_star, gamma], outputs=outs, device="cpu")
+    wp.launch(
+        _jkr_kernel,
+        dim=k,
+        inputs=[wp.array(np.asarray(overlap, np.float32), dtype=float, device="cpu"), r_star, e_star, gamma],
+        outputs=outs,
+        device="cpu",
+    )
     return [o.numpy().astype(float) for o in outs]
 
 
 def _eepa(path, f0=0.0, n=1.5, lambda_p=0.5, chi=1.5, gamma=5.0, r_star=1e-3, e_star=1e8):
     k = len(path)
     outs = [wp.zeros(k, dtype=float, device="cpu") for _ in range(4)]
-    wp.launch(_eepa_path_kernel, dim=1,
-              inputs=[wp.array(np.asarray(path, np.float32), dtype=float, device="cpu"),
-                      r_star, e_star, f0, n, lambda_p, chi, gamma], outputs=outs, device="cpu")
+    wp.launch(
+        _eepa_path_kernel,
+        dim=1,
+        inputs=[
+            wp.array(np.asarray(path, np.float32), dtype=float, device="cpu"),
+            r_star,
+            e_star,
+            f0,
+            n,
+            lambda_p,
+            chi,
+            gamma,
+        ],
+        outputs=outs,
+        device="cpu",
+    )
     return [o.numpy().astype(float) for o in outs]
 
 
 # ------------------------------------------------------------------------------------------- JKR
 
 
-@pytest.mark.parametrize("e_star,r_star,gamma", [(E_STAR, R_STAR, GAMMA), (7.0e10, 2.0e-3, 0.02),
-                                                 (1.0e6, 5.0e-6, 0.05)])
+@pytest.mark.parametrize(
+    "e_star,r_star,gamma", [(E_STAR, R_STAR, GAMMA), (7.0e10, 2.0e-3, 0.02), (1.0e6, 5.0e-6, 0.05)]
+)
 def test_jkr_force_curve_matches_closed_form(e_star, r_star, gamma):
     """JKR (EDEM form) F(delta) at 20 overlaps from delta_c to 20 delta_0 equals the parametric curve
     delta(a), F(a) within 1 % of max(|F|, pi gamma R*), and the float32 Newton contact radius is within
@@ -149,11 +201,13 @@ def test_jkr_characteristic_values():
     assert an.jkr_break_overlap(R_STAR, E_STAR, GAMMA) == pytest.approx(-0.9376e-6, rel=1e-3)
     a_c = an.jkr_critical_radius(R_STAR, E_STAR, GAMMA)
     assert an.jkr_force_of_radius(a_c, R_STAR, E_STAR, GAMMA) == pytest.approx(-0.2356e-3, rel=1e-3)
-    assert an.jkr_force(an.jkr_min_force_overlap(R_STAR, E_STAR, GAMMA), R_STAR, E_STAR, GAMMA) == \
-        pytest.approx(-0.471e-3, rel=1e-3)
+    assert an.jkr_force(an.jkr_min_force_overlap(R_STAR, E_STAR, GAMMA), R_STAR, E_STAR, GAMMA) == pytest.approx(
+        -0.471e-3, rel=1e-3
+    )
     assert an.jkr_force(0.0, R_STAR, E_STAR, GAMMA) == pytest.approx(-8.0 / 3.0 * PGR, rel=1e-9)
-    assert an.jkr_force(an.jkr_zero_force_overlap(R_STAR, E_STAR, GAMMA), R_STAR, E_STAR, GAMMA) == \
-        pytest.approx(0.0, abs=1e-12 * PGR)
+    assert an.jkr_force(an.jkr_zero_force_overlap(R_STAR, E_STAR, GAMMA), R_STAR, E_STAR, GAMMA) == pytest.approx(
+        0.0, abs=1e-12 * PGR
+    )
 
 
 def test_jkr_peak_attraction_and_force_at_break():
@@ -168,8 +222,13 @@ def test_jkr_peak_attraction_and_force_at_break():
     assert np.all(load >= 0.0)
     a_c = an.jkr_critical_radius(R_STAR, E_STAR, GAMMA)
     out = wp.zeros(1, dtype=float, device="cpu")
-    wp.launch(_jkr_radius_force_kernel, dim=1, inputs=[wp.array([a_c], dtype=float, device="cpu"), R_STAR,
-                                                       E_STAR, GAMMA], outputs=[out], device="cpu")
+    wp.launch(
+        _jkr_radius_force_kernel,
+        dim=1,
+        inputs=[wp.array([a_c], dtype=float, device="cpu"), R_STAR, E_STAR, GAMMA],
+        outputs=[out],
+        device="cpu",
+    )
     assert out.numpy()[0] == pytest.approx(-1.5 * PGR, rel=0.01)
     assert f[0] == pytest.approx(an.jkr_break_force(R_STAR, E_STAR, GAMMA), rel=0.01)
     assert f[0] / PGR == pytest.approx(-1.832, rel=0.01)
@@ -197,8 +256,13 @@ def test_jkr_hysteresis_contact_flag():
     path = np.concatenate([up, up[::-1]]).astype(np.float32)
     flag = wp.zeros(len(path), dtype=int, device="cpu")
     f = wp.zeros(len(path), dtype=float, device="cpu")
-    wp.launch(_jkr_path_kernel, dim=1, inputs=[wp.array(path, dtype=float, device="cpu"), R_STAR, E_STAR, GAMMA],
-              outputs=[flag, f], device="cpu")
+    wp.launch(
+        _jkr_path_kernel,
+        dim=1,
+        inputs=[wp.array(path, dtype=float, device="cpu"), R_STAR, E_STAR, GAMMA],
+        outputs=[flag, f],
+        device="cpu",
+    )
     flag, f = flag.numpy(), f.numpy()
     approach, leave = slice(0, len(up)), slice(len(up), len(path))
     assert np.all(flag[approach][path[approach] < 0.0] == 0)
@@ -222,8 +286,13 @@ def test_jkr_zero_surface_energy_is_hertz():
     assert np.all(brk == 0.0)
     g_star = 4.0e6
     sn, st = wp.zeros(10, dtype=float, device="cpu"), wp.zeros(10, dtype=float, device="cpu")
-    wp.launch(_jkr_stiffness_kernel, dim=10, inputs=[wp.array(a.astype(np.float32), dtype=float, device="cpu"),
-                                                     E_STAR, g_star], outputs=[sn, st], device="cpu")
+    wp.launch(
+        _jkr_stiffness_kernel,
+        dim=10,
+        inputs=[wp.array(a.astype(np.float32), dtype=float, device="cpu"), E_STAR, g_star],
+        outputs=[sn, st],
+        device="cpu",
+    )
     assert np.allclose(sn.numpy(), 2.0 * E_STAR * np.sqrt(R_STAR * delta), rtol=1e-5)
     assert np.allclose(st.numpy(), 8.0 * g_star * np.sqrt(R_STAR * delta), rtol=1e-5)
 
@@ -257,8 +326,13 @@ def test_eepa_load_unload_reload_follows_three_branches():
     -> reload -> 1.5 delta_max: every point equals the analytic branch force for the running delta_max within
     1 % of k1 delta_max^n; the path visits virgin loading, unloading, adhesion and the reload back onto the
     virgin branch beyond delta_max."""
-    path = np.concatenate([np.linspace(0.0, D_MAX, 300)[1:], np.linspace(D_MAX, 0.05 * D_MAX, 300),
-                           np.linspace(0.05 * D_MAX, 1.5 * D_MAX, 450)])
+    path = np.concatenate(
+        [
+            np.linspace(0.0, D_MAX, 300)[1:],
+            np.linspace(D_MAX, 0.05 * D_MAX, 300),
+            np.linspace(0.05 * D_MAX, 1.5 * D_MAX, 450),
+        ]
+    )
     f, dmax, _, _ = _eepa(path)
     dmax_ref = np.maximum.accumulate(path)
     assert np.allclose(dmax, dmax_ref, rtol=1e-6)
@@ -272,9 +346,9 @@ def test_eepa_load_unload_reload_follows_three_branches():
     k_adh = np.array([an.eepa_adhesion(k2, dm, 0.5, 1.5, 1.5, an.eepa_min_force(R_E, 5.0))[0] for dm in dmax_ref])
     load, unload, adh = k1 * path**1.5, k2 * (path**1.5 - dpn), -k_adh * path**1.5
     on = lambda g: np.abs(f - g) < 1e-4 * scale  # noqa: E731
-    assert np.sum(on(load) & (path >= dmax_ref * (1 - 1e-6))) > 400        # virgin (first load + beyond delta_max)
-    assert np.sum(on(unload) & ~on(load) & ~on(adh)) > 200                 # unloading and reloading line
-    assert np.sum(on(adh) & ~on(unload)) > 50                              # adhesive branch
+    assert np.sum(on(load) & (path >= dmax_ref * (1 - 1e-6))) > 400  # virgin (first load + beyond delta_max)
+    assert np.sum(on(unload) & ~on(load) & ~on(adh)) > 200  # unloading and reloading line
+    assert np.sum(on(adh) & ~on(unload)) > 50  # adhesive branch
     # reload retraces the unloading line up to delta_max, then continues on the virgin branch
     re = slice(599, None)
     below, beyond = path[re] < D_MAX * 0.999, path[re] > D_MAX * 1.001
@@ -307,7 +381,7 @@ def test_eepa_dissipated_energy_is_loop_area(n, chi, gamma):
     path = np.concatenate([np.linspace(0.0, D_MAX, m), np.linspace(D_MAX, 0.0, m)[1:]])
     f, _, _, _ = _eepa(path, n=n, chi=chi, gamma=gamma)
     f[-1] = f[-2]  # the contact ends at delta = 0; close the loop with the adhesive branch's limit f0
-    w = _trapz(f[:m], path[:m]) + _trapz(f[m - 1:], path[m - 1:])
+    w = _trapz(f[:m], path[:m]) + _trapz(f[m - 1 :], path[m - 1 :])
     ref = an.eepa_loop_energy(D_MAX, E_E, R_E, n, 0.5, chi, gamma)
     assert ref > 0.0
     assert w == pytest.approx(ref, rel=0.02)
@@ -320,8 +394,9 @@ def test_eepa_dissipated_energy_is_loop_area(n, chi, gamma):
 def test_eepa_pull_off_force_shifts_loop():
     """The constant pull-off force f0 shifts the whole loop by f0 while in contact (delta > 0) and leaves its
     area unchanged; at delta -> 0+ the force tends to f0; the contact ends (F = 0, history reset) at delta <= 0."""
-    path = np.concatenate([np.linspace(0.0, D_MAX, 300)[1:], np.linspace(D_MAX, 0.0, 300)[1:-1],
-                           [1e-4 * D_MAX, 0.0, -1e-7]])
+    path = np.concatenate(
+        [np.linspace(0.0, D_MAX, 300)[1:], np.linspace(D_MAX, 0.0, 300)[1:-1], [1e-4 * D_MAX, 0.0, -1e-7]]
+    )
     f0 = -0.01
     fa, _, _, _ = _eepa(path, f0=0.0)
     fb, dmax_b, _, _ = _eepa(path, f0=f0)
@@ -341,10 +416,12 @@ def test_eepa_friction_load_and_stiffness():
     k2 = an.eepa_unloading_stiffness(k1, 0.5)
     k_adh = an.eepa_adhesion(k2, D_MAX, 0.5, 1.5, 1.5, an.eepa_min_force(R_E, 5.0))[0]
     first = slice(0, 299)
-    k_adh_first = np.array([an.eepa_adhesion(k2, d, 0.5, 1.5, 1.5, an.eepa_min_force(R_E, 5.0))[0]
-                            for d in path[first]])
-    assert np.allclose(load[first], k1 * path[first] ** 1.5 + k_adh_first * path[first] ** 1.5,
-                       rtol=1e-4, atol=1e-6 * k1 * D_MAX**1.5)
+    k_adh_first = np.array(
+        [an.eepa_adhesion(k2, d, 0.5, 1.5, 1.5, an.eepa_min_force(R_E, 5.0))[0] for d in path[first]]
+    )
+    assert np.allclose(
+        load[first], k1 * path[first] ** 1.5 + k_adh_first * path[first] ** 1.5, rtol=1e-4, atol=1e-6 * k1 * D_MAX**1.5
+    )
     on_adh = np.abs(f - (f0 - k_adh * path**1.5)) < 1e-6 * k1 * D_MAX**1.5
     on_adh[first] = False
     assert on_adh.sum() > 20
@@ -363,9 +440,23 @@ def test_eepa_damping_and_tangential_stiffness():
     for n in (1.0, 1.5):
         c = wp.zeros(2, dtype=float, device="cpu")
         kt = wp.zeros(2, dtype=float, device="cpu")
-        wp.launch(_eepa_aux_kernel, dim=2, inputs=[wp.array(k, dtype=float, device="cpu"),
-                                                   wp.array(d, dtype=float, device="cpu"), m, beta, n, R_E, E_E,
-                                                   g_star, ks], outputs=[c, kt], device="cpu")
+        wp.launch(
+            _eepa_aux_kernel,
+            dim=2,
+            inputs=[
+                wp.array(k, dtype=float, device="cpu"),
+                wp.array(d, dtype=float, device="cpu"),
+                m,
+                beta,
+                n,
+                R_E,
+                E_E,
+                g_star,
+                ks,
+            ],
+            outputs=[c, kt],
+            device="cpu",
+        )
         if n == 1.0:
             c_ref = np.sqrt(4.0 * m * k / (1.0 + (math.pi / math.log(e)) ** 2))
             kt_ref = ks * 2.0 * E_E * R_E * np.ones(2)

@@ -12,8 +12,16 @@ from warpdem.kernels.params import PairParams
 
 
 @wp.kernel
-def _hm_kernel(overlap: wp.array[float], n: wp.array[wp.vec3], v: wp.array[wp.vec3], s: wp.array[wp.vec3],
-               p: PairParams, dt: float, f_out: wp.array[wp.vec3], xi_out: wp.array[wp.vec3]):
+def _hm_kernel(
+    overlap: wp.array[float],
+    n: wp.array[wp.vec3],
+    v: wp.array[wp.vec3],
+    s: wp.array[wp.vec3],
+    p: PairParams,
+    dt: float,
+    f_out: wp.array[wp.vec3],
+    xi_out: wp.array[wp.vec3],
+):
     i = wp.tid()
     f, fn, ft, xi, kn = hertz_mindlin(overlap[i], n[i], v[i], s[i], 0.002, 1e-4, p, dt)
     f_out[i] = f
@@ -53,9 +61,19 @@ def test_hertz_mindlin_matches_numpy():
     p.beta = math.log(0.5) / math.sqrt(math.log(0.5) ** 2 + math.pi**2)
     f = wp.zeros(k, dtype=wp.vec3)
     xi = wp.zeros(k, dtype=wp.vec3)
-    wp.launch(_hm_kernel, dim=k, inputs=[wp.array(d, dtype=float), wp.array(n, dtype=wp.vec3),
-                                         wp.array(v, dtype=wp.vec3), wp.array(s, dtype=wp.vec3), p, 1e-5],
-              outputs=[f, xi])
+    wp.launch(
+        _hm_kernel,
+        dim=k,
+        inputs=[
+            wp.array(d, dtype=float),
+            wp.array(n, dtype=wp.vec3),
+            wp.array(v, dtype=wp.vec3),
+            wp.array(s, dtype=wp.vec3),
+            p,
+            1e-5,
+        ],
+        outputs=[f, xi],
+    )
     sliding = 0
     for i in range(k):
         fe, xe = _hm_numpy(d[i], n[i], v[i], s[i], 1e8, 4e7, p.beta, 0.4, 0.002, 1e-4, 1e-5)
@@ -309,8 +327,11 @@ def test_bodies_leaving_the_domain_are_removed():
 
 def test_domain_is_validated():
     b = wd.ModelBuilder()
-    with pytest.raises(ValueError, match=r"set_domain: low = \(0.0, 0.0, 1.0\) and high = \(1.0, 1.0, 1.0\) "
-                                         r"are not allowed; expected low < high on every axis"):
+    with pytest.raises(
+        ValueError,
+        match=r"set_domain: low = \(0.0, 0.0, 1.0\) and high = \(1.0, 1.0, 1.0\) "
+        r"are not allowed; expected low < high on every axis",
+    ):
         b.set_domain((0, 0, 1), (1, 1, 1))
     with pytest.raises(ValueError, match="set_domain: high = .* is not allowed; expected three finite numbers"):
         b.set_domain((0, 0, 0), (1, 1, float("nan")))

@@ -59,18 +59,19 @@ def _depth(region, x):
     x = np.atleast_2d(x)
     if isinstance(region, Box):
         return np.min(np.concatenate([x - region.lo, np.asarray(region.hi) - x], axis=1), axis=1)
-    rb, rt = (region.radius, region.radius) if isinstance(region, Cylinder) else (region.base_radius,
-                                                                                   region.top_radius)
+    rb, rt = (region.radius, region.radius) if isinstance(region, Cylinder) else (region.base_radius, region.top_radius)
     a = np.asarray(region.axis)
     d = x - np.asarray(region.base_center)
     h = d @ a
     rho = np.linalg.norm(d - h[:, None] * a, axis=1)
     height = region.height
-    dist = np.minimum.reduce([
-        _segment_distance(rho, h, 0.0, 0.0, rb, 0.0),
-        _segment_distance(rho, h, rb, 0.0, rt, height),
-        _segment_distance(rho, h, rt, height, 0.0, height),
-    ])
+    dist = np.minimum.reduce(
+        [
+            _segment_distance(rho, h, 0.0, 0.0, rb, 0.0),
+            _segment_distance(rho, h, rb, 0.0, rt, height),
+            _segment_distance(rho, h, rt, height, 0.0, height),
+        ]
+    )
     inside = (h >= 0) & (h <= height) & (rho <= rb + (rt - rb) * h / height)
     return np.where(inside, dist, -dist)
 
@@ -391,7 +392,7 @@ def test_dynamic_place_avoids_overlap_and_defers_when_crowded():
     x, r = f.place(None, 100, first=0)
     assert len(x) == 100 and np.array_equal(r, f.radii[:100])
     x2, r2 = f.place(None, 400, x, r, first=100)
-    assert len(x2) < 400 and np.array_equal(r2, f.radii[100:100 + len(x2)])
+    assert len(x2) < 400 and np.array_equal(r2, f.radii[100 : 100 + len(x2)])
     assert _min_gap(np.concatenate([x, x2]), np.concatenate([r, r2])) >= -1e-12 * r0
     assert np.all(region.contains(x2, r2))
 
@@ -440,16 +441,19 @@ def test_random_quaternions_uniform_on_so3():
         (lambda: Cylinder((0, 0, 0), (0, 0, 1), -1.0, 1.0), r"radius = -1\.0"),
         (lambda: Cone((0, 0, 0), (0, 0, 1), 0.0, 0.0, 1.0), r"top_radius = 0\.0"),
         (lambda: Box((0, 0, 0), (1, 1, 1)).inset(0.6), r"margin = 0\.6 .*\[0, 0\.5\)"),
-        (lambda: fill_region(Box((0, 0, 0), (1, 1, 1)), FixedSize(0.1), count=5, mass=1.0),
-         r"count/mass = \(5, 1\.0\).*exactly one"),
+        (
+            lambda: fill_region(Box((0, 0, 0), (1, 1, 1)), FixedSize(0.1), count=5, mass=1.0),
+            r"count/mass = \(5, 1\.0\).*exactly one",
+        ),
         (lambda: fill_region(Box((0, 0, 0), (1, 1, 1)), FixedSize(0.1), mass=1.0), r"density = None"),
         (lambda: fill_region(Box((0, 0, 0), (1, 1, 1)), FixedSize(0.6), count=1), r"bounding radius 0\.6 m"),
         (lambda: fill_region(Box((0, 0, 0), (1, 1, 1)), FixedSize(0.1), count=-3), r"count = -3 .*>= 0"),
         (lambda: DynamicFactory(Box((0, 0, 0), (1, 1, 1)), FixedSize(0.1), count=5), r"rate/mass_rate"),
-        (lambda: DynamicFactory(Box((0, 0, 0), (1, 1, 1)), FixedSize(0.1), rate=-2.0, count=5),
-         r"rate = -2\.0 .*> 0"),
-        (lambda: DynamicFactory(Box((0, 0, 0), (1, 1, 1)), FixedSize(0.1), rate=2.0, count=5, interval=0.0),
-         r"interval = 0\.0"),
+        (lambda: DynamicFactory(Box((0, 0, 0), (1, 1, 1)), FixedSize(0.1), rate=-2.0, count=5), r"rate = -2\.0 .*> 0"),
+        (
+            lambda: DynamicFactory(Box((0, 0, 0), (1, 1, 1)), FixedSize(0.1), rate=2.0, count=5, interval=0.0),
+            r"interval = 0\.0",
+        ),
     ],
 )
 def test_errors_name_field_and_value(build, pattern):

@@ -40,8 +40,14 @@ def test_modulus_derived_from_the_other():
     assert m2.G == pytest.approx(1e7)
 
 
-@pytest.mark.parametrize("kw,field", [({"density": -1}, "density"), ({"poisson_ratio": 0.5}, "poisson_ratio"),
-                                      ({"youngs_modulus": 0}, "youngs_modulus")])
+@pytest.mark.parametrize(
+    "kw,field",
+    [
+        ({"density": -1}, "density"),
+        ({"poisson_ratio": 0.5}, "poisson_ratio"),
+        ({"youngs_modulus": 0}, "youngs_modulus"),
+    ],
+)
 def test_material_fields_checked(kw, field):
     """Density > 0, nu in (-1, 0.5), E > 0."""
     args = dict(name="m", density=1000.0, youngs_modulus=1e7, poisson_ratio=0.3) | kw
@@ -80,7 +86,7 @@ def test_solver_options_checked():
         wd.SolverOptions(dt_fraction=1.5)
     with pytest.raises(ValueError, match="dt = -1"):
         wd.SolverOptions(dt=-1)
-    with pytest.raises(ValueError, match="clump_contact_mass = 'half'.*\"shared\" or \"body\""):
+    with pytest.raises(ValueError, match='clump_contact_mass = \'half\'.*"shared" or "body"'):
         wd.SolverOptions(clump_contact_mass="half")
     with pytest.raises(ValueError, match="skin_fraction = 0.0 is not allowed; expected a fraction of the smallest"):
         wd.SolverOptions(skin_fraction=0.0)

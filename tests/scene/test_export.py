@@ -25,8 +25,10 @@ def _plate():
 
 def _shapes():
     """Two clump shapes: a 2-sphere dumbbell and a 3-sphere triangle."""
-    return [ShapeGeometry("dumbbell", [[-1e-3, 0, 0], [1e-3, 0, 0]], [1.5e-3, 1.5e-3]),
-            ShapeGeometry("tri", [[0, 0, 0], [2e-3, 0, 0], [0, 2e-3, 0]], [1e-3, 1.2e-3, 0.8e-3])]
+    return [
+        ShapeGeometry("dumbbell", [[-1e-3, 0, 0], [1e-3, 0, 0]], [1.5e-3, 1.5e-3]),
+        ShapeGeometry("tri", [[0, 0, 0], [2e-3, 0, 0], [0, 2e-3, 0]], [1e-3, 1.2e-3, 0.8e-3]),
+    ]
 
 
 def _frames():
@@ -35,14 +37,23 @@ def _frames():
     frames = []
     for f, (n, k) in enumerate(zip(SPHERES, CLUMPS)):
         q = rng.normal(size=(k, 4))
-        frames.append(dict(
-            sphere_x=rng.uniform(-0.04, 0.04, (n, 3)), sphere_r=rng.uniform(1e-3, 2e-3, n),
-            sphere_id=np.arange(n) + 100, sphere_v=rng.normal(size=(n, 3)),
-            clump_x=rng.uniform(-0.04, 0.04, (k, 3)), clump_q=q / np.linalg.norm(q, axis=1, keepdims=True),
-            clump_shape=rng.integers(0, 2, k), clump_scale=rng.uniform(0.8, 1.2, k), clump_id=np.arange(k),
-            clump_v=rng.normal(size=(k, 3)),
-            wall_pose=np.array([[*(f * WALL_SHIFT), 0.0, 0.0, 0.0, 1.0]]),
-            face_impacts=[np.array([f, 2 * f])], face_energy=[np.array([0.5 * f, 1e-3])]))
+        frames.append(
+            dict(
+                sphere_x=rng.uniform(-0.04, 0.04, (n, 3)),
+                sphere_r=rng.uniform(1e-3, 2e-3, n),
+                sphere_id=np.arange(n) + 100,
+                sphere_v=rng.normal(size=(n, 3)),
+                clump_x=rng.uniform(-0.04, 0.04, (k, 3)),
+                clump_q=q / np.linalg.norm(q, axis=1, keepdims=True),
+                clump_shape=rng.integers(0, 2, k),
+                clump_scale=rng.uniform(0.8, 1.2, k),
+                clump_id=np.arange(k),
+                clump_v=rng.normal(size=(k, 3)),
+                wall_pose=np.array([[*(f * WALL_SHIFT), 0.0, 0.0, 0.0, 1.0]]),
+                face_impacts=[np.array([f, 2 * f])],
+                face_energy=[np.array([0.5 * f, 1e-3])],
+            )
+        )
     return frames
 
 
@@ -110,10 +121,18 @@ def test_usd_stage_metadata(stage):
 
 def test_usd_one_time_sample_per_frame(stage):
     """points, positions, protoIndices and the wall transform each have exactly 3 time samples."""
-    for path in ("/World/Spheres.points", "/World/Spheres.widths", "/World/Spheres.ids",
-                 "/World/Clumps.positions", "/World/Clumps.orientations", "/World/Clumps.scales",
-                 "/World/Clumps.protoIndices", "/World/Clumps.ids",
-                 "/World/Walls/floor_plate_1.xformOp:translate", "/World/Walls/floor_plate_1.xformOp:orient"):
+    for path in (
+        "/World/Spheres.points",
+        "/World/Spheres.widths",
+        "/World/Spheres.ids",
+        "/World/Clumps.positions",
+        "/World/Clumps.orientations",
+        "/World/Clumps.scales",
+        "/World/Clumps.protoIndices",
+        "/World/Clumps.ids",
+        "/World/Walls/floor_plate_1.xformOp:translate",
+        "/World/Walls/floor_plate_1.xformOp:orient",
+    ):
         assert stage.GetAttributeAtPath(path).GetNumTimeSamples() == 3, path
 
 
@@ -123,8 +142,14 @@ def test_usd_counts_follow_each_frame(stage, written):
     inst = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Clumps"))
     pts = UsdGeom.Points(stage.GetPrimAtPath("/World/Spheres"))
     for f, (n, k) in enumerate(zip(SPHERES, CLUMPS)):
-        for attr in (inst.GetPositionsAttr(), inst.GetOrientationsAttr(), inst.GetScalesAttr(),
-                     inst.GetProtoIndicesAttr(), inst.GetIdsAttr(), inst.GetVelocitiesAttr()):
+        for attr in (
+            inst.GetPositionsAttr(),
+            inst.GetOrientationsAttr(),
+            inst.GetScalesAttr(),
+            inst.GetProtoIndicesAttr(),
+            inst.GetIdsAttr(),
+            inst.GetVelocitiesAttr(),
+        ):
             assert len(attr.Get(f)) == k, (attr.GetName(), f)
         for attr in (pts.GetPointsAttr(), pts.GetWidthsAttr(), pts.GetIdsAttr(), pts.GetVelocitiesAttr()):
             assert len(attr.Get(f)) == n, (attr.GetName(), f)
@@ -155,15 +180,16 @@ def test_usd_instance_transforms_place_clump_spheres(stage, written):
     last = written[1][-1]
     inst = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Clumps"))
     xforms = inst.ComputeInstanceTransformsAtTime(Usd.TimeCode(2), Usd.TimeCode(2))
-    world, _, body = expand_clumps(last["clump_x"], last["clump_q"], last["clump_shape"], last["clump_scale"],
-                                   _shapes())
+    world, _, body = expand_clumps(
+        last["clump_x"], last["clump_q"], last["clump_shape"], last["clump_scale"], _shapes()
+    )
     shapes = _shapes()
     first = 0
     for i, m in enumerate(xforms):
         offsets = shapes[last["clump_shape"][i]].sphere_offset
         got = np.array([m.Transform(tuple(o)) for o in offsets])
-        np.testing.assert_allclose(got, world[first:first + len(offsets)], atol=2e-6)  # quath: ~5e-4 rad
-        assert np.all(body[first:first + len(offsets)] == i)
+        np.testing.assert_allclose(got, world[first : first + len(offsets)], atol=2e-6)  # quath: ~5e-4 rad
+        assert np.all(body[first : first + len(offsets)] == i)
         first += len(offsets)
 
 
@@ -202,16 +228,18 @@ def test_vtk_particles_read_back(written):
     pv = pytest.importorskip("pyvista")
     _, frames, out = written
     last = frames[-1]
-    world, radius, body = expand_clumps(last["clump_x"], last["clump_q"], last["clump_shape"],
-                                        last["clump_scale"], _shapes())
+    world, radius, body = expand_clumps(
+        last["clump_x"], last["clump_q"], last["clump_shape"], last["clump_scale"], _shapes()
+    )
     cloud = pv.read(out / "vtk" / "particles_00002.vtp")
     assert cloud.n_points == SPHERES[-1] + len(radius)
     np.testing.assert_allclose(cloud.point_data["radius"], np.concatenate([last["sphere_r"], radius]), rtol=1e-6)
     np.testing.assert_allclose(cloud.points, np.concatenate([last["sphere_x"], world]), atol=1e-7)
-    assert np.all(cloud.point_data["body"][:SPHERES[-1]] == -1)
-    assert np.array_equal(cloud.point_data["body"][SPHERES[-1]:], last["clump_id"][body])
-    np.testing.assert_allclose(cloud.point_data["speed"][SPHERES[-1]:],
-                               np.linalg.norm(last["clump_v"], axis=1)[body], rtol=1e-5)
+    assert np.all(cloud.point_data["body"][: SPHERES[-1]] == -1)
+    assert np.array_equal(cloud.point_data["body"][SPHERES[-1] :], last["clump_id"][body])
+    np.testing.assert_allclose(
+        cloud.point_data["speed"][SPHERES[-1] :], np.linalg.norm(last["clump_v"], axis=1)[body], rtol=1e-5
+    )
     empty = pv.read(out / "vtk" / "particles_00000.vtp")  # frame 0: loose spheres only
     assert empty.n_points == SPHERES[0]
 
@@ -242,8 +270,15 @@ def test_side_view_png_writes_file(tmp_path):
     rng = np.random.default_rng(3)
     x = rng.uniform(-0.02, 0.02, (500, 3))
     plate = _plate()
-    path = side_view_png(tmp_path / "pile.png", x, np.full(500, 1e-3), [(plate.vertices, plate.triangles)],
-                         axis="x", title="pile", colour_by=x[:, 2])
+    path = side_view_png(
+        tmp_path / "pile.png",
+        x,
+        np.full(500, 1e-3),
+        [(plate.vertices, plate.triangles)],
+        axis="x",
+        title="pile",
+        colour_by=x[:, 2],
+    )
     data = open(path, "rb").read()
     assert len(data) > 1000 and data[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -273,24 +308,35 @@ def test_side_view_true_size_and_near_covers_far(tmp_path):
     assert far.sum() < 0.8 * near.sum()  # depth shading: farther is darker
 
 
-@pytest.mark.parametrize("bad, name", [
-    (dict(sphere_r=np.full(4, 1e-3)), "sphere_r"),
-    (dict(sphere_id=np.arange(2)), "sphere_id"),
-    (dict(sphere_v=np.zeros((5, 2))), "sphere_v"),
-    (dict(clump_q=np.zeros((2, 3))), "clump_q"),
-    (dict(clump_shape=np.array([0, 5])), "clump_shape"),
-    (dict(clump_scale=np.array([1.0, -1.0])), "clump_scale"),
-    (dict(clump_id=np.arange(3)), "clump_id"),
-    (dict(wall_pose=np.zeros((2, 7))), "wall_pose"),
-    (dict(face_impacts=[np.zeros(3, int)]), "face_impacts"),
-    (dict(face_energy=[np.zeros(2), np.zeros(2)]), "face_energy"),
-    (dict(sphere_x=None), "sphere_x"),
-])
+@pytest.mark.parametrize(
+    "bad, name",
+    [
+        (dict(sphere_r=np.full(4, 1e-3)), "sphere_r"),
+        (dict(sphere_id=np.arange(2)), "sphere_id"),
+        (dict(sphere_v=np.zeros((5, 2))), "sphere_v"),
+        (dict(clump_q=np.zeros((2, 3))), "clump_q"),
+        (dict(clump_shape=np.array([0, 5])), "clump_shape"),
+        (dict(clump_scale=np.array([1.0, -1.0])), "clump_scale"),
+        (dict(clump_id=np.arange(3)), "clump_id"),
+        (dict(wall_pose=np.zeros((2, 7))), "wall_pose"),
+        (dict(face_impacts=[np.zeros(3, int)]), "face_impacts"),
+        (dict(face_energy=[np.zeros(2), np.zeros(2)]), "face_energy"),
+        (dict(sphere_x=None), "sphere_x"),
+    ],
+)
 def test_add_frame_rejects_mismatched_shapes(tmp_path, bad, name):
     """A frame with an array of the wrong shape or value raises ValueError naming it; nothing is written."""
-    good = dict(sphere_x=np.zeros((5, 3)), sphere_r=np.full(5, 1e-3), sphere_id=np.arange(5),
-                clump_x=np.zeros((2, 3)), clump_q=np.tile([0, 0, 0, 1.0], (2, 1)), clump_shape=np.array([0, 1]),
-                clump_scale=np.ones(2), clump_id=np.arange(2), wall_pose=np.array([[0, 0, 0, 0, 0, 0, 1.0]]))
+    good = dict(
+        sphere_x=np.zeros((5, 3)),
+        sphere_r=np.full(5, 1e-3),
+        sphere_id=np.arange(5),
+        clump_x=np.zeros((2, 3)),
+        clump_q=np.tile([0, 0, 0, 1.0], (2, 1)),
+        clump_shape=np.array([0, 1]),
+        clump_scale=np.ones(2),
+        clump_id=np.arange(2),
+        wall_pose=np.array([[0, 0, 0, 0, 0, 0, 1.0]]),
+    )
     writer = ResultWriter(tmp_path, [_plate()], _shapes(), vtk=False)
     try:
         with pytest.raises(ValueError, match=name) as err:
@@ -321,11 +367,24 @@ def test_geometry_and_writer_arguments_validated(tmp_path):
 def test_flush_makes_a_readable_stage_before_close(tmp_path):
     """With flush_every=2 the file on disk already has 2 frames (ASCII .usda) while the writer is open;
     velocities given only from frame 1 on are blocked at frame 0 rather than held back in time."""
-    writer = ResultWriter(tmp_path, [], _shapes(), usd_name="run.usda", vtk=False, flush_every=2,
-                          meters_per_unit=0.001, frames_per_second=30)
+    writer = ResultWriter(
+        tmp_path,
+        [],
+        _shapes(),
+        usd_name="run.usda",
+        vtk=False,
+        flush_every=2,
+        meters_per_unit=0.001,
+        frames_per_second=30,
+    )
     for f in range(3):
-        writer.add_frame(0.1 * f, sphere_x=np.full((f + 1, 3), 0.001 * f), sphere_r=np.full(f + 1, 1e-3),
-                         sphere_id=np.arange(f + 1), sphere_v=None if f == 0 else np.ones((f + 1, 3)))
+        writer.add_frame(
+            0.1 * f,
+            sphere_x=np.full((f + 1, 3), 0.001 * f),
+            sphere_r=np.full(f + 1, 1e-3),
+            sphere_id=np.arange(f + 1),
+            sphere_v=None if f == 0 else np.ones((f + 1, 3)),
+        )
     on_disk = Usd.Stage.Open(Sdf.Layer.OpenAsAnonymous(str(tmp_path / "run.usda")))
     points = on_disk.GetAttributeAtPath("/World/Spheres.points")
     assert points.GetNumTimeSamples() == 2
@@ -334,5 +393,6 @@ def test_flush_makes_a_readable_stage_before_close(tmp_path):
     assert tuple(points.Get(1)[0]) == pytest.approx((1.0, 1.0, 1.0))  # 1 mm in stage units of mm
     assert on_disk.GetAttributeAtPath("/World/Spheres.velocities").Get(0) is None
     writer.close()
-    assert Usd.Stage.Open(str(tmp_path / "run.usda")).GetAttributeAtPath("/World/Spheres.points") \
-        .GetNumTimeSamples() == 3
+    assert (
+        Usd.Stage.Open(str(tmp_path / "run.usda")).GetAttributeAtPath("/World/Spheres.points").GetNumTimeSamples() == 3
+    )

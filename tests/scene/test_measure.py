@@ -37,6 +37,7 @@ def _cone(angle, pd=0.0, base_z=0.0, center=(0.0, 0.0), seed=0):
 # the synthetic cone itself
 # --------------------------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("angle", ANGLES)
 @pytest.mark.parametrize("pd,base_z,center", PILES)
 def test_synthetic_cone_geometry(angle, pd, base_z, center):
@@ -75,6 +76,7 @@ def test_synthetic_cone_seeded():
 # --------------------------------------------------------------------------------------------------
 # angle of repose
 # --------------------------------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize("angle", ANGLES)
 @pytest.mark.parametrize("pd,base_z,center", PILES)
@@ -194,6 +196,7 @@ def test_small_pile_is_rejected():
 # die press
 # --------------------------------------------------------------------------------------------------
 
+
 def _stroke(z_end=0.0297, fill=0.08, k=2.0e7, z_start=0.09, n=2001):
     z = np.linspace(z_start, z_end, n)
     f = k * np.clip(fill - z, 0, None) ** 2
@@ -231,7 +234,7 @@ def test_press_curve_from_contact():
     z, f = _stroke()
     c = press_curve(z, f, contact_z=0.08)
     assert c["displacement_m"][0] == pytest.approx(0.0, abs=z[0] - z[1])
-    assert np.allclose(c["displacement_m"], 0.08 - z[c["contact_index"]:])
+    assert np.allclose(c["displacement_m"], 0.08 - z[c["contact_index"] :])
     assert np.allclose(c["force_n"], 2.0e7 * np.clip(c["displacement_m"], 0, None) ** 2, rtol=1e-9, atol=1e-6)
     zl = np.linspace(0.09, 0.03, 601)
     fl = 1.0e6 * np.clip(0.08 - zl, 0, None)  # linear: 1 % of max at 0.5 mm past contact
@@ -245,6 +248,7 @@ def test_press_curve_from_contact():
 # --------------------------------------------------------------------------------------------------
 # impacts
 # --------------------------------------------------------------------------------------------------
+
 
 def test_impact_summary_hand_made():
     """impact_summary: totals, the fastest face, count-weighted mean energy, energy per area and the
@@ -291,6 +295,7 @@ def test_impact_phases_differences():
 # settling
 # --------------------------------------------------------------------------------------------------
 
+
 def test_settle_monitor():
     """SettleMonitor: True only after `window` consecutive samples below the threshold; a sample above
     restarts the count; the history keeps every (t, ke) and settled_time the first settling."""
@@ -308,6 +313,7 @@ def test_settle_monitor():
 # --------------------------------------------------------------------------------------------------
 # plots
 # --------------------------------------------------------------------------------------------------
+
 
 def test_plots_write_png(tmp_path):
     """plot_press and plot_angles write PNG files."""
@@ -331,45 +337,48 @@ _X, _R = synthetic_cone(30.0, 0.03, 0.002)
 _Z, _F = np.linspace(0.09, 0.03, 50), np.linspace(0.0, 100.0, 50)
 
 
-@pytest.mark.parametrize("call,names", [
-    (lambda: angle_surface_fit(np.zeros((0, 3)), np.zeros(0)), "x = "),
-    (lambda: angle_surface_fit(_X, _R[:-1]), "r = "),
-    (lambda: angle_surface_fit(_X, -_R), "r = "),
-    (lambda: angle_surface_fit(_X, _R, slices=1), "slices = 1"),
-    (lambda: angle_surface_fit(_X, _R, bins=2), "bins = 2"),
-    (lambda: angle_surface_fit(_X, _R, inner=0.9, outer=0.5), "outer = 0.5"),
-    (lambda: angle_surface_fit(_X, _R, center=(0.0,)), "center = "),
-    (lambda: angle_surface_fit(_X, _R, base_z=1.0), "base_z = 1.0"),
-    (lambda: angle_cone(_X, _R, base_z=float("nan")), "base_z = nan"),
-    (lambda: angle_image(_X, _R, views=0), "views = 0"),
-    (lambda: angle_image(_X, _R, pixel=0.0), "pixel = 0.0"),
-    (lambda: angle_image(_X, _R, inner=-0.1), "inner = -0.1"),
-    (lambda: synthetic_cone(90.0, 0.06, 0.002), "angle_deg = 90.0"),
-    (lambda: synthetic_cone(30.0, -0.06, 0.002), "base_radius = -0.06"),
-    (lambda: synthetic_cone(30.0, 0.06, 0.0), "sphere_radius = 0.0"),
-    (lambda: synthetic_cone(30.0, 0.06, 0.002, polydispersity=1.0), "polydispersity = 1.0"),
-    (lambda: synthetic_cone(30.0, 0.001, 0.002), "base_radius = 0.001"),
-    (lambda: press_curve(_Z[:1], _F[:1]), "piston_z = "),
-    (lambda: press_curve(_Z, _F[:-1]), "piston_force = "),
-    (lambda: press_curve(_Z[::-1], _F), "piston_z = .*downward"),
-    (lambda: press_curve(_Z, np.zeros(50)), "piston_force = "),
-    (lambda: press_curve(_Z, _F, contact_z=0.01), "contact_z = 0.01"),
-    (lambda: press_summary(_Z, _F, fill_height=0.0), "fill_height = 0.0"),
-    (lambda: press_summary(_Z, _F, fill_height=0.08, force_limit=-1.0), "force_limit = -1.0"),
-    (lambda: impact_summary([], [], []), "face_count = "),
-    (lambda: impact_summary([1, -1], [0, 0], [0, 0]), "face_count = "),
-    (lambda: impact_summary([1.5, 1], [0, 0], [0, 0]), "face_count = "),
-    (lambda: impact_summary([1, 1], [0, 0, 0], [0, 0]), "face_energy = "),
-    (lambda: impact_summary([1, 1], [0, 0], [0, -1.0]), "face_max_speed = "),
-    (lambda: impact_summary([1, 1], [0, 0], [0, 0], face_area=[1.0, 0.0]), "face_area = "),
-    (lambda: impact_phases({}), "snapshots = "),
-    (lambda: SettleMonitor(0.0), "threshold = 0.0"),
-    (lambda: SettleMonitor(-1e-6), "threshold = -1e-06"),
-    (lambda: SettleMonitor(1e-6, window=0), "window = 0"),
-    (lambda: SettleMonitor(1e-6).update(0.0, -1.0), "kinetic_energy_per_particle = -1.0"),
-    (lambda: plot_press({}, "x.png"), "curve = "),
-    (lambda: plot_angles({}, "x.png"), "result = "),
-])
+@pytest.mark.parametrize(
+    "call,names",
+    [
+        (lambda: angle_surface_fit(np.zeros((0, 3)), np.zeros(0)), "x = "),
+        (lambda: angle_surface_fit(_X, _R[:-1]), "r = "),
+        (lambda: angle_surface_fit(_X, -_R), "r = "),
+        (lambda: angle_surface_fit(_X, _R, slices=1), "slices = 1"),
+        (lambda: angle_surface_fit(_X, _R, bins=2), "bins = 2"),
+        (lambda: angle_surface_fit(_X, _R, inner=0.9, outer=0.5), "outer = 0.5"),
+        (lambda: angle_surface_fit(_X, _R, center=(0.0,)), "center = "),
+        (lambda: angle_surface_fit(_X, _R, base_z=1.0), "base_z = 1.0"),
+        (lambda: angle_cone(_X, _R, base_z=float("nan")), "base_z = nan"),
+        (lambda: angle_image(_X, _R, views=0), "views = 0"),
+        (lambda: angle_image(_X, _R, pixel=0.0), "pixel = 0.0"),
+        (lambda: angle_image(_X, _R, inner=-0.1), "inner = -0.1"),
+        (lambda: synthetic_cone(90.0, 0.06, 0.002), "angle_deg = 90.0"),
+        (lambda: synthetic_cone(30.0, -0.06, 0.002), "base_radius = -0.06"),
+        (lambda: synthetic_cone(30.0, 0.06, 0.0), "sphere_radius = 0.0"),
+        (lambda: synthetic_cone(30.0, 0.06, 0.002, polydispersity=1.0), "polydispersity = 1.0"),
+        (lambda: synthetic_cone(30.0, 0.001, 0.002), "base_radius = 0.001"),
+        (lambda: press_curve(_Z[:1], _F[:1]), "piston_z = "),
+        (lambda: press_curve(_Z, _F[:-1]), "piston_force = "),
+        (lambda: press_curve(_Z[::-1], _F), "piston_z = .*downward"),
+        (lambda: press_curve(_Z, np.zeros(50)), "piston_force = "),
+        (lambda: press_curve(_Z, _F, contact_z=0.01), "contact_z = 0.01"),
+        (lambda: press_summary(_Z, _F, fill_height=0.0), "fill_height = 0.0"),
+        (lambda: press_summary(_Z, _F, fill_height=0.08, force_limit=-1.0), "force_limit = -1.0"),
+        (lambda: impact_summary([], [], []), "face_count = "),
+        (lambda: impact_summary([1, -1], [0, 0], [0, 0]), "face_count = "),
+        (lambda: impact_summary([1.5, 1], [0, 0], [0, 0]), "face_count = "),
+        (lambda: impact_summary([1, 1], [0, 0, 0], [0, 0]), "face_energy = "),
+        (lambda: impact_summary([1, 1], [0, 0], [0, -1.0]), "face_max_speed = "),
+        (lambda: impact_summary([1, 1], [0, 0], [0, 0], face_area=[1.0, 0.0]), "face_area = "),
+        (lambda: impact_phases({}), "snapshots = "),
+        (lambda: SettleMonitor(0.0), "threshold = 0.0"),
+        (lambda: SettleMonitor(-1e-6), "threshold = -1e-06"),
+        (lambda: SettleMonitor(1e-6, window=0), "window = 0"),
+        (lambda: SettleMonitor(1e-6).update(0.0, -1.0), "kinetic_energy_per_particle = -1.0"),
+        (lambda: plot_press({}, "x.png"), "curve = "),
+        (lambda: plot_angles({}, "x.png"), "result = "),
+    ],
+)
 def test_bad_input_names_argument(call, names):
     """Bad input raises ValueError naming the argument and its value, and saying what is allowed."""
     with pytest.raises(ValueError, match=names) as err:
@@ -400,5 +409,5 @@ def test_pile_spheres_drops_grains_off_the_pile():
     xa = np.vstack([x, stuck, flying])
     ra = np.r_[r, np.full(4, R_SPHERE)]
     on = pile_spheres(xa, ra, gap=0.3)
-    assert on[:len(r)].all() and not on[len(r):].any()
+    assert on[: len(r)].all() and not on[len(r) :].any()
     assert abs(angle_surface_fit(xa[on], ra[on])["mean_deg"] - 30.0) < 0.5

@@ -138,8 +138,15 @@ def test_stage_round_trip(rig):
             else:
                 assert g.sizes[k] == pytest.approx(v, rel=1e-12), (w.name, k)
 
-    for f in ("duration", "dt_fraction", "settle_energy", "settle_after", "output_interval", "impact_speed_min",
-              "skin_fraction"):
+    for f in (
+        "duration",
+        "dt_fraction",
+        "settle_energy",
+        "settle_after",
+        "output_interval",
+        "impact_speed_min",
+        "skin_fraction",
+    ):
         assert getattr(got.run, f) == pytest.approx(getattr(want.run, f), rel=1e-12, abs=0), f
     assert got.run.clump_contact_mass == want.run.clump_contact_mass == "shared"
 
@@ -193,8 +200,10 @@ def test_run_outputs(rig, rig_run):
         assert translate and orient, wall.name
         if wall.name in MOVING_WALLS:
             assert translate.GetNumTimeSamples() >= 2, wall.name
-            moved = (np.linalg.norm(np.subtract(translate.Get(last), translate.Get(0))) > 1e-6
-                     or abs(float(_quat_dot(orient.Get(last), orient.Get(0)))) < 1 - 1e-9)
+            moved = (
+                np.linalg.norm(np.subtract(translate.Get(last), translate.Get(0))) > 1e-6
+                or abs(float(_quat_dot(orient.Get(last), orient.Get(0)))) < 1 - 1e-9
+            )
             assert moved, f"{wall.name} did not move between the first and the last frame"
         else:
             for code in (0, last):
@@ -318,8 +327,9 @@ def test_stage_missing_attribute(funnel_stage):
 def test_stage_misspelt_attribute(funnel_stage):
     """An unknown warpdem: attribute (warpdem:run:durration) is an error that suggests the right name."""
     path, stage = funnel_stage
-    stage.GetPrimAtPath("/World").CreateAttribute("warpdem:run:durration", Sdf.ValueTypeNames.Double,
-                                                  custom=True).Set(1.0)
+    stage.GetPrimAtPath("/World").CreateAttribute("warpdem:run:durration", Sdf.ValueTypeNames.Double, custom=True).Set(
+        1.0
+    )
     msg = _read_error(path, stage)
     assert "/World" in msg and "durration" in msg and "warpdem:run:duration" in msg
 
@@ -477,7 +487,8 @@ def test_open_box_normals_inward(open_sides):
     # the closed faces tile the box's surface exactly
     sides = {"bottom": L * W, "top": L * W, "front": W * H, "rear": W * H, "left": L * H, "right": L * H}
     assert geometry.face_areas(v, t).sum() == pytest.approx(
-        sum(a for s, a in sides.items() if s not in open_sides), rel=1e-12)
+        sum(a for s, a in sides.items() if s not in open_sides), rel=1e-12
+    )
 
 
 @pytest.mark.parametrize("r_bottom, r_top", [(0.1, 0.1), (0.02, 0.08), (0.08, 0.03)])

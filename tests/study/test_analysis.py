@@ -25,16 +25,35 @@ from warpdem.study.analysis import (
 from warpdem.study.designs import Factor, box_behnken, central_composite, full_factorial
 
 REF = Path(__file__).resolve().parents[2] / "studies" / "reference"
-TRUE = {"Intercept": 10.0, "A": 2.0, "B": -1.0, "C": 0.5, "AB": 0.3, "AC": 0.0, "BC": -0.2,
-        "A^2": -1.5, "B^2": 0.4, "C^2": 0.1}
+TRUE = {
+    "Intercept": 10.0,
+    "A": 2.0,
+    "B": -1.0,
+    "C": 0.5,
+    "AB": 0.3,
+    "AC": 0.0,
+    "BC": -0.2,
+    "A^2": -1.5,
+    "B^2": 0.4,
+    "C^2": 0.1,
+}
 CENTRE_NOISE = np.array([0.3, -0.1, -0.2, 0.2, -0.4, 0.2])  # sums to zero; sum of squares 0.38
 
 
 def _truth(d: pd.DataFrame) -> np.ndarray:
     A, B, C = d["A"], d["B"], d["C"]
-    return (TRUE["Intercept"] + TRUE["A"] * A + TRUE["B"] * B + TRUE["C"] * C + TRUE["AB"] * A * B
-            + TRUE["AC"] * A * C + TRUE["BC"] * B * C + TRUE["A^2"] * A ** 2 + TRUE["B^2"] * B ** 2
-            + TRUE["C^2"] * C ** 2).to_numpy()
+    return (
+        TRUE["Intercept"]
+        + TRUE["A"] * A
+        + TRUE["B"] * B
+        + TRUE["C"] * C
+        + TRUE["AB"] * A * B
+        + TRUE["AC"] * A * C
+        + TRUE["BC"] * B * C
+        + TRUE["A^2"] * A**2
+        + TRUE["B^2"] * B**2
+        + TRUE["C^2"] * C**2
+    ).to_numpy()
 
 
 def _ccd_with_centre_noise(cubic: float = 0.0) -> pd.DataFrame:
@@ -69,9 +88,9 @@ def test_lack_of_fit_from_missing_cubic_term():
     d = _ccd_with_centre_noise(cubic=0.7)
     fit = fit_model(d, "y", ["A", "B", "C"], "quadratic")
     x = d["A"].to_numpy()
-    s2, s4, s6 = (x ** 2).sum(), (x ** 4).sum(), (x ** 6).sum()
+    s2, s4, s6 = (x**2).sum(), (x**4).sum(), (x**6).sum()
     assert fit.coef("A") == pytest.approx(2.0 + 0.7 * s4 / s2)
-    lof = 0.49 * (s6 - s4 ** 2 / s2)
+    lof = 0.49 * (s6 - s4**2 / s2)
     a = fit.anova
     assert a.loc["Pure Error", "sum_sq"] == pytest.approx(0.38)
     assert a.loc["Lack of Fit", "sum_sq"] == pytest.approx(lof)
@@ -88,8 +107,17 @@ def test_anova_and_fit_statistics_match_statsmodels():
     d["y"] = _truth(d) + rng.normal(0, 0.3, len(d))
     fit = fit_model(d, "y", ["A", "B", "C"], "quadratic")
     m = smf.ols("y ~ A + B + C + A:B + A:C + B:C + I(A**2) + I(B**2) + I(C**2)", d).fit()
-    names = {"A": "A", "B": "B", "C": "C", "AB": "A:B", "AC": "A:C", "BC": "B:C",
-             "A^2": "I(A ** 2)", "B^2": "I(B ** 2)", "C^2": "I(C ** 2)"}
+    names = {
+        "A": "A",
+        "B": "B",
+        "C": "C",
+        "AB": "A:B",
+        "AC": "A:C",
+        "BC": "B:C",
+        "A^2": "I(A ** 2)",
+        "B^2": "I(B ** 2)",
+        "C^2": "I(C ** 2)",
+    }
     t2, t3 = anova_lm(m, typ=2), anova_lm(m, typ=3)
     for ours, theirs in names.items():
         assert fit.anova.loc[ours, "sum_sq"] == pytest.approx(t2.loc[theirs, "sum_sq"], rel=1e-9)
@@ -134,9 +162,18 @@ def test_actual_equation_equals_fit_in_actual_units():
     act["y"] = q["y"]
     m = smf.ols("y ~ B + C + D + B:C + B:D + C:D + I(B**2) + I(C**2) + I(D**2)", act).fit()
     eq = fit.equation("actual")
-    pairs = {(): "Intercept", ("B",): "B", ("C",): "C", ("D",): "D", ("B", "C"): "B:C",
-             ("B", "D"): "B:D", ("C", "D"): "C:D", ("B", "B"): "I(B ** 2)",
-             ("C", "C"): "I(C ** 2)", ("D", "D"): "I(D ** 2)"}
+    pairs = {
+        (): "Intercept",
+        ("B",): "B",
+        ("C",): "C",
+        ("D",): "D",
+        ("B", "C"): "B:C",
+        ("B", "D"): "B:D",
+        ("C", "D"): "C:D",
+        ("B", "B"): "I(B ** 2)",
+        ("C", "C"): "I(C ** 2)",
+        ("D", "D"): "I(D ** 2)",
+    }
     for mono, name in pairs.items():
         assert eq[mono] == pytest.approx(m.params[name], rel=1e-8, abs=1e-8)
     pt = {"B": 0.7, "C": 0.3, "D": 1.0}
@@ -238,8 +275,17 @@ def test_term_parsing_and_labels():
     assert parse_term("X1X2", x) == ("X1", "X2")
     assert parse_term("X1^2", x) == ("X1", "X1")
     assert term_label(("A", "A"), f) == "A^2" and term_label(("X1", "X3"), x) == "X1*X3"
-    assert [term_label(t, f) for t in model_terms("quadratic", f)] == \
-        ["A", "B", "C", "AB", "AC", "BC", "A^2", "B^2", "C^2"]
+    assert [term_label(t, f) for t in model_terms("quadratic", f)] == [
+        "A",
+        "B",
+        "C",
+        "AB",
+        "AC",
+        "BC",
+        "A^2",
+        "B^2",
+        "C^2",
+    ]
     with pytest.raises(ValueError):
         parse_term("AQ", f)
     with pytest.raises(ValueError):

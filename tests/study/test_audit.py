@@ -12,9 +12,25 @@ from warpdem.study import audit
 # inconsistent/impossible input). Kept explicit so that a change in either direction is noticed.
 PELLETS_BBD_ANOVA_REPRODUCING = {
     # df cells, the CE sum of squares, and the '<0.0001' p-values that stay below 0.0001
-    "Model.df", "C.df", "D.df", "E.df", "CD.df", "CE.df", "DE.df", "C^2.df", "D^2.df", "E^2.df",
-    "Residual.df", "Lack of Fit.df", "Pure Error.df", "Cor Total.df",
-    "CE.sum_sq", "CE.mean_sq", "Model.p", "C.p", "D.p",
+    "Model.df",
+    "C.df",
+    "D.df",
+    "E.df",
+    "CD.df",
+    "CE.df",
+    "DE.df",
+    "C^2.df",
+    "D^2.df",
+    "E^2.df",
+    "Residual.df",
+    "Lack of Fit.df",
+    "Pure Error.df",
+    "Cor Total.df",
+    "CE.sum_sq",
+    "CE.mean_sq",
+    "Model.p",
+    "C.p",
+    "D.p",
 }
 EXPECTED_FAILURES_OUTSIDE_PELLETS_BBD_ANOVA = {
     "pellets.pb.equation_actual.const",
@@ -22,13 +38,18 @@ EXPECTED_FAILURES_OUTSIDE_PELLETS_BBD_ANOVA = {
     "pellets.bbd.coding_direction",
     "pellets.bbd.significant_terms",
     "pellets.bbd.reduced_model_terms",
-    "pellets.bbd.equation_actual.C", "pellets.bbd.equation_actual.D", "pellets.bbd.equation_actual.E",
-    "pellets.bbd.equation_actual.CD", "pellets.bbd.equation_actual.C^2",
+    "pellets.bbd.equation_actual.C",
+    "pellets.bbd.equation_actual.D",
+    "pellets.bbd.equation_actual.E",
+    "pellets.bbd.equation_actual.CD",
+    "pellets.bbd.equation_actual.C^2",
     "pellets.bbd.equation_actual.const",
     "pellets.bbd.optimum.predicted_by_published_equation",
     "pellets.bbd.optimum.predicted_by_refit",
     "wetfeed.ccd.anova.X2*X3.F",
-    "wetfeed.ccd.r2", "wetfeed.ccd.adj_r2", "wetfeed.ccd.r2_from_published_table",
+    "wetfeed.ccd.r2",
+    "wetfeed.ccd.adj_r2",
+    "wetfeed.ccd.r2_from_published_table",
     "wetfeed.ccd.alpha",
     "wetfeed.wall.youngs_modulus_implied.shear_modulus_Pa_text",
     "wetfeed.wall.shear_modulus_table_vs_text",
@@ -70,31 +91,34 @@ def test_record_schema(records):
     json.dumps(records, allow_nan=False)
 
 
-@pytest.mark.parametrize("name, value", [
-    ("pellets.pb.anova.D.sum_sq", 132.07),
-    ("pellets.pb.anova.Model.F", 14.08),
-    ("pellets.pb.anova.Model.p", 0.0054),
-    ("pellets.pb.r2", 0.9441),
-    ("pellets.pb.adj_r2", 0.8771),
-    ("pellets.pb.pred_r2", 0.6782),
-    ("pellets.pb.adeq_precision", 11.599),
-    ("pellets.pb.equation_actual.E", 59.75),
-    ("pellets.steepest.run1.relative_error_pct", 11.43),
-    ("pellets.verification.relative_error_pct", 0.92),
-    ("wetfeed.pb.G.coefficient", 2.64),
-    ("wetfeed.pb.anova.G.sum_sq", 83.74),
-    ("wetfeed.pb.anova.C.F", 89.80),
-    ("wetfeed.ccd.anova.X3.sum_sq", 1613.03),
-    ("wetfeed.ccd.anova.Lack of Fit.F", 51.73),
-    ("wetfeed.ccd.anova.Pure Error.sum_sq", 4.88),
-    ("wetfeed.ccd.anova.X2*X3.p", 0.1534),
-    ("wetfeed.ccd.optimum.pp_rolling", 0.21),
-    ("wetfeed.verification.mean_aor_deg", 53.94),
-    ("phosphate.bbd.r2", 0.9858),
-    ("phosphate.bbd.equation_actual.B", 50.81),
-    ("phosphate.bbd.equation_actual.C^2", -20.43),
-    ("phosphate.bbd.equation_actual.const", 2.89),
-])
+@pytest.mark.parametrize(
+    "name, value",
+    [
+        ("pellets.pb.anova.D.sum_sq", 132.07),
+        ("pellets.pb.anova.Model.F", 14.08),
+        ("pellets.pb.anova.Model.p", 0.0054),
+        ("pellets.pb.r2", 0.9441),
+        ("pellets.pb.adj_r2", 0.8771),
+        ("pellets.pb.pred_r2", 0.6782),
+        ("pellets.pb.adeq_precision", 11.599),
+        ("pellets.pb.equation_actual.E", 59.75),
+        ("pellets.steepest.run1.relative_error_pct", 11.43),
+        ("pellets.verification.relative_error_pct", 0.92),
+        ("wetfeed.pb.G.coefficient", 2.64),
+        ("wetfeed.pb.anova.G.sum_sq", 83.74),
+        ("wetfeed.pb.anova.C.F", 89.80),
+        ("wetfeed.ccd.anova.X3.sum_sq", 1613.03),
+        ("wetfeed.ccd.anova.Lack of Fit.F", 51.73),
+        ("wetfeed.ccd.anova.Pure Error.sum_sq", 4.88),
+        ("wetfeed.ccd.anova.X2*X3.p", 0.1534),
+        ("wetfeed.ccd.optimum.pp_rolling", 0.21),
+        ("wetfeed.verification.mean_aor_deg", 53.94),
+        ("phosphate.bbd.r2", 0.9858),
+        ("phosphate.bbd.equation_actual.B", 50.81),
+        ("phosphate.bbd.equation_actual.C^2", -20.43),
+        ("phosphate.bbd.equation_actual.const", 2.89),
+    ],
+)
 def test_published_numbers_that_reproduce(by_name, name, value):
     """Numbers the seeds print that do follow from their run tables: the record passes and the
     recomputed value rounds to the published one."""
@@ -104,22 +128,25 @@ def test_published_numbers_that_reproduce(by_name, name, value):
     assert r["expected"] == pytest.approx(value)
 
 
-@pytest.mark.parametrize("name, published, recomputed", [
-    ("pellets.pb.equation_actual.const", -1.72, -3.2188),
-    ("pellets.bbd.anova.C^2.sum_sq", 13.78, 4.0935),
-    ("pellets.bbd.anova.Pure Error.sum_sq", 0.61, 0.4551),
-    ("pellets.bbd.anova.Cor Total.sum_sq", 58.26, 61.1264),
-    ("pellets.bbd.equation_actual.C", 928.20, 381.797),
-    ("pellets.bbd.optimum.predicted_by_published_equation", 28.2699, 29.7031),
-    ("wetfeed.ccd.anova.X2*X3.F", 22.30, 2.2988),
-    ("wetfeed.ccd.r2", 0.92, 0.94195),
-    ("wetfeed.ccd.adj_r2", 0.87, 0.90176),
-    ("wetfeed.ccd.alpha", 2.0, 1.68179),
-    ("phosphate.bbd.optimum.predicted_by_published_equation", 33.0, 36.4238),
-    ("phosphate.measured_aor_from_pile", 33.0, 32.2756),
-    ("phosphate.material.shear_from_E_nu", 2.5e6, 4.0e5),
-    ("phosphate.psd.150um.retained_pct", 18.71, 18.70),
-])
+@pytest.mark.parametrize(
+    "name, published, recomputed",
+    [
+        ("pellets.pb.equation_actual.const", -1.72, -3.2188),
+        ("pellets.bbd.anova.C^2.sum_sq", 13.78, 4.0935),
+        ("pellets.bbd.anova.Pure Error.sum_sq", 0.61, 0.4551),
+        ("pellets.bbd.anova.Cor Total.sum_sq", 58.26, 61.1264),
+        ("pellets.bbd.equation_actual.C", 928.20, 381.797),
+        ("pellets.bbd.optimum.predicted_by_published_equation", 28.2699, 29.7031),
+        ("wetfeed.ccd.anova.X2*X3.F", 22.30, 2.2988),
+        ("wetfeed.ccd.r2", 0.92, 0.94195),
+        ("wetfeed.ccd.adj_r2", 0.87, 0.90176),
+        ("wetfeed.ccd.alpha", 2.0, 1.68179),
+        ("phosphate.bbd.optimum.predicted_by_published_equation", 33.0, 36.4238),
+        ("phosphate.measured_aor_from_pile", 33.0, 32.2756),
+        ("phosphate.material.shear_from_E_nu", 2.5e6, 4.0e5),
+        ("phosphate.psd.150um.retained_pct", 18.71, 18.70),
+    ],
+)
 def test_published_numbers_that_do_not_reproduce(by_name, name, published, recomputed):
     """Numbers that do not follow from their data are flagged, with the recomputed value kept
     in the record (not replaced by the published one, not dropped)."""
@@ -135,7 +162,7 @@ def test_exact_set_of_failures(records):
     R^2, design, material and PSD findings."""
     fails = {r["name"] for r in records if r["pass"] is False}
     prefix = "pellets.bbd.anova."
-    bbd_anova = {r["name"][len(prefix):] for r in records if r["name"].startswith(prefix)}
+    bbd_anova = {r["name"][len(prefix) :] for r in records if r["name"].startswith(prefix)}
     expected = {prefix + c for c in bbd_anova - PELLETS_BBD_ANOVA_REPRODUCING}
     expected |= EXPECTED_FAILURES_OUTSIDE_PELLETS_BBD_ANOVA
     assert fails == expected
@@ -158,8 +185,11 @@ def test_rounding_of_inputs_is_allowed_for(by_name):
 def test_informational_records(by_name):
     """Our own target solutions are reported next to the published optima as informational
     records (pass None), and they predict the target."""
-    for name in ("pellets.bbd.optimum_ours.D", "wetfeed.ccd.optimum_ours.X1",
-                 "phosphate.bbd.optimum_ours.static_friction"):
+    for name in (
+        "pellets.bbd.optimum_ours.D",
+        "wetfeed.ccd.optimum_ours.X1",
+        "phosphate.bbd.optimum_ours.static_friction",
+    ):
         assert by_name[name]["pass"] is None
         assert "predicted" in by_name[name]["note"]
     assert by_name["phosphate.bbd.optimum_ours.static_friction"]["value"] == pytest.approx(0.5757, abs=2e-3)

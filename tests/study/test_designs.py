@@ -170,9 +170,9 @@ def test_ccd_rotatable_alpha_and_counts(k):
     """Rotatable CCD: alpha = (2^k)^(1/4); 2^k factorial + 2k axial + centre runs; the
     prediction variance of the full quadratic is the same at every point of a sphere."""
     d = central_composite(k, "rotatable", center_points=5)
-    alpha = (2 ** k) ** 0.25
+    alpha = (2**k) ** 0.25
     assert d.attrs["alpha"] == pytest.approx(alpha)
-    assert design_counts(d) == {"factorial": 2 ** k, "axial": 2 * k, "center": 5, "total": 2 ** k + 2 * k + 5}
+    assert design_counts(d) == {"factorial": 2**k, "axial": 2 * k, "center": 5, "total": 2**k + 2 * k + 5}
     X = _matrix(d)
     assert np.abs(X).max() == pytest.approx(alpha)
 
@@ -254,8 +254,7 @@ def test_steepest_path_direction():
     q = steepest_path(b, "D", 0.4, n_steps=2, descent=True)
     np.testing.assert_allclose(q.to_numpy(), -p.iloc[:3].to_numpy())
     lv = [Factor("C", 0.39, 0.49), Factor("D", 0.45, 0.75), Factor("E", 0.02, 0.08)]
-    a = steepest_path(b, "D", 0.06, 5, levels=lv, start={"C": 0.39, "D": 0.45, "E": 0.02},
-                      step_units="actual")
+    a = steepest_path(b, "D", 0.06, 5, levels=lv, start={"C": 0.39, "D": 0.45, "E": 0.02}, step_units="actual")
     np.testing.assert_allclose(a["D_actual"], [0.45, 0.51, 0.57, 0.63, 0.69, 0.75])
     assert a.attrs["actual_step"]["C"] == pytest.approx(0.4 * 1.3275 / 3.3175 * 0.05)
     with pytest.raises(ValueError):

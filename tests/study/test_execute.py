@@ -198,6 +198,7 @@ def test_crash_inside_a_launch_resumes_from_its_checkpoint(tmp_path, monkeypatch
         def kill(frac, msg):
             if frac > 0.5:
                 raise Crash
+
         return real(*a, **(kw | {"progress": kill, "checkpoint_every": 1e-9}))
 
     monkeypatch.setattr(runner, "run_scene", killed)

@@ -44,9 +44,17 @@ def _pb():
 def bbd_report(tmp_path_factory):
     runs, factors, labels = _bbd()
     out = tmp_path_factory.mktemp("bbd")
-    res = write_report(out, runs, title="Pellets BBD", factors=factors, labels=labels,
-                       responses=[{**AOR, "target": 28.27}], model="quadratic",
-                       design_kind="Box-Behnken, 3 factors, 5 centre points", notes=["seed 000 Table 10"])
+    res = write_report(
+        out,
+        runs,
+        title="Pellets BBD",
+        factors=factors,
+        labels=labels,
+        responses=[{**AOR, "target": 28.27}],
+        model="quadratic",
+        design_kind="Box-Behnken, 3 factors, 5 centre points",
+        notes=["seed 000 Table 10"],
+    )
     return out, res, runs, factors
 
 
@@ -54,9 +62,16 @@ def bbd_report(tmp_path_factory):
 def ccd_report(tmp_path_factory):
     runs, factors, labels = _ccd()
     out = tmp_path_factory.mktemp("ccd")
-    res = write_report(out, runs, title="Wet feed CCD", factors=factors, labels=labels,
-                       responses=[{**AOR, "target": 54.25}], model="quadratic",
-                       design_kind="central composite, alpha 2, 9 centre points")
+    res = write_report(
+        out,
+        runs,
+        title="Wet feed CCD",
+        factors=factors,
+        labels=labels,
+        responses=[{**AOR, "target": 54.25}],
+        model="quadratic",
+        design_kind="central composite, alpha 2, 9 centre points",
+    )
     return out, res, runs, factors
 
 
@@ -80,9 +95,17 @@ def test_bbd_report_files_anova_and_target(bbd_report):
     Cor Total, Lack of Fit + Pure Error = Residual, p < 1e-4 printed '< 0.0001'); the chosen
     setting predicts the target to 1e-6 and lies in the design region."""
     out, res, runs, factors = bbd_report
-    expected = {"report.md", "anova_aor_deg.csv", "coefficients_aor_deg.csv", "pareto_aor_deg.png",
-                "contour_aor_deg_C_D.png", "contour_aor_deg_C_E.png", "contour_aor_deg_D_E.png",
-                "surface_aor_deg_C_D.png", "optimum_aor_deg.csv"}
+    expected = {
+        "report.md",
+        "anova_aor_deg.csv",
+        "coefficients_aor_deg.csv",
+        "pareto_aor_deg.png",
+        "contour_aor_deg_C_D.png",
+        "contour_aor_deg_C_E.png",
+        "contour_aor_deg_D_E.png",
+        "surface_aor_deg_C_D.png",
+        "optimum_aor_deg.csv",
+    }
     assert set(res["files"]) == expected
     for name in expected:
         assert (out / name).stat().st_size > 0
@@ -99,8 +122,9 @@ def test_bbd_report_files_anova_and_target(bbd_report):
     assert r["terms"] == fit.labels and r["equation_actual"] == fit.equation_string("actual", 6)
 
     coef = pd.read_csv(out / "coefficients_aor_deg.csv").set_index("Term")
-    np.testing.assert_allclose(coef.loc[fit.labels, "Coefficient Estimate"],
-                               fit.coefficients.loc[fit.labels, "coef"], rtol=1e-12)
+    np.testing.assert_allclose(
+        coef.loc[fit.labels, "Coefficient Estimate"], fit.coefficients.loc[fit.labels, "coef"], rtol=1e-12
+    )
     assert coef.loc["C^2", "Actual Coefficient"] == pytest.approx(fit.equation("actual")[("C", "C")])
     assert coef.loc["C", "VIF"] == pytest.approx(1.0)
 
@@ -121,10 +145,22 @@ def test_bbd_report_files_anova_and_target(bbd_report):
     assert row["C"] == pytest.approx(chosen["C"])
 
     md = (out / "report.md").read_text()
-    for text in ("# Pellets BBD", "Box-Behnken", "17 (0 failed)", "| Lack of Fit |", "< 0.0001",
-                 "Adeq Precision", "C.V. %", "Reachable", "nearest the design centre",
-                 "![Pareto chart of aor_deg](pareto_aor_deg.png)", "(contour_aor_deg_C_D.png)",
-                 "seed 000 Table 10", "Reversed coding", fit.equation_string("coded", 6)):
+    for text in (
+        "# Pellets BBD",
+        "Box-Behnken",
+        "17 (0 failed)",
+        "| Lack of Fit |",
+        "< 0.0001",
+        "Adeq Precision",
+        "C.V. %",
+        "Reachable",
+        "nearest the design centre",
+        "![Pareto chart of aor_deg](pareto_aor_deg.png)",
+        "(contour_aor_deg_C_D.png)",
+        "seed 000 Table 10",
+        "Reversed coding",
+        fit.equation_string("coded", 6),
+    ):
         assert text in md, text
 
 
@@ -152,8 +188,16 @@ def test_pb_linear_report_and_unreachable_target(tmp_path):
     row without replicates; a 90 deg target is outside the predicted range and reported as
     unreachable, with no chosen settings."""
     runs, factors, labels = _pb()
-    res = write_report(tmp_path, runs, title="Pellets PB", factors=factors, labels=labels,
-                       responses=[{**AOR, "target": 90.0}], model="linear", design_kind="Plackett-Burman")
+    res = write_report(
+        tmp_path,
+        runs,
+        title="Pellets PB",
+        factors=factors,
+        labels=labels,
+        responses=[{**AOR, "target": 90.0}],
+        model="linear",
+        design_kind="Plackett-Burman",
+    )
     fit = fit_model(runs, "aor_deg", list("ABCDEF"), "linear", factors)
     csv = _anova_csv_matches_fit(tmp_path / "anova_aor_deg.csv", fit)
     assert "Lack of Fit" not in set(csv["Source"])
@@ -173,11 +217,19 @@ def test_failed_run_excluded_and_listed(tmp_path):
     equals fit_model on the other 16 runs, and is listed as failed; optional run-table columns
     (point_type, replicate, wall_s) are shown."""
     runs, factors, labels = _bbd()
-    runs = runs.assign(point_type=np.where(runs["run"] > 12, "center", "edge"), replicate=1,
-                       wall_s=np.linspace(10, 20, len(runs)))
+    runs = runs.assign(
+        point_type=np.where(runs["run"] > 12, "center", "edge"), replicate=1, wall_s=np.linspace(10, 20, len(runs))
+    )
     runs.loc[runs["run"] == 5, "aor_deg"] = np.nan
-    res = write_report(tmp_path, runs, title="BBD with a failure", factors=factors, labels=labels,
-                       responses=[{**AOR, "target": None}], model="quadratic")
+    res = write_report(
+        tmp_path,
+        runs,
+        title="BBD with a failure",
+        factors=factors,
+        labels=labels,
+        responses=[{**AOR, "target": None}],
+        model="quadratic",
+    )
     r = res["aor_deg"]
     assert r["failed_runs"] == [5] and r["n_used"] == 16
     assert r["chosen"] is None and r["reachable"] is None and "optimum_aor_deg.csv" not in res["files"]
@@ -199,8 +251,15 @@ def test_model_fallback_to_largest_estimable(tmp_path):
     noise = np.array([0.1, -0.2, 0.15, 0.05, -0.1, 0.2, -0.05, 0.0, 0.3, -0.2, 0.1])
     d["y"] = 10 + 2 * d["A"] - d["B"] + 0.5 * d["A"] * d["B"] + noise
     factors = [Factor("A", 0, 1), Factor("B", 10, 20, "K"), Factor("C", -1, 1)]
-    res = write_report(tmp_path / "ff", d, title="FF", factors=factors, labels={"A": "first"},
-                       responses=[{"name": "y", "unit": "", "target": 11.0}], model="quadratic")
+    res = write_report(
+        tmp_path / "ff",
+        d,
+        title="FF",
+        factors=factors,
+        labels={"A": "first"},
+        responses=[{"name": "y", "unit": "", "target": 11.0}],
+        model="quadratic",
+    )
     r = res["y"]
     assert r["model"] == "2FI" and r["terms"] == ["A", "B", "C", "AB", "AC", "BC"]
     assert "2FI" in r["model_fallback"]
@@ -208,8 +267,15 @@ def test_model_fallback_to_largest_estimable(tmp_path):
     assert "Model fallback" in md and "not estimable" in md.split("## Notes")[1]
 
     runs, pfactors, labels = _pb()
-    res = write_report(tmp_path / "pb", runs, title="PB", factors=pfactors, labels=labels,
-                       responses=[{**AOR, "target": None}], model="2fi")
+    res = write_report(
+        tmp_path / "pb",
+        runs,
+        title="PB",
+        factors=pfactors,
+        labels=labels,
+        responses=[{**AOR, "target": None}],
+        model="2fi",
+    )
     assert res["aor_deg"]["terms"] == list("ABCDEF") and "Linear" in res["aor_deg"]["model_fallback"]
 
 
@@ -217,8 +283,16 @@ def test_elimination_reported(tmp_path):
     """eliminate=True gives backward_eliminate's hierarchical model (seed 001 CCD at alpha
     0.05) and lists the removed terms with their p-values."""
     runs, factors, labels = _ccd()
-    res = write_report(tmp_path, runs, title="CCD reduced", factors=factors, labels=labels,
-                       responses=[{**AOR, "target": None}], model="quadratic", eliminate=True)
+    res = write_report(
+        tmp_path,
+        runs,
+        title="CCD reduced",
+        factors=factors,
+        labels=labels,
+        responses=[{**AOR, "target": None}],
+        model="quadratic",
+        eliminate=True,
+    )
     back = backward_eliminate(runs, "aor_deg", ["X1", "X2", "X3"], "quadratic", 0.05, levels=factors)
     r = res["aor_deg"]
     assert r["terms"] == back.labels and r["eliminated"] == [e["removed"] for e in back.elimination]
@@ -235,8 +309,21 @@ def test_format_anova_and_p_values():
     runs, factors, _ = _bbd()
     fit = fit_model(runs, "aor_deg", ["C", "D", "E"], "quadratic", factors)
     text = format_anova(fit)
-    for src in ("Source", "Sum of Squares", "Mean Square", "F-value", "p-value", "Model", "C^2",
-                "Residual", "Lack of Fit", "Pure Error", "Cor Total", "< 0.0001", "not significant"):
+    for src in (
+        "Source",
+        "Sum of Squares",
+        "Mean Square",
+        "F-value",
+        "p-value",
+        "Model",
+        "C^2",
+        "Residual",
+        "Lack of Fit",
+        "Pure Error",
+        "Cor Total",
+        "< 0.0001",
+        "not significant",
+    ):
         assert src in text, src
     assert text.splitlines()[0].startswith("ANOVA for Quadratic model")
     assert format_p(3e-5) == "< 0.0001" and format_p(0.00482) == "0.0048" and format_p(float("nan")) == ""

@@ -18,8 +18,16 @@ STUDIES = ROOT / "studies"
 REF = STUDIES / "reference"
 FILES = sorted(STUDIES.glob("*.toml"))
 
-COUNTS = {"pellets_pb": 12, "pellets_steepest": 6, "pellets_bbd": 17, "wetfeed_pb": 12, "wetfeed_ccd": 23,
-          "phosphate_ffd": 16, "phosphate_bbd": 15, "main_funnel_pb": 12}
+COUNTS = {
+    "pellets_pb": 12,
+    "pellets_steepest": 6,
+    "pellets_bbd": 17,
+    "wetfeed_pb": 12,
+    "wetfeed_ccd": 23,
+    "phosphate_ffd": 16,
+    "phosphate_bbd": 15,
+    "main_funnel_pb": 12,
+}
 
 
 @pytest.fixture(scope="module")
@@ -49,8 +57,12 @@ def test_every_study_file_is_listed_and_loads(studies, tables):
         assert spec.name == name
         t = tables[name]
         names = spec.factor_names
-        assert list(t.columns) == (["run", "std_order", "point_type", "replicate", "world_seed"] + names
-                                   + [f"{n}_actual" for n in names] + ["point_id"])
+        assert list(t.columns) == (
+            ["run", "std_order", "point_type", "replicate", "world_seed"]
+            + names
+            + [f"{n}_actual" for n in names]
+            + ["point_id"]
+        )
         assert list(t["run"]) == list(range(1, len(t) + 1))
         assert sorted(t["std_order"]) == list(range(1, len(t) + 1))
 
@@ -151,9 +163,14 @@ def test_gradient_path_and_explicit_points(tmp_path, studies):
     (eq. 5 in coded units: C 1.3275, D 3.318, E 1.7925) a D step of 0.06 moves C by 0.008 and E by
     0.00648, which is why Table 8's fixed steps are encoded as `step`. An explicit design runs the
     given actual points as they are, and its repeats get new world seeds."""
-    text = (STUDIES / "pellets_steepest.toml").read_text().replace(
-        "step = { C = 0.02, D = 0.06, E = 0.01 }",
-        'coefficients = { C = 1.3275, D = 3.318, E = 1.7925 }\nbase = "D"\nbase_step = 0.06')
+    text = (
+        (STUDIES / "pellets_steepest.toml")
+        .read_text()
+        .replace(
+            "step = { C = 0.02, D = 0.06, E = 0.01 }",
+            'coefficients = { C = 1.3275, D = 3.318, E = 1.7925 }\nbase = "D"\nbase_step = 0.06',
+        )
+    )
     p = tmp_path / "grad.toml"
     p.write_text(text)
     t = design_table(load_study(p))
@@ -166,7 +183,7 @@ def test_gradient_path_and_explicit_points(tmp_path, studies):
     tail = text.split("[[responses]]")[1]
     pts = "[{C = 0.45, D = 0.55, E = 0.05}, {C = 0.41, D = 0.51, E = 0.03}, {C = 0.45, D = 0.55, E = 0.05}]"
     p = tmp_path / "explicit.toml"
-    p.write_text(head + f"[design]\nkind = \"explicit\"\npoints = {pts}\nrandomize = false\n[[responses]]" + tail)
+    p.write_text(head + f'[design]\nkind = "explicit"\npoints = {pts}\nrandomize = false\n[[responses]]' + tail)
     spec = load_study(p)
     t = design_table(spec)
     assert list(t["point_type"]) == ["point"] * 3 and list(t["world_seed"]) == [0, 0, 1]
@@ -241,9 +258,14 @@ def test_batch_key_groups_runs(studies, tables, tmp_path):
     for name, spec in studies.items():
         keys = {batch_key(spec, run_overrides(spec, r)) for _, r in tables[name].iterrows()}
         assert len(keys) == 1, name
-    text = (STUDIES / "main_funnel_pb.toml").read_text().replace(
-        'parameter = "interaction.grain.grain.restitution"\nlow = 0.05\nhigh = 0.1',
-        'parameter = "seed"\nlow = 1\nhigh = 3')
+    text = (
+        (STUDIES / "main_funnel_pb.toml")
+        .read_text()
+        .replace(
+            'parameter = "interaction.grain.grain.restitution"\nlow = 0.05\nhigh = 0.1',
+            'parameter = "seed"\nlow = 1\nhigh = 3',
+        )
+    )
     p = tmp_path / "main_funnel_pb.toml"
     p.write_text(text)
     spec = load_study(p)
@@ -258,8 +280,12 @@ def test_fixed_clump_contact_mass_reaches_the_scene(tmp_path):
     from warpdem.study.execute import _scene
 
     p = tmp_path / "s.toml"
-    p.write_text(BASE.replace('"interaction.grain.grain.restitution" = 0.3',
-                              '"interaction.grain.grain.restitution" = 0.3\n"run.clump_contact_mass" = "body"'))
+    p.write_text(
+        BASE.replace(
+            '"interaction.grain.grain.restitution" = 0.3',
+            '"interaction.grain.grain.restitution" = 0.3\n"run.clump_contact_mass" = "body"',
+        )
+    )
     spec = load_study(p)
     row = design_table(spec).iloc[0]
     assert _scene(spec, run_overrides(spec, row)).run.clump_contact_mass == "body"
@@ -270,7 +296,8 @@ def test_scene_study_and_bare_dotted_keys(tmp_path):
     sub-table) means the same as the quoted key."""
     scene = os.path.relpath(ROOT / "scenes" / "funnel.usda", tmp_path)
     text = BASE.replace('rig = "funnel"\nsmoke = true', f'scene = "{scene}"').replace(
-        '"interaction.grain.grain.restitution" = 0.3', "interaction.grain.grain.restitution = 0.3")
+        '"interaction.grain.grain.restitution" = 0.3', "interaction.grain.grain.restitution = 0.3"
+    )
     p = tmp_path / "s.toml"
     p.write_text(text)
     spec = load_study(p)
@@ -333,66 +360,143 @@ BAD = [
     ("toml-syntax", "seed = 1", "seed = = 1", ["not valid TOML"]),
     ("unknown-table", "[design]", "[desing]", ["[desing]", "did you mean 'design'"]),
     ("unknown-key", "seed = 1", "sed = 1", ["[study]", "'sed'", "did you mean 'seed'"]),
-    ("missing-design", '[design]\n' + _PB + '\nreplicates = 1', "", ["[design] is missing"]),
+    ("missing-design", "[design]\n" + _PB + "\nreplicates = 1", "", ["[design] is missing"]),
     ("bad-name", 'name = "bad_case"', 'name = "Bad Case"', ["[study]", "name = 'Bad Case'"]),
     ("unknown-rig", 'rig = "funnel"', 'rig = "funel"', ["rig = 'funel'", "did you mean 'funnel'"]),
-    ("rig-and-scene", 'smoke = true', 'smoke = true\nscene = "x.usda"', ["exactly one of rig"]),
+    ("rig-and-scene", "smoke = true", 'smoke = true\nscene = "x.usda"', ["exactly one of rig"]),
     ("missing-scene", 'rig = "funnel"\nsmoke = true', 'scene = "nowhere/funnel.usda"', ["scene =", "does not exist"]),
     ("negative-seed", "seed = 1", "seed = -1", ["seed = -1", "integer >= 0"]),
-    ("fixed-unknown-field", '"interaction.grain.grain.restitution"', '"interaction.grain.grain.restitutoin"',
-     ["[fixed]", "restitutoin", "did you mean 'restitution'"]),
-    ("fixed-unknown-rig-param", '"interaction.grain.grain.restitution" = 0.3', 'partcle_radius = 0.003',
-     ["[fixed]", "partcle_radius", "did you mean 'particle_radius'"]),
-    ("fixed-unknown-material", '"interaction.grain.grain.restitution"', '"interaction.grian.grain.restitution"',
-     ["[fixed]", "interaction.grian.grain.restitution", "material 'grian'"]),
-    ("fixed-value-refused", '"interaction.grain.grain.restitution" = 0.3', '"interaction.grain.grain.restitution" = 1.5',
-     ["[fixed]", "restitution = 1.5", "(0, 1]"]),
-    ("fixed-rig-value-refused", '"interaction.grain.grain.restitution" = 0.3', 'material = "wood"',
-     ["[fixed]", "material = 'wood'", "pellet or feed"]),
-    ("factor-key-form", '"interaction.grain.steel.static_friction"\nlow = 0.3',
-     '"interaction.grain.static_friction"\nlow = 0.3', ["[[factors]] 'B'", "parameter", "interaction.A.B.FIELD"]),
-    ("factor-not-numeric", '"interaction.grain.steel.static_friction"\nlow = 0.3',
-     '"interaction.grain.steel.law"\nlow = 0.3', ["[[factors]] 'B'", "parameter", "numeric interaction field"]),
-    ("factor-bool-rig-param", '"interaction.grain.steel.static_friction"\nlow = 0.3', '"particle"\nlow = 0.3',
-     ["[[factors]] 'B'", "numeric funnel parameter"]),
-    ("factor-missing-key", _FAC_B, 'name = "B"\nparameter = "interaction.grain.steel.static_friction"\nlow = 0.3',
-     ["[[factors]] #2 'B'", "high is missing"]),
+    (
+        "fixed-unknown-field",
+        '"interaction.grain.grain.restitution"',
+        '"interaction.grain.grain.restitutoin"',
+        ["[fixed]", "restitutoin", "did you mean 'restitution'"],
+    ),
+    (
+        "fixed-unknown-rig-param",
+        '"interaction.grain.grain.restitution" = 0.3',
+        "partcle_radius = 0.003",
+        ["[fixed]", "partcle_radius", "did you mean 'particle_radius'"],
+    ),
+    (
+        "fixed-unknown-material",
+        '"interaction.grain.grain.restitution"',
+        '"interaction.grian.grain.restitution"',
+        ["[fixed]", "interaction.grian.grain.restitution", "material 'grian'"],
+    ),
+    (
+        "fixed-value-refused",
+        '"interaction.grain.grain.restitution" = 0.3',
+        '"interaction.grain.grain.restitution" = 1.5',
+        ["[fixed]", "restitution = 1.5", "(0, 1]"],
+    ),
+    (
+        "fixed-rig-value-refused",
+        '"interaction.grain.grain.restitution" = 0.3',
+        'material = "wood"',
+        ["[fixed]", "material = 'wood'", "pellet or feed"],
+    ),
+    (
+        "factor-key-form",
+        '"interaction.grain.steel.static_friction"\nlow = 0.3',
+        '"interaction.grain.static_friction"\nlow = 0.3',
+        ["[[factors]] 'B'", "parameter", "interaction.A.B.FIELD"],
+    ),
+    (
+        "factor-not-numeric",
+        '"interaction.grain.steel.static_friction"\nlow = 0.3',
+        '"interaction.grain.steel.law"\nlow = 0.3',
+        ["[[factors]] 'B'", "parameter", "numeric interaction field"],
+    ),
+    (
+        "factor-bool-rig-param",
+        '"interaction.grain.steel.static_friction"\nlow = 0.3',
+        '"particle"\nlow = 0.3',
+        ["[[factors]] 'B'", "numeric funnel parameter"],
+    ),
+    (
+        "factor-missing-key",
+        _FAC_B,
+        'name = "B"\nparameter = "interaction.grain.steel.static_friction"\nlow = 0.3',
+        ["[[factors]] #2 'B'", "high is missing"],
+    ),
     ("factor-unknown-key", _FAC_B, _FAC_B + '\nunits = "-"', ["[[factors]] #2 'B'", "did you mean 'unit'"]),
     ("duplicate-factor", 'name = "B"', 'name = "A"', ["[[factors]] 'A'", "unique factor names"]),
-    ("duplicate-parameter", '"interaction.grain.steel.static_friction"', '"interaction.grain.grain.static_friction"',
-     ["[[factors]] 'B'", "already sets it"]),
-    ("factor-also-fixed", '"interaction.grain.grain.restitution" = 0.3', '"interaction.grain.steel.static_friction" = 0.3',
-     ["[[factors]] 'B'", "[fixed] sets it too"]),
-    ("low-equals-high", "low = 0.3\nhigh = 0.6", "low = 0.3\nhigh = 0.3", ["[[factors]] 'B'", "low = 0.3 and high = 0.3"]),
+    (
+        "duplicate-parameter",
+        '"interaction.grain.steel.static_friction"',
+        '"interaction.grain.grain.static_friction"',
+        ["[[factors]] 'B'", "already sets it"],
+    ),
+    (
+        "factor-also-fixed",
+        '"interaction.grain.grain.restitution" = 0.3',
+        '"interaction.grain.steel.static_friction" = 0.3',
+        ["[[factors]] 'B'", "[fixed] sets it too"],
+    ),
+    (
+        "low-equals-high",
+        "low = 0.3\nhigh = 0.6",
+        "low = 0.3\nhigh = 0.3",
+        ["[[factors]] 'B'", "low = 0.3 and high = 0.3"],
+    ),
     ("bad-factor-name", 'name = "B"', 'name = "2B"', ["[[factors]]", "name = '2B'"]),
     ("reserved-factor-name", 'name = "B"', 'name = "run"', ["[[factors]] 'run'", "design-table column"]),
-    ("extreme-value-refused", _PB, 'kind = "central_composite"\nalpha = 4.0',
-     ["[[factors]] 'A'", "static_friction = -0.2", "lowest"]),
+    (
+        "extreme-value-refused",
+        _PB,
+        'kind = "central_composite"\nalpha = 4.0',
+        ["[[factors]] 'A'", "static_friction = -0.2", "lowest"],
+    ),
     ("replicates-zero", "replicates = 1", "replicates = 0", ["[design]", "replicates = 0", "integer >= 1"]),
     ("unknown-kind", '"plackett_burman"', '"plackett_burmann"', ["kind = 'plackett_burmann'", "did you mean"]),
     ("pb-runs", "runs = 12", "runs = 16", ["[design]", "runs = 16", "12 or 20"]),
     ("option-of-other-kind", "runs = 12", "runs = 12\nalpha = 2.0", ["alpha = 2.0", "central_composite"]),
     ("ff-no-generators", _PB, 'kind = "fractional_factorial"', ["[design]", "generators is missing", "E = ABCD"]),
-    ("ff-bad-generator", _PB, 'kind = "fractional_factorial"\ngenerators = ["C = AZ"]', ["[design]", "unknown factors"]),
+    (
+        "ff-bad-generator",
+        _PB,
+        'kind = "fractional_factorial"\ngenerators = ["C = AZ"]',
+        ["[design]", "unknown factors"],
+    ),
     ("ccd-bad-alpha", _PB, 'kind = "central_composite"\nalpha = "rotatible"', ["alpha = 'rotatible'", "rotatable"]),
-    ("steepest-missing-factor", _PB, 'kind = "steepest_ascent"\nsteps = 4\nstep = {A = 0.1, B = 0.05}',
-     ["[design]", "step", "lacks factor(s) C"]),
-    ("steepest-unknown-factor", _PB, 'kind = "steepest_ascent"\nsteps = 4\nstep = {A = 0.1, B = 0.05, Z = 0.1}',
-     ["[design]", "'Z'", "not a factor"]),
-    ("steepest-both", _PB, 'kind = "steepest_ascent"\nsteps = 4\nstep = {A = 0.1, B = 0.05, C = 0.01}\nbase = "A"',
-     ["[design]", "not both"]),
+    (
+        "steepest-missing-factor",
+        _PB,
+        'kind = "steepest_ascent"\nsteps = 4\nstep = {A = 0.1, B = 0.05}',
+        ["[design]", "step", "lacks factor(s) C"],
+    ),
+    (
+        "steepest-unknown-factor",
+        _PB,
+        'kind = "steepest_ascent"\nsteps = 4\nstep = {A = 0.1, B = 0.05, Z = 0.1}',
+        ["[design]", "'Z'", "not a factor"],
+    ),
+    (
+        "steepest-both",
+        _PB,
+        'kind = "steepest_ascent"\nsteps = 4\nstep = {A = 0.1, B = 0.05, C = 0.01}\nbase = "A"',
+        ["[design]", "not both"],
+    ),
     ("explicit-missing", _PB, 'kind = "explicit"\npoints = [{A = 0.5, B = 0.4}]', ["points[0]", "lacks factor(s) C"]),
-    ("unknown-measure", 'measure = "angle_fit_deg"', 'measure = "angle_fit"',
-     ["[[responses]] 'aor_deg'", "did you mean 'angle_fit_deg'"]),
+    (
+        "unknown-measure",
+        'measure = "angle_fit_deg"',
+        'measure = "angle_fit"',
+        ["[[responses]] 'aor_deg'", "did you mean 'angle_fit_deg'"],
+    ),
     ("no-responses", '[[responses]]\nname = "aor_deg"\nmeasure = "angle_fit_deg"', "", ["[responses] is missing"]),
     ("model-not-estimable", 'model = "linear"', 'model = "quadratic"', ["[analysis]", "model = 'quadratic'", "rank"]),
     ("model-unknown-term", 'model = "linear"', 'model = ["A", "A*Z"]', ["[analysis]", "A*Z"]),
     ("model-unknown-name", 'model = "linear"', 'model = "cubic"', ["[analysis]", "model = 'cubic'"]),
     ("analysis-alpha", 'model = "linear"', 'model = "linear"\nalpha = 1.5', ["[analysis]", "alpha = 1.5", "(0, 1)"]),
     ("verification-negative", "replicates = 0", "replicates = -1", ["[verification]", "replicates = -1"]),
-    ("clump-mass-word", '"interaction.grain.grain.restitution" = 0.3',
-     '"interaction.grain.grain.restitution" = 0.3\n"run.clump_contact_mass" = "half"',
-     ["[fixed]", "run.clump_contact_mass = 'half'", "shared or body"]),
+    (
+        "clump-mass-word",
+        '"interaction.grain.grain.restitution" = 0.3',
+        '"interaction.grain.grain.restitution" = 0.3\n"run.clump_contact_mass" = "half"',
+        ["[fixed]", "run.clump_contact_mass = 'half'", "shared or body"],
+    ),
 ]
 
 
@@ -414,8 +518,10 @@ def test_bad_input_raises_study_error_naming_the_field(tmp_path, case, old, new,
 def test_factors_must_be_an_array_of_tables(tmp_path):
     """[factors] written as one table (not [[factors]]) is refused with the right spelling."""
     head, rest = BASE.split("[[factors]]", 1)
-    text = head + '[factors]\nname = "A"\nparameter = "interaction.grain.grain.static_friction"\nlow = 0.4\n' \
-        'high = 0.8\n\n[design]' + rest.split("[design]", 1)[1]
+    text = (
+        head + '[factors]\nname = "A"\nparameter = "interaction.grain.grain.static_friction"\nlow = 0.4\n'
+        "high = 0.8\n\n[design]" + rest.split("[design]", 1)[1]
+    )
     p = tmp_path / "table.toml"
     p.write_text(text)
     with pytest.raises(StudyError, match=r"\[factors\]: expected an array of tables, written \[\[factors\]\]"):
@@ -425,8 +531,11 @@ def test_factors_must_be_an_array_of_tables(tmp_path):
 def test_base_case_is_valid(tmp_path):
     """The template the bad cases break is itself a valid study (so each case fails for its own reason);
     it also loads with a Box-Behnken and a central composite design."""
-    for text in (BASE, BASE.replace(_PB, 'kind = "box_behnken"\ncenter_points = 3'),
-                 BASE.replace(_PB, 'kind = "central_composite"\nalpha = "face"').replace('"linear"', '"quadratic"')):
+    for text in (
+        BASE,
+        BASE.replace(_PB, 'kind = "box_behnken"\ncenter_points = 3'),
+        BASE.replace(_PB, 'kind = "central_composite"\nalpha = "face"').replace('"linear"', '"quadratic"'),
+    ):
         p = tmp_path / "ok.toml"
         p.write_text(text)
         assert len(design_table(load_study(p))) > 0

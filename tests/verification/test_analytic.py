@@ -12,8 +12,11 @@ from warpdem.verify import cases as verify
 
 def _assert_records(records):
     assert records, "a case produced no record"
-    bad = [f"{r.case}: {r.name} = {r.value:.6g}, expected {r.expected:.6g} (error {r.error:.3g} > {r.tolerance:.3g})"
-           for r in records if not r.passed]
+    bad = [
+        f"{r.case}: {r.name} = {r.value:.6g}, expected {r.expected:.6g} (error {r.error:.3g} > {r.tolerance:.3g})"
+        for r in records
+        if not r.passed
+    ]
     assert not bad, "\n".join(bad)
 
 

@@ -239,8 +239,17 @@ def eepa_adhesion(k2: float, overlap_max: float, lambda_p: float, n: float, chi:
     return -f_eff / d_min**chi, d_min, f_eff
 
 
-def eepa_force(overlap, overlap_max: float, e_star: float, r_star: float, f0: float, n: float, lambda_p: float,
-               chi: float, gamma: float):
+def eepa_force(
+    overlap,
+    overlap_max: float,
+    e_star: float,
+    r_star: float,
+    f0: float,
+    n: float,
+    lambda_p: float,
+    chi: float,
+    gamma: float,
+):
     """EEPA hysteretic force [N] at overlap(s) delta > 0 for a *given* history delta_max (>= delta).
 
     F = f0 + min(k1 delta^n, max(k2 (delta^n - delta_p^n), -k_adh delta^chi)): the three branches of
@@ -255,8 +264,9 @@ def eepa_force(overlap, overlap_max: float, e_star: float, r_star: float, f0: fl
     return np.where(d > 0.0, f, 0.0)
 
 
-def eepa_loop_energy(overlap_max: float, e_star: float, r_star: float, n: float, lambda_p: float, chi: float,
-                     gamma: float) -> float:
+def eepa_loop_energy(
+    overlap_max: float, e_star: float, r_star: float, n: float, lambda_p: float, chi: float, gamma: float
+) -> float:
     """Energy dissipated [J] by one cycle: virgin load 0 -> delta_max, unload through adhesion to delta = 0.
 
     W_in  = k1 delta_max^(n+1)/(n+1)

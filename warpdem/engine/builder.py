@@ -20,9 +20,18 @@ GLUED_VOLUME = 1.0e12
 reduced mass is the particle's to float32 precision, while products of masses stay finite in float32."""
 
 
-INTERACTION_SCALARS = ("restitution", "static_friction", "rolling_friction", "rolling_damping", "surface_energy",
-                       "pull_off_force", "slope_exponent", "plasticity_ratio", "tensile_exponent",
-                       "tangential_stiffness_multiplier")
+INTERACTION_SCALARS = (
+    "restitution",
+    "static_friction",
+    "rolling_friction",
+    "rolling_damping",
+    "surface_energy",
+    "pull_off_force",
+    "slope_exponent",
+    "plasticity_ratio",
+    "tensile_exponent",
+    "tangential_stiffness_multiplier",
+)
 """Interaction fields that :meth:`ModelBuilder.vary` can set per world."""
 
 
@@ -97,17 +106,20 @@ class ModelBuilder:
 
     def set_default_interaction(self, interaction: Interaction | None = None, **kwargs) -> None:
         """Interaction used for every pair not set explicitly."""
-        self.interactions.default = interaction if interaction is not None else dataclasses.replace(
-            self.interactions.default, **kwargs)
+        self.interactions.default = (
+            interaction if interaction is not None else dataclasses.replace(self.interactions.default, **kwargs)
+        )
 
     # bodies and walls ------------------------------------------------------------------------
-    def add_sphere(self, position, radius: float, material, velocity=(0, 0, 0), angular_velocity=(0, 0, 0),
-                   world: int = 0) -> int:
+    def add_sphere(
+        self, position, radius: float, material, velocity=(0, 0, 0), angular_velocity=(0, 0, 0), world: int = 0
+    ) -> int:
         """Add one sphere: centre [m], radius [m], velocity [m/s], angular velocity [rad/s]; returns its index."""
         return int(self.add_spheres([position], radius, material, [velocity], [angular_velocity], world)[0])
 
-    def add_spheres(self, positions, radius, material, velocities=None, angular_velocities=None,
-                    world: int = 0) -> np.ndarray:
+    def add_spheres(
+        self, positions, radius, material, velocities=None, angular_velocities=None, world: int = 0
+    ) -> np.ndarray:
         """Add spheres; ``positions`` shape (n, 3) [m], ``radius`` scalar or shape (n,) [m]. Returns their indices."""
         x = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
         n = x.shape[0]
@@ -116,13 +128,21 @@ class ModelBuilder:
             raise ValueError("add_spheres: positions contain a non-finite value")
         bad = np.flatnonzero(~(np.isfinite(r) & (r > 0)))
         if bad.size:
-            raise ValueError(f"add_spheres: radius = {float(r[bad[0]])!r} (sphere {bad[0]}) is not allowed; expected a radius > 0 m")
+            raise ValueError(
+                f"add_spheres: radius = {float(r[bad[0]])!r} (sphere {bad[0]}) is not allowed; expected a radius > 0 m"
+            )
         v = np.zeros((n, 3)) if velocities is None else np.asarray(velocities, dtype=np.float64).reshape(n, 3)
-        w = np.zeros((n, 3)) if angular_velocities is None else np.asarray(angular_velocities, dtype=np.float64).reshape(n, 3)
+        w = (
+            np.zeros((n, 3))
+            if angular_velocities is None
+            else np.asarray(angular_velocities, dtype=np.float64).reshape(n, 3)
+        )
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(w))):
             raise ValueError("add_spheres: velocities contain a non-finite value")
         if int(world) != 0:
-            raise ValueError(f"add_spheres: world = {world!r} is not allowed; build world 0 and call replicate(world_count)")
+            raise ValueError(
+                f"add_spheres: world = {world!r} is not allowed; build world 0 and call replicate(world_count)"
+            )
         mat = self.material_index(material)
         start = len(self._r)
         self._x.extend(x)
@@ -151,8 +171,9 @@ class ModelBuilder:
         # the glued spheres start where the wall's pose at t = 0 puts them (placed by the solver's first step)
         return idx
 
-    def coat_wall(self, wall, radius: float, material, spacing: float | None = None, side: float = 1.0,
-                  seed: int = 0) -> np.ndarray:
+    def coat_wall(
+        self, wall, radius: float, material, spacing: float | None = None, side: float = 1.0, seed: int = 0
+    ) -> np.ndarray:
         """Cover a mesh wall with glued spheres of ``radius`` [m], centres ``radius`` off the surface on the side
         of the triangle normals (right-hand winding; ``side = -1`` for the other side), at least ``spacing`` [m]
         apart (default 2 x radius: touching neighbours), by seeded random sequential placement. Returns the
@@ -199,13 +220,23 @@ class ModelBuilder:
         names = ", ".join(repr(w[4]) for w in self._walls) or "none yet"
         raise ValueError(f"{where}: wall = {wall!r} is not a mesh wall; defined walls: {names}")
 
-    def add_clump(self, template, position, material, orientation=(0, 0, 0, 1), velocity=(0, 0, 0),
-                  angular_velocity=(0, 0, 0)) -> int:
+    def add_clump(
+        self, template, position, material, orientation=(0, 0, 0, 1), velocity=(0, 0, 0), angular_velocity=(0, 0, 0)
+    ) -> int:
         """Add one rigid clump; returns its index. See :meth:`add_clumps`."""
         return int(self.add_clumps(template, [position], material, [orientation], [velocity], [angular_velocity])[0])
 
-    def add_clumps(self, template, positions, material, orientations=None, velocities=None,
-                   angular_velocities=None, active: bool = True, scale=None) -> np.ndarray:
+    def add_clumps(
+        self,
+        template,
+        positions,
+        material,
+        orientations=None,
+        velocities=None,
+        angular_velocities=None,
+        active: bool = True,
+        scale=None,
+    ) -> np.ndarray:
         """Add rigid multi-sphere clumps of one template.
 
         Args:
@@ -222,15 +253,22 @@ class ModelBuilder:
         """
         for name in ("sphere_offset", "sphere_radius", "volume", "inertia_unit"):
             if not hasattr(template, name):
-                raise TypeError(f"add_clumps: template = {template!r} is not allowed; expected a ClumpTemplate "
-                                f"(missing {name})")
+                raise TypeError(
+                    f"add_clumps: template = {template!r} is not allowed; expected a ClumpTemplate (missing {name})"
+                )
         x = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
         n = len(x)
-        q = np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)) if orientations is None else \
-            np.asarray(orientations, dtype=np.float64).reshape(n, 4)
+        q = (
+            np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
+            if orientations is None
+            else np.asarray(orientations, dtype=np.float64).reshape(n, 4)
+        )
         v = np.zeros((n, 3)) if velocities is None else np.asarray(velocities, dtype=np.float64).reshape(n, 3)
-        w = np.zeros((n, 3)) if angular_velocities is None else \
-            np.asarray(angular_velocities, dtype=np.float64).reshape(n, 3)
+        w = (
+            np.zeros((n, 3))
+            if angular_velocities is None
+            else np.asarray(angular_velocities, dtype=np.float64).reshape(n, 3)
+        )
         for name, arr in (("positions", x), ("orientations", q), ("velocities", v), ("angular_velocities", w)):
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"add_clumps: {name} contain a non-finite value")
@@ -239,7 +277,9 @@ class ModelBuilder:
             raise ValueError(f"add_clumps: scale = {scale!r} is not allowed; expected factors > 0")
         norms = np.linalg.norm(q, axis=1)
         if np.any(norms < 1e-6):
-            raise ValueError("add_clumps: orientations contain a zero quaternion; expected unit quaternions (x, y, z, w)")
+            raise ValueError(
+                "add_clumps: orientations contain a zero quaternion; expected unit quaternions (x, y, z, w)"
+            )
         q = q / norms[:, None]
         mat = self.material_index(material)
         tid = next((k for k, t in enumerate(self._templates) if t is template), None)
@@ -288,8 +328,18 @@ class ModelBuilder:
         active = np.asarray(self._active, dtype=bool)
         return np.asarray(self._x, dtype=np.float64)[active], np.asarray(self._r, dtype=np.float64)[active]
 
-    def fill(self, region, sizes, material, count: int | None = None, mass: float | None = None, seed: int = 0,
-             template=None, velocity=(0.0, 0.0, 0.0), max_attempts: int = 10000) -> np.ndarray:
+    def fill(
+        self,
+        region,
+        sizes,
+        material,
+        count: int | None = None,
+        mass: float | None = None,
+        seed: int = 0,
+        template=None,
+        velocity=(0.0, 0.0, 0.0),
+        max_attempts: int = 10000,
+    ) -> np.ndarray:
         """Static factory: fill ``region`` (Box, Cylinder, Cone) with non-overlapping particles now.
 
         ``sizes`` (FixedSize, TruncatedNormal, LogNormal, SieveTable) gives sphere radii, or for clumps the
@@ -302,15 +352,26 @@ class ModelBuilder:
         density = self.materials[self.material_index(material)].density
         ex_x, ex_r = self._existing()
         ratio = 1.0 if template is None else template.bounding_radius / template.equivalent_radius
-        out = fill_region(region, sizes, count=count, mass=mass, density=density, rng_seed=seed,
-                          existing_x=ex_x, existing_r=ex_r, max_attempts=max_attempts, bounding_ratio=ratio,
-                          orientations=template is not None)
+        out = fill_region(
+            region,
+            sizes,
+            count=count,
+            mass=mass,
+            density=density,
+            rng_seed=seed,
+            existing_x=ex_x,
+            existing_r=ex_r,
+            max_attempts=max_attempts,
+            bounding_ratio=ratio,
+            orientations=template is not None,
+        )
         x, r = out[0], out[1]
         v = np.tile(np.asarray(velocity, dtype=np.float64), (len(r), 1))
         if template is None:
             return self.add_spheres(x, r, material, velocities=v)
-        return self.add_clumps(template, x, material, orientations=out[2], velocities=v,
-                               scale=r / template.equivalent_radius)
+        return self.add_clumps(
+            template, x, material, orientations=out[2], velocities=v, scale=r / template.equivalent_radius
+        )
 
     def add_factory(self, factory, material, template=None) -> int:
         """Dynamic factory: preallocate its ``capacity()`` particles, parked and inactive, for the solver's
@@ -322,9 +383,11 @@ class ModelBuilder:
         if template is not None:
             need = template.bounding_radius / template.equivalent_radius
             if factory.bounding_ratio < need * (1 - 1e-9):
-                raise ValueError(f"add_factory: factory.bounding_ratio = {factory.bounding_ratio!r} is not allowed for "
-                                 f"template {template.name!r}; expected at least its bounding / equivalent radius "
-                                 f"= {need:.6g}, or released clumps could overlap")
+                raise ValueError(
+                    f"add_factory: factory.bounding_ratio = {factory.bounding_ratio!r} is not allowed for "
+                    f"template {template.name!r}; expected at least its bounding / equivalent radius "
+                    f"= {need:.6g}, or released clumps could overlap"
+                )
         n = factory.capacity()
         r = np.asarray(factory.radii, dtype=np.float64)
         bound = r if template is None else r * template.bounding_radius / template.equivalent_radius
@@ -337,15 +400,29 @@ class ModelBuilder:
         if template is None:
             first = self.sphere_count
             self.add_spheres(park, r, material)
-            self._active[first:first + n] = [0] * n
+            self._active[first : first + n] = [0] * n
             kind = "sphere"
         else:
             first = self.clump_count
-            self.add_clumps(template, park, material, orientations=factory.quaternions, active=False,
-                            scale=r / template.equivalent_radius)
+            self.add_clumps(
+                template,
+                park,
+                material,
+                orientations=factory.quaternions,
+                active=False,
+                scale=r / template.equivalent_radius,
+            )
             kind = "clump"
-        self._factories.append({"factory": factory, "kind": kind, "first": first, "count": n,
-                                "material": self.material_index(material), "template": template})
+        self._factories.append(
+            {
+                "factory": factory,
+                "kind": kind,
+                "first": first,
+                "count": n,
+                "material": self.material_index(material),
+                "template": template,
+            }
+        )
         return len(self._factories) - 1
 
     def add_plane(self, point, normal, material, world: int = -1) -> int:
@@ -358,8 +435,9 @@ class ModelBuilder:
         self._planes.append((p, nrm / length, self.material_index(material), int(world)))
         return len(self._planes) - 1
 
-    def add_wall_mesh(self, vertices, triangles, material, name: str | None = None, world: int = -1,
-                      motion: WallMotion | None = None) -> int:
+    def add_wall_mesh(
+        self, vertices, triangles, material, name: str | None = None, world: int = -1, motion: WallMotion | None = None
+    ) -> int:
         """Add a rigid triangle-mesh wall: ``vertices`` shape (v, 3) [m], ``triangles`` shape (t, 3) int.
 
         Triangles are two-sided: a sphere is pushed away from whichever side it touches. ``motion``
@@ -393,8 +471,10 @@ class ModelBuilder:
         ``State.world_removed``. Without a domain nothing is removed."""
         lo, hi = _vec3(low, "set_domain", "low"), _vec3(high, "set_domain", "high")
         if not np.all(lo < hi):
-            raise ValueError(f"set_domain: low = {tuple(lo.tolist())} and high = {tuple(hi.tolist())} are not "
-                             "allowed; expected low < high on every axis")
+            raise ValueError(
+                f"set_domain: low = {tuple(lo.tolist())} and high = {tuple(hi.tolist())} are not "
+                "allowed; expected low < high on every axis"
+            )
         self._domain = (tuple(float(v) for v in lo), tuple(float(v) for v in hi))
 
     def replicate(self, world_count: int) -> None:
@@ -424,8 +504,10 @@ class ModelBuilder:
             if parts[3] not in INTERACTION_SCALARS:
                 raise ValueError(f"vary {target!r}: field {parts[3]!r} is not an interaction scalar")
         elif parts != ["gravity"]:
-            raise ValueError(f"vary: target = {target!r} is not allowed; expected material.NAME.FIELD, "
-                             "interaction.A.B.FIELD or gravity")
+            raise ValueError(
+                f"vary: target = {target!r} is not allowed; expected material.NAME.FIELD, "
+                "interaction.A.B.FIELD or gravity"
+            )
         self._variations[target] = vals
 
     def seed_worlds(self, seeds) -> None:
@@ -511,8 +593,12 @@ class ModelBuilder:
 
         meshes, face_start, tri_wall, wall_radius = [], [0], [], []
         for k, (v, t, *_rest) in enumerate(self._walls):
-            meshes.append(wp.Mesh(points=wp.array(v.astype(np.float32), dtype=wp.vec3, device=device),
-                                  indices=wp.array(t.astype(np.int32).reshape(-1), dtype=int, device=device)))
+            meshes.append(
+                wp.Mesh(
+                    points=wp.array(v.astype(np.float32), dtype=wp.vec3, device=device),
+                    indices=wp.array(t.astype(np.int32).reshape(-1), dtype=int, device=device),
+                )
+            )
             face_start.append(face_start[-1] + len(t))
             tri_wall.append(np.full(len(t), k, dtype=np.int32))
             wall_radius.append(float(np.linalg.norm(v, axis=1).max()))
@@ -565,10 +651,12 @@ class ModelBuilder:
             sphere_wall=wp.array(sphere_wall, dtype=int, device=device),
             attached_index=wp.array(attached if len(attached) else np.zeros(1, np.int32), dtype=int, device=device),
             attached_count=len(attached),
-            sphere_offset=wp.array(np.tile(np.asarray(self._offset, dtype=np.float32).reshape(-1, 3), (W, 1)),
-                                   dtype=wp.vec3, device=device),
-            sphere_body_volume=wp.array(np.tile(np.asarray(self._body_volume, dtype=np.float32), W), dtype=float,
-                                        device=device),
+            sphere_offset=wp.array(
+                np.tile(np.asarray(self._offset, dtype=np.float32).reshape(-1, 3), (W, 1)), dtype=wp.vec3, device=device
+            ),
+            sphere_body_volume=wp.array(
+                np.tile(np.asarray(self._body_volume, dtype=np.float32), W), dtype=float, device=device
+            ),
             clump_count=c0 * W,
             clump_sphere_start=wp.array(starts, dtype=int, device=device),
             clump_sphere_end=wp.array(ends, dtype=int, device=device),
@@ -602,8 +690,12 @@ class ModelBuilder:
             "sphere_active": np.tile(np.asarray(self._active, dtype=np.int32), W),
         }
         if c0:
-            model.initial.update(clump_x=tiled(self._cx, 3), clump_q=tiled(self._cq, 4), clump_v=tiled(self._cv, 3),
-                                 clump_w=tiled(self._cw, 3))
+            model.initial.update(
+                clump_x=tiled(self._cx, 3),
+                clump_q=tiled(self._cq, 4),
+                clump_v=tiled(self._cv, 3),
+                clump_w=tiled(self._cw, 3),
+            )
         return model
 
 
@@ -613,7 +705,8 @@ def contact_reach(params: np.ndarray, radius_max: float) -> float:
     jkr = params[params["law"] == int(ContactLaw.JKR)]
     if len(jkr) == 0:
         return 0.0
-    reach = [-analytic.jkr_break_overlap(radius_max, float(p["e_star"]), float(p["gamma"]))
-             for p in jkr if p["gamma"] > 0]
+    reach = [
+        -analytic.jkr_break_overlap(radius_max, float(p["e_star"]), float(p["gamma"])) for p in jkr if p["gamma"] > 0
+    ]
     # 5 % margin: float32 rounding of the break test must never find a pair outside the lists
     return 1.05 * max(reach, default=0.0)

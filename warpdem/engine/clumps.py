@@ -34,8 +34,9 @@ def _short(a: np.ndarray) -> str:
     return np.array2string(np.asarray(a), precision=6, threshold=12, separator=", ")
 
 
-def _as_spheres(offsets, radii, where: str, offsets_name: str = "sphere_offset",
-                radii_name: str = "sphere_radius") -> tuple[np.ndarray, np.ndarray]:
+def _as_spheres(
+    offsets, radii, where: str, offsets_name: str = "sphere_offset", radii_name: str = "sphere_radius"
+) -> tuple[np.ndarray, np.ndarray]:
     """Validated float64 copies of sphere centres (n, 3) [m] and radii (n,) [m], n >= 1."""
     try:
         c = np.array(offsets, dtype=np.float64)
@@ -48,19 +49,31 @@ def _as_spheres(offsets, radii, where: str, offsets_name: str = "sphere_offset",
     if c.ndim == 1 and c.shape == (3,):
         c = c[None, :]
     r = np.atleast_1d(r)
-    _check(c.ndim == 2 and c.shape[1] == 3 and c.shape[0] >= 1, where, offsets_name + ".shape", c.shape,
-           "(n, 3) with n >= 1")
+    _check(
+        c.ndim == 2 and c.shape[1] == 3 and c.shape[0] >= 1,
+        where,
+        offsets_name + ".shape",
+        c.shape,
+        "(n, 3) with n >= 1",
+    )
     _check(r.ndim == 1, where, radii_name + ".shape", r.shape, f"(n,) with n = {c.shape[0]} (one radius per sphere)")
-    _check(r.shape[0] == c.shape[0], where, radii_name + ".shape", r.shape,
-           f"({c.shape[0]},) to match {offsets_name}.shape = {c.shape}")
+    _check(
+        r.shape[0] == c.shape[0],
+        where,
+        radii_name + ".shape",
+        r.shape,
+        f"({c.shape[0]},) to match {offsets_name}.shape = {c.shape}",
+    )
     bad = np.flatnonzero(~np.isfinite(c).all(axis=1))
     if bad.size:
-        raise ValueError(f"{where}: {offsets_name}[{bad[0]}] = {_short(c[bad[0]])} is not allowed; "
-                         "expected finite coordinates in m")
+        raise ValueError(
+            f"{where}: {offsets_name}[{bad[0]}] = {_short(c[bad[0]])} is not allowed; expected finite coordinates in m"
+        )
     bad = np.flatnonzero(~(np.isfinite(r) & (r > 0)))
     if bad.size:
-        raise ValueError(f"{where}: {radii_name}[{bad[0]}] = {float(r[bad[0]])!r} is not allowed; "
-                         "expected a finite radius > 0 m")
+        raise ValueError(
+            f"{where}: {radii_name}[{bad[0]}] = {float(r[bad[0]])!r} is not allowed; expected a finite radius > 0 m"
+        )
     return c, r
 
 
@@ -73,6 +86,7 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # Mass properties
 # ---------------------------------------------------------------------------------------------
+
 
 def _inertia_from_second_moments(s: np.ndarray) -> np.ndarray:
     """Inertia per unit density I = tr(S) 1 - S from S_ij = int x_i x_j dV (both about one point)."""
@@ -104,8 +118,9 @@ def sum_of_spheres_properties(offsets, radii) -> tuple[float, np.ndarray, np.nda
     return volume, com, inertia
 
 
-def union_volume_properties(offsets, radii, resolution: int = 32, *,
-                            max_intervals: int = 2_000_000) -> tuple[float, np.ndarray, np.ndarray]:
+def union_volume_properties(
+    offsets, radii, resolution: int = 32, *, max_intervals: int = 2_000_000
+) -> tuple[float, np.ndarray, np.ndarray]:
     """Volume, centre of mass and inertia tensor of the UNION of spheres (overlaps counted once).
 
     Algorithm: a column grid. The (x, y) plane over the union's bounding box is cut into square-ish
@@ -135,10 +150,20 @@ def union_volume_properties(offsets, radii, resolution: int = 32, *,
     """
     where = "union_volume_properties"
     c, r = _as_spheres(offsets, radii, where, "offsets", "radii")
-    _check(isinstance(resolution, (int, np.integer)) and resolution >= 2, where, "resolution", resolution,
-           "an integer >= 2 (grid cells per smallest radius)")
-    _check(isinstance(max_intervals, (int, np.integer)) and max_intervals >= 1000, where, "max_intervals",
-           max_intervals, "an integer >= 1000")
+    _check(
+        isinstance(resolution, (int, np.integer)) and resolution >= 2,
+        where,
+        "resolution",
+        resolution,
+        "an integer >= 2 (grid cells per smallest radius)",
+    )
+    _check(
+        isinstance(max_intervals, (int, np.integer)) and max_intervals >= 1000,
+        where,
+        "max_intervals",
+        max_intervals,
+        "an integer >= 1000",
+    )
     if len(r) == 1:
         volume = _FOUR_THIRDS_PI * r[0] ** 3
         return float(volume), c[0].copy(), 0.4 * volume * r[0] ** 2 * np.eye(3)
@@ -210,9 +235,18 @@ def union_volume_properties(offsets, radii, resolution: int = 32, *,
         l0 = z1 - z0
         l1 = 0.5 * (z1 * z1 - z0 * z0)
         l2 = (z1**3 - z0**3) / 3.0
-        acc += [l0.sum(), (xs * l0).sum(), (ys * l0).sum(), l1.sum(),
-                ((xs * xs + hx * hx / 12.0) * l0).sum(), ((ys * ys + hy * hy / 12.0) * l0).sum(), l2.sum(),
-                (xs * ys * l0).sum(), (xs * l1).sum(), (ys * l1).sum()]
+        acc += [
+            l0.sum(),
+            (xs * l0).sum(),
+            (ys * l0).sum(),
+            l1.sum(),
+            ((xs * xs + hx * hx / 12.0) * l0).sum(),
+            ((ys * ys + hy * hy / 12.0) * l0).sum(),
+            l2.sum(),
+            (xs * ys * l0).sum(),
+            (xs * l1).sum(),
+            (ys * l1).sum(),
+        ]
     acc *= hx * hy
     volume = acc[0]
     g = acc[1:4] / volume
@@ -239,6 +273,7 @@ def _principal_frame(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # ---------------------------------------------------------------------------------------------
 # Auto-fill
 # ---------------------------------------------------------------------------------------------
+
 
 @dataclass
 class _Field:
@@ -274,27 +309,34 @@ def _validate_mesh(vertices, faces, where: str) -> tuple[np.ndarray, np.ndarray]
         v = np.array(vertices, dtype=np.float64)
     except (TypeError, ValueError):
         raise ValueError(f"{where}: vertices = {vertices!r} is not allowed; expected a (V, 3) array of numbers")
-    _check(v.ndim == 2 and v.shape[1] == 3 and v.shape[0] >= 4, where, "vertices.shape", v.shape,
-           "(V, 3) with V >= 4")
+    _check(v.ndim == 2 and v.shape[1] == 3 and v.shape[0] >= 4, where, "vertices.shape", v.shape, "(V, 3) with V >= 4")
     bad = np.flatnonzero(~np.isfinite(v).all(axis=1))
     if bad.size:
-        raise ValueError(f"{where}: vertices[{bad[0]}] = {_short(v[bad[0]])} is not allowed; expected finite "
-                         "coordinates in m")
+        raise ValueError(
+            f"{where}: vertices[{bad[0]}] = {_short(v[bad[0]])} is not allowed; expected finite coordinates in m"
+        )
     f_in = np.asarray(faces)
-    _check(f_in.ndim == 2 and f_in.shape[1] == 3 and f_in.shape[0] >= 4, where, "faces.shape", f_in.shape,
-           "(F, 3) with F >= 4 (triangles)")
+    _check(
+        f_in.ndim == 2 and f_in.shape[1] == 3 and f_in.shape[0] >= 4,
+        where,
+        "faces.shape",
+        f_in.shape,
+        "(F, 3) with F >= 4 (triangles)",
+    )
     _check(np.issubdtype(f_in.dtype, np.integer), where, "faces.dtype", f_in.dtype, "an integer dtype")
     f = f_in.astype(np.int64)
     bad = np.flatnonzero(((f < 0) | (f >= len(v))).any(axis=1))
     if bad.size:
-        raise ValueError(f"{where}: faces[{bad[0]}] = {f[bad[0]].tolist()} is not allowed; expected vertex "
-                         f"indices in [0, {len(v)})")
+        raise ValueError(
+            f"{where}: faces[{bad[0]}] = {f[bad[0]].tolist()} is not allowed; expected vertex indices in [0, {len(v)})"
+        )
     area2 = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
     scale = np.ptp(v, axis=0).max()
     bad = np.flatnonzero(area2 <= 1e-12 * scale * scale)
     if bad.size:
-        raise ValueError(f"{where}: faces[{bad[0]}] = {f[bad[0]].tolist()} is not allowed; the triangle is "
-                         "degenerate (zero area)")
+        raise ValueError(
+            f"{where}: faces[{bad[0]}] = {f[bad[0]].tolist()} is not allowed; the triangle is degenerate (zero area)"
+        )
     # Closed (watertight, 2-manifold) <=> every undirected edge is shared by exactly two faces.
     directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
     undirected = np.sort(directed, axis=1)
@@ -304,18 +346,21 @@ def _validate_mesh(vertices, faces, where: str) -> tuple[np.ndarray, np.ndarray]
         many = edges[counts > 2]
         parts = []
         if len(open_edges):
-            parts.append(f"{len(open_edges)} boundary edge(s) used by one face, e.g. vertices "
-                         f"{open_edges[0].tolist()}")
+            parts.append(f"{len(open_edges)} boundary edge(s) used by one face, e.g. vertices {open_edges[0].tolist()}")
         if len(many):
             parts.append(f"{len(many)} edge(s) used by more than two faces, e.g. vertices {many[0].tolist()}")
-        raise ValueError(f"{where}: faces do not form a closed surface ({'; '.join(parts)}); expected every "
-                         "edge shared by exactly two triangles")
+        raise ValueError(
+            f"{where}: faces do not form a closed surface ({'; '.join(parts)}); expected every "
+            "edge shared by exactly two triangles"
+        )
     # Consistent orientation <=> each directed edge occurs once (its twin runs the other way).
     _, dcounts = np.unique(directed, axis=0, return_counts=True)
     if np.any(dcounts != 1):
-        raise ValueError(f"{where}: faces are not consistently oriented ({int((dcounts > 1).sum())} directed "
-                         "edge(s) occur twice); expected neighbouring triangles to traverse a shared edge in "
-                         "opposite directions")
+        raise ValueError(
+            f"{where}: faces are not consistently oriented ({int((dcounts > 1).sum())} directed "
+            "edge(s) occur twice); expected neighbouring triangles to traverse a shared edge in "
+            "opposite directions"
+        )
     signed = np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6.0
     if signed < 0:
         f = f[:, [0, 2, 1]]  # inward-facing normals: flip so the enclosed volume is positive
@@ -338,8 +383,12 @@ def _winding_number(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
     c = tri[None, :, 2, :] - p[:, None, :]
     la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
     num = np.einsum("pfi,pfi->pf", a, np.cross(b, c))
-    den = (la * lb * lc + np.einsum("pfi,pfi->pf", a, b) * lc + np.einsum("pfi,pfi->pf", a, c) * lb
-           + np.einsum("pfi,pfi->pf", b, c) * la)
+    den = (
+        la * lb * lc
+        + np.einsum("pfi,pfi->pf", a, b) * lc
+        + np.einsum("pfi,pfi->pf", a, c) * lb
+        + np.einsum("pfi,pfi->pf", b, c) * la
+    )
     return np.arctan2(num, den).sum(axis=1) / (2.0 * math.pi)
 
 
@@ -401,7 +450,7 @@ def _mesh_field(v: np.ndarray, f: np.ndarray, cells: np.ndarray, chunk_pairs: in
     nearest = pts.copy()
     step = max(1, chunk_pairs // len(f))
     for s in range(0, len(pts), step):
-        q = pts[s:s + step]
+        q = pts[s : s + step]
         inside = np.abs(_winding_number(q, tri)) > 0.5
         if not inside.any():
             continue
@@ -428,12 +477,15 @@ def _autofill(fld: _Field, min_radius: float, smoothing: float, overlap, sphere_
     t = 0.5 * smoothing * h
     inside = depth > 0
     if not inside.any():
-        raise ValueError(f"{where}: cells = {tuple(shape)} leaves no cell centre inside the shape; expected "
-                         "a finer grid")
+        raise ValueError(
+            f"{where}: cells = {tuple(shape)} leaves no cell centre inside the shape; expected a finer grid"
+        )
     deepest = float(depth[inside].max())
     if deepest < min_radius:
-        raise ValueError(f"{where}: min_radius = {min_radius!r} is not allowed; expected at most the largest "
-                         f"inscribed radius found on the grid, {deepest:.6g} m")
+        raise ValueError(
+            f"{where}: min_radius = {min_radius!r} is not allowed; expected at most the largest "
+            f"inscribed radius found on the grid, {deepest:.6g} m"
+        )
 
     # Discrete medial axis: a candidate ball contained in a neighbouring cell's ball
     # (d_n >= d_p + |n - p|) can never cover anything the bigger one does not, so it is dropped.
@@ -445,7 +497,7 @@ def _autofill(fld: _Field, min_radius: float, smoothing: float, overlap, sphere_
                 if di == dj == dk == 0:
                     continue
                 gap = math.sqrt((di * fld.cell[0]) ** 2 + (dj * fld.cell[1]) ** 2 + (dk * fld.cell[2]) ** 2)
-                nb = padded[1 + di:1 + di + shape[0], 1 + dj:1 + dj + shape[1], 1 + dk:1 + dk + shape[2]]
+                nb = padded[1 + di : 1 + di + shape[0], 1 + dj : 1 + dj + shape[1], 1 + dk : 1 + dk + shape[2]]
                 dominated |= nb >= depth + gap - 1e-9 * h
     candidate = inside & (depth >= min_radius) & ~dominated
     centre = point[candidate]
@@ -507,8 +559,9 @@ def _autofill(fld: _Field, min_radius: float, smoothing: float, overlap, sphere_
     return centre[chosen], inscribed[chosen], reach, h
 
 
-def _match_volume(centre: np.ndarray, inscribed: np.ndarray, start: float, volume_target: float,
-                  resolution: int, h: float):
+def _match_volume(
+    centre: np.ndarray, inscribed: np.ndarray, start: float, volume_target: float, resolution: int, h: float
+):
     """Common radius offset delta [m] with union volume(inscribed + delta) = volume_target.
 
     Secant iteration on the integrated union volume, which is close to linear in delta (its slope is
@@ -540,6 +593,7 @@ def _match_volume(centre: np.ndarray, inscribed: np.ndarray, start: float, volum
 # ---------------------------------------------------------------------------------------------
 # Template
 # ---------------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True, eq=False)
 class ClumpTemplate:
@@ -586,35 +640,68 @@ class ClumpTemplate:
             inertia = np.array(self.inertia_unit, dtype=np.float64).reshape(-1)
         except (TypeError, ValueError):
             inertia = np.array([np.nan])
-        _check(inertia.shape == (3,) and np.all(np.isfinite(inertia)) and np.all(inertia > 0), where,
-               "inertia_unit", self.inertia_unit, "three finite principal moments > 0 m^5")
+        _check(
+            inertia.shape == (3,) and np.all(np.isfinite(inertia)) and np.all(inertia > 0),
+            where,
+            "inertia_unit",
+            self.inertia_unit,
+            "three finite principal moments > 0 m^5",
+        )
         _check(np.all(np.diff(inertia) >= 0), where, "inertia_unit", self.inertia_unit, "ascending moments")
         # Any rigid body: each principal moment is at most the sum of the other two.
-        _check(inertia[2] <= (inertia[0] + inertia[1]) * (1 + 1e-9), where, "inertia_unit", self.inertia_unit,
-               "moments obeying the triangle inequality I3 <= I1 + I2")
+        _check(
+            inertia[2] <= (inertia[0] + inertia[1]) * (1 + 1e-9),
+            where,
+            "inertia_unit",
+            self.inertia_unit,
+            "moments obeying the triangle inequality I3 <= I1 + I2",
+        )
         object.__setattr__(self, "inertia_unit", _readonly(inertia))
         if self.volume_target is not None:
-            _check(_finite(self.volume_target) and float(self.volume_target) > 0, where, "volume_target",
-                   self.volume_target, "a volume > 0 m^3 or None")
+            _check(
+                _finite(self.volume_target) and float(self.volume_target) > 0,
+                where,
+                "volume_target",
+                self.volume_target,
+                "a volume > 0 m^3 or None",
+            )
             object.__setattr__(self, "volume_target", float(self.volume_target))
         if self.volume_error is not None:
-            _check(_finite(self.volume_error) and float(self.volume_error) > -1, where, "volume_error",
-                   self.volume_error, "a relative error > -1 or None")
+            _check(
+                _finite(self.volume_error) and float(self.volume_error) > -1,
+                where,
+                "volume_error",
+                self.volume_error,
+                "a relative error > -1 or None",
+            )
             object.__setattr__(self, "volume_error", float(self.volume_error))
         rot = np.array(self.body_from_input, dtype=np.float64)
-        _check(rot.shape == (3, 3) and np.all(np.isfinite(rot)) and np.allclose(rot @ rot.T, np.eye(3), atol=1e-9)
-               and np.linalg.det(rot) > 0, where, "body_from_input", self.body_from_input,
-               "a proper rotation matrix, shape (3, 3)")
+        _check(
+            rot.shape == (3, 3)
+            and np.all(np.isfinite(rot))
+            and np.allclose(rot @ rot.T, np.eye(3), atol=1e-9)
+            and np.linalg.det(rot) > 0,
+            where,
+            "body_from_input",
+            self.body_from_input,
+            "a proper rotation matrix, shape (3, 3)",
+        )
         object.__setattr__(self, "body_from_input", _readonly(rot))
         com = np.array(self.input_com, dtype=np.float64).reshape(-1)
-        _check(com.shape == (3,) and np.all(np.isfinite(com)), where, "input_com", self.input_com,
-               "three finite coordinates in m")
+        _check(
+            com.shape == (3,) and np.all(np.isfinite(com)),
+            where,
+            "input_com",
+            self.input_com,
+            "three finite coordinates in m",
+        )
         object.__setattr__(self, "input_com", _readonly(com))
 
     # -- construction -------------------------------------------------------------------------
     @classmethod
-    def from_spheres(cls, name: str, offsets, radii, resolution: int = 32, *,
-                     volume_target: float | None = None) -> ClumpTemplate:
+    def from_spheres(
+        cls, name: str, offsets, radii, resolution: int = 32, *, volume_target: float | None = None
+    ) -> ClumpTemplate:
         """A template from spheres given in any frame.
 
         Integrates the union (:func:`union_volume_properties`, grid cell = smallest radius /
@@ -646,9 +733,18 @@ class ClumpTemplate:
         return cls(name, body, r, volume, moments, volume_target, error, rot, com)
 
     @classmethod
-    def from_box(cls, name: str, size, *, cells=30, min_radius: float | None = None, smoothing: float = 1.0,
-                 overlap: float | None = None, sphere_count: int | None = None,
-                 resolution: int = 8) -> ClumpTemplate:
+    def from_box(
+        cls,
+        name: str,
+        size,
+        *,
+        cells=30,
+        min_radius: float | None = None,
+        smoothing: float = 1.0,
+        overlap: float | None = None,
+        sphere_count: int | None = None,
+        resolution: int = 8,
+    ) -> ClumpTemplate:
         """Auto-fill a box of edge lengths ``size`` = (a, b, c) [m], centred at the origin, with spheres.
 
         Algorithm (after EDEM's "generate particle from template": spheres on a grid, then an
@@ -695,17 +791,33 @@ class ClumpTemplate:
             size_a = np.array(size, dtype=np.float64).reshape(-1)
         except (TypeError, ValueError):
             size_a = np.array([np.nan])
-        _check(size_a.shape == (3,) and np.all(np.isfinite(size_a)) and np.all(size_a > 0), where, "size", size,
-               "three finite edge lengths > 0 m")
+        _check(
+            size_a.shape == (3,) and np.all(np.isfinite(size_a)) and np.all(size_a > 0),
+            where,
+            "size",
+            size,
+            "three finite edge lengths > 0 m",
+        )
         cells_a = _cells(cells, where)
         fld = _box_field(size_a, cells_a)
-        return cls._fill(name, fld, float(np.prod(size_a)), min_radius, smoothing, overlap, sphere_count,
-                         resolution, where)
+        return cls._fill(
+            name, fld, float(np.prod(size_a)), min_radius, smoothing, overlap, sphere_count, resolution, where
+        )
 
     @classmethod
-    def from_mesh(cls, name: str, vertices, faces, *, cells=30, min_radius: float | None = None,
-                  smoothing: float = 1.0, overlap: float | None = None, sphere_count: int | None = None,
-                  resolution: int = 8) -> ClumpTemplate:
+    def from_mesh(
+        cls,
+        name: str,
+        vertices,
+        faces,
+        *,
+        cells=30,
+        min_radius: float | None = None,
+        smoothing: float = 1.0,
+        overlap: float | None = None,
+        sphere_count: int | None = None,
+        resolution: int = 8,
+    ) -> ClumpTemplate:
         """Auto-fill a closed triangle mesh with spheres (an STL or CAD particle template).
 
         The mesh must be closed: every edge shared by exactly two triangles, consistently oriented
@@ -724,28 +836,47 @@ class ClumpTemplate:
         v, f = _validate_mesh(vertices, faces, where)
         cells_a = _cells(cells, where)
         fld = _mesh_field(v, f, cells_a)
-        return cls._fill(name, fld, _mesh_volume(v, f), min_radius, smoothing, overlap, sphere_count,
-                         resolution, where)
+        return cls._fill(name, fld, _mesh_volume(v, f), min_radius, smoothing, overlap, sphere_count, resolution, where)
 
     @classmethod
     def _fill(cls, name, fld, volume_target, min_radius, smoothing, overlap, sphere_count, resolution, where):
         h = float(fld.cell.min())
         if min_radius is None:
             min_radius = h
-        _check(_finite(min_radius) and float(min_radius) > 0, where, "min_radius", min_radius,
-               "a radius > 0 m or None")
-        _check(_finite(smoothing) and float(smoothing) > 0, where, "smoothing", smoothing,
-               "a tolerance > 0 (in half grid cells)")
+        _check(_finite(min_radius) and float(min_radius) > 0, where, "min_radius", min_radius, "a radius > 0 m or None")
+        _check(
+            _finite(smoothing) and float(smoothing) > 0,
+            where,
+            "smoothing",
+            smoothing,
+            "a tolerance > 0 (in half grid cells)",
+        )
         if overlap is not None:
-            _check(_finite(overlap) and float(overlap) > -0.5 * float(min_radius) / h, where, "overlap", overlap,
-                   f"None or a reach in grid cells > -min_radius / (2 h) = {-0.5 * float(min_radius) / h:.6g}")
+            _check(
+                _finite(overlap) and float(overlap) > -0.5 * float(min_radius) / h,
+                where,
+                "overlap",
+                overlap,
+                f"None or a reach in grid cells > -min_radius / (2 h) = {-0.5 * float(min_radius) / h:.6g}",
+            )
         if sphere_count is not None:
-            _check(isinstance(sphere_count, (int, np.integer)) and sphere_count >= 1, where, "sphere_count",
-                   sphere_count, "None or an integer >= 1")
-        _check(isinstance(resolution, (int, np.integer)) and resolution >= 2, where, "resolution", resolution,
-               "an integer >= 2 (grid cells per smallest radius)")
-        centre, inscribed, reach, h = _autofill(fld, float(min_radius), float(smoothing),
-                                                None if overlap is None else float(overlap), sphere_count, where)
+            _check(
+                isinstance(sphere_count, (int, np.integer)) and sphere_count >= 1,
+                where,
+                "sphere_count",
+                sphere_count,
+                "None or an integer >= 1",
+            )
+        _check(
+            isinstance(resolution, (int, np.integer)) and resolution >= 2,
+            where,
+            "resolution",
+            resolution,
+            "an integer >= 2 (grid cells per smallest radius)",
+        )
+        centre, inscribed, reach, h = _autofill(
+            fld, float(min_radius), float(smoothing), None if overlap is None else float(overlap), sphere_count, where
+        )
         if overlap is None:
             reach, props = _match_volume(centre, inscribed, reach, volume_target, resolution, h)
         else:
@@ -776,38 +907,66 @@ class ClumpTemplate:
     @property
     def extents(self) -> np.ndarray:
         """Edge lengths of the union's bounding box along the body axes [m], shape (3,)."""
-        return (self.sphere_offset + self.sphere_radius[:, None]).max(axis=0) - \
-            (self.sphere_offset - self.sphere_radius[:, None]).min(axis=0)
+        return (self.sphere_offset + self.sphere_radius[:, None]).max(axis=0) - (
+            self.sphere_offset - self.sphere_radius[:, None]
+        ).min(axis=0)
 
     def mass(self, density: float) -> float:
         """Mass [kg] of the union at particle density ``density`` [kg/m^3]."""
-        _check(_finite(density) and float(density) > 0, f"ClumpTemplate {self.name!r}", "density", density,
-               "a density > 0 kg/m^3")
+        _check(
+            _finite(density) and float(density) > 0,
+            f"ClumpTemplate {self.name!r}",
+            "density",
+            density,
+            "a density > 0 kg/m^3",
+        )
         return float(density) * self.volume
 
     def inertia(self, density: float) -> np.ndarray:
         """Principal moments of inertia [kg m^2], shape (3,), at density ``density`` [kg/m^3]."""
-        _check(_finite(density) and float(density) > 0, f"ClumpTemplate {self.name!r}", "density", density,
-               "a density > 0 kg/m^3")
+        _check(
+            _finite(density) and float(density) > 0,
+            f"ClumpTemplate {self.name!r}",
+            "density",
+            density,
+            "a density > 0 kg/m^3",
+        )
         return float(density) * np.array(self.inertia_unit)
 
     def scaled(self, factor: float, name: str | None = None) -> ClumpTemplate:
         """The same shape scaled by ``factor`` > 0: lengths x s, volumes x s^3, inertia per density x s^5."""
-        _check(_finite(factor) and float(factor) > 0, f"ClumpTemplate {self.name!r}", "factor", factor,
-               "a scale factor > 0")
+        _check(
+            _finite(factor) and float(factor) > 0,
+            f"ClumpTemplate {self.name!r}",
+            "factor",
+            factor,
+            "a scale factor > 0",
+        )
         s = float(factor)
-        return ClumpTemplate(name or self.name, self.sphere_offset * s, self.sphere_radius * s, self.volume * s**3,
-                             self.inertia_unit * s**5,
-                             None if self.volume_target is None else self.volume_target * s**3,
-                             self.volume_error, self.body_from_input, self.input_com * s)
+        return ClumpTemplate(
+            name or self.name,
+            self.sphere_offset * s,
+            self.sphere_radius * s,
+            self.volume * s**3,
+            self.inertia_unit * s**5,
+            None if self.volume_target is None else self.volume_target * s**3,
+            self.volume_error,
+            self.body_from_input,
+            self.input_com * s,
+        )
 
 
 def _cells(cells, where: str) -> np.ndarray:
     a = np.asarray(cells)
     if a.ndim == 0:
         a = np.full(3, a)
-    _check(a.shape == (3,) and np.issubdtype(a.dtype, np.integer) and np.all(a >= 4), where, "cells", cells,
-           "an integer >= 4 or three of them (grid cells per axis)")
+    _check(
+        a.shape == (3,) and np.issubdtype(a.dtype, np.integer) and np.all(a >= 4),
+        where,
+        "cells",
+        cells,
+        "an integer >= 4 or three of them (grid cells per axis)",
+    )
     return a.astype(np.int64)
 
 
@@ -840,13 +999,30 @@ def pellet_template() -> ClumpTemplate:
 
 # A deterministic irregular convex "grain": 20 points around an ellipsoid of semi-axes 1 : 0.78 : 0.6
 # with radial scatter of +-15 %, fixed here (not drawn at import) so that the template never changes.
-_PHOSPHATE_POINTS = np.array([
-    [1.000, 0.080, -0.050], [-0.930, -0.120, 0.060], [0.080, 0.800, 0.100], [-0.100, -0.700, -0.080],
-    [0.050, 0.060, 0.620], [-0.020, -0.080, -0.560], [0.620, 0.520, 0.240], [-0.560, 0.480, -0.260],
-    [0.540, -0.470, 0.300], [-0.640, -0.430, -0.220], [0.600, 0.380, -0.330], [-0.480, 0.560, 0.330],
-    [0.520, -0.560, -0.300], [-0.600, -0.380, 0.360], [0.230, 0.150, 0.560], [-0.310, 0.140, 0.520],
-    [0.280, -0.200, -0.540], [-0.260, 0.240, -0.500], [0.880, -0.240, 0.120], [-0.780, 0.260, 0.100],
-])
+_PHOSPHATE_POINTS = np.array(
+    [
+        [1.000, 0.080, -0.050],
+        [-0.930, -0.120, 0.060],
+        [0.080, 0.800, 0.100],
+        [-0.100, -0.700, -0.080],
+        [0.050, 0.060, 0.620],
+        [-0.020, -0.080, -0.560],
+        [0.620, 0.520, 0.240],
+        [-0.560, 0.480, -0.260],
+        [0.540, -0.470, 0.300],
+        [-0.640, -0.430, -0.220],
+        [0.600, 0.380, -0.330],
+        [-0.480, 0.560, 0.330],
+        [0.520, -0.560, -0.300],
+        [-0.600, -0.380, 0.360],
+        [0.230, 0.150, 0.560],
+        [-0.310, 0.140, 0.520],
+        [0.280, -0.200, -0.540],
+        [-0.260, 0.240, -0.500],
+        [0.880, -0.240, 0.120],
+        [-0.780, 0.260, 0.100],
+    ]
+)
 
 
 def _convex_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

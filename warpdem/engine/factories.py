@@ -54,8 +54,13 @@ def _vec3(where: str, name: str, value) -> tuple[float, float, float]:
         a = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         a = None
-    _check(a is not None and a.shape == (3,) and bool(np.all(np.isfinite(a))), where, name, value,
-           "3 finite numbers, shape (3,)")
+    _check(
+        a is not None and a.shape == (3,) and bool(np.all(np.isfinite(a))),
+        where,
+        name,
+        value,
+        "3 finite numbers, shape (3,)",
+    )
     return (float(a[0]), float(a[1]), float(a[2]))
 
 
@@ -76,8 +81,7 @@ def _points(points) -> np.ndarray:
 
 def _margins(where: str, margin, n: int) -> np.ndarray:
     m = np.asarray(margin, dtype=float)
-    _check(bool(np.all(np.isfinite(m))) and bool(np.all(m >= 0.0)), where, "margin", margin,
-           "finite values >= 0 [m]")
+    _check(bool(np.all(np.isfinite(m))) and bool(np.all(m >= 0.0)), where, "margin", margin, "finite values >= 0 [m]")
     return np.broadcast_to(m, (n,))
 
 
@@ -175,14 +179,20 @@ class TruncatedNormal(_Moments):
         low = _positive(where, "low", self.low, "a radius > 0 m (radii must be positive)")
         _check(_finite(self.high) and self.high > low, where, "high", self.high, f"a radius > low = {low!r} m")
         if self.std == 0.0:
-            _check(low <= self.mean <= self.high, where, "mean", self.mean,
-                   f"a radius in [low, high] = [{low!r}, {self.high!r}] m when std = 0")
+            _check(
+                low <= self.mean <= self.high,
+                where,
+                "mean",
+                self.mean,
+                f"a radius in [low, high] = [{low!r}, {self.high!r}] m when std = 0",
+            )
         for name in ("mean", "std", "low", "high"):
             object.__setattr__(self, name, float(getattr(self, name)))
 
     def _dist(self):
-        return stats.truncnorm((self.low - self.mean) / self.std, (self.high - self.mean) / self.std,
-                               loc=self.mean, scale=self.std)
+        return stats.truncnorm(
+            (self.low - self.mean) / self.std, (self.high - self.mean) / self.std, loc=self.mean, scale=self.std
+        )
 
     def sample(self, rng, count: int) -> np.ndarray:
         """Radii [m], shape (count,)."""
@@ -217,8 +227,13 @@ class LogNormal(_Moments):
     def __post_init__(self):
         where = "LogNormal"
         object.__setattr__(self, "median", _positive(where, "median", self.median, "a radius > 0 m"))
-        _check(_finite(self.sigma_log) and self.sigma_log >= 0.0, where, "sigma_log", self.sigma_log,
-               "a standard deviation of ln r >= 0")
+        _check(
+            _finite(self.sigma_log) and self.sigma_log >= 0.0,
+            where,
+            "sigma_log",
+            self.sigma_log,
+            "a standard deviation of ln r >= 0",
+        )
         object.__setattr__(self, "sigma_log", float(self.sigma_log))
         if self.low is not None:
             object.__setattr__(self, "low", _positive(where, "low", self.low, "a radius > 0 m or None"))
@@ -228,11 +243,21 @@ class LogNormal(_Moments):
             object.__setattr__(self, "high", float(self.high))
         lo, hi = self.radius_range()
         if self.sigma_log == 0.0:
-            _check(lo <= self.median <= hi, where, "median", self.median,
-                   f"a radius in [low, high] = [{self.low!r}, {self.high!r}] m when sigma_log = 0")
+            _check(
+                lo <= self.median <= hi,
+                where,
+                "median",
+                self.median,
+                f"a radius in [low, high] = [{self.low!r}, {self.high!r}] m when sigma_log = 0",
+            )
         else:
-            _check(float(_norm_interval(*self._z_bounds())) > 0.0, where, "sigma_log", self.sigma_log,
-                   f"a spread that leaves [low, high] = [{self.low!r}, {self.high!r}] m a non-zero probability")
+            _check(
+                float(_norm_interval(*self._z_bounds())) > 0.0,
+                where,
+                "sigma_log",
+                self.sigma_log,
+                f"a spread that leaves [low, high] = [{self.low!r}, {self.high!r}] m a non-zero probability",
+            )
 
     def _z_bounds(self) -> tuple[float, float]:
         """Truncation bounds in standard-normal units of ln r (-inf, inf when not truncated); sigma_log > 0."""
@@ -285,8 +310,7 @@ def _spread(value, where: str) -> SizeSpread:
         key = value.strip().upper().replace("-", "_").replace(" ", "_")
         if key in SizeSpread.__members__:
             return SizeSpread[key]
-    raise ValueError(f"{where}: spread = {value!r} is not allowed; expected one of "
-                     f"{', '.join(SizeSpread.__members__)}")
+    raise ValueError(f"{where}: spread = {value!r} is not allowed; expected one of {', '.join(SizeSpread.__members__)}")
 
 
 @dataclass(frozen=True)
@@ -314,29 +338,55 @@ class SieveTable(_Moments):
             d = np.asarray(self.sizes, dtype=float).ravel()
         except (TypeError, ValueError):
             d = np.array([np.nan])
-        _check(d.size >= 2 and bool(np.all(np.isfinite(d))), where, "sizes", self.sizes,
-               "at least 2 finite class edges (diameters [m])")
+        _check(
+            d.size >= 2 and bool(np.all(np.isfinite(d))),
+            where,
+            "sizes",
+            self.sizes,
+            "at least 2 finite class edges (diameters [m])",
+        )
         bad = np.flatnonzero(d <= 0.0)
-        _check(bad.size == 0, where, f"sizes[{bad[0] if bad.size else 0}]",
-               float(d[bad[0]]) if bad.size else None, "a diameter > 0 m (give the pan class a positive lower edge)")
+        _check(
+            bad.size == 0,
+            where,
+            f"sizes[{bad[0] if bad.size else 0}]",
+            float(d[bad[0]]) if bad.size else None,
+            "a diameter > 0 m (give the pan class a positive lower edge)",
+        )
         steps = np.flatnonzero(np.diff(d) <= 0.0)
-        _check(steps.size == 0, where, f"sizes[{steps[0] + 1 if steps.size else 0}]",
-               float(d[steps[0] + 1]) if steps.size else None,
-               f"strictly increasing edges (> {float(d[steps[0]]) if steps.size else 0.0!r} m)")
+        _check(
+            steps.size == 0,
+            where,
+            f"sizes[{steps[0] + 1 if steps.size else 0}]",
+            float(d[steps[0] + 1]) if steps.size else None,
+            f"strictly increasing edges (> {float(d[steps[0]]) if steps.size else 0.0!r} m)",
+        )
         try:
             f = np.asarray(self.mass_fractions, dtype=float).ravel()
         except (TypeError, ValueError):
             f = np.array([np.nan])
-        _check(f.size == d.size - 1, where, "mass_fractions", self.mass_fractions,
-               f"{d.size - 1} values, one per class between the {d.size} edges")
+        _check(
+            f.size == d.size - 1,
+            where,
+            "mass_fractions",
+            self.mass_fractions,
+            f"{d.size - 1} values, one per class between the {d.size} edges",
+        )
         bad = np.flatnonzero(~np.isfinite(f) | (f < 0.0))
-        _check(bad.size == 0, where, f"mass_fractions[{bad[0] if bad.size else 0}]",
-               float(f[bad[0]]) if bad.size else None, "a mass fraction >= 0")
+        _check(
+            bad.size == 0,
+            where,
+            f"mass_fractions[{bad[0] if bad.size else 0}]",
+            float(f[bad[0]]) if bad.size else None,
+            "a mass fraction >= 0",
+        )
         total = float(f.sum())
         if not abs(total - 1.0) <= _FRACTION_TOL:
-            raise ValueError(f"{where}: mass_fractions = {[float(x) for x in f]} (sum {total!r}) is not allowed; "
-                             f"expected fractions summing to 1 within 1e-6 (percentages: divide by 100; a table "
-                             f"with sieving loss: SieveTable.normalised(...) spreads the loss over the classes)")
+            raise ValueError(
+                f"{where}: mass_fractions = {[float(x) for x in f]} (sum {total!r}) is not allowed; "
+                f"expected fractions summing to 1 within 1e-6 (percentages: divide by 100; a table "
+                f"with sieving loss: SieveTable.normalised(...) spreads the loss over the classes)"
+            )
         object.__setattr__(self, "sizes", tuple(float(x) for x in d))
         object.__setattr__(self, "mass_fractions", tuple(float(x) for x in f / total))
         object.__setattr__(self, "spread", _spread(self.spread, where))
@@ -350,13 +400,25 @@ class SieveTable(_Moments):
         """
         f = np.asarray(mass_fractions, dtype=float)
         total = float(f.sum()) if f.size else 0.0
-        _check(np.isfinite(total) and total > 0.0, "SieveTable.normalised", "mass_fractions", mass_fractions,
-               "non-negative values with a positive sum")
+        _check(
+            np.isfinite(total) and total > 0.0,
+            "SieveTable.normalised",
+            "mass_fractions",
+            mass_fractions,
+            "non-negative values with a positive sum",
+        )
         return cls(sizes, tuple(f / total), spread)
 
     @classmethod
-    def from_csv(cls, path, *, top_size: float | None = None, pan_size: float | None = None,
-                 column: str | None = None, spread=SizeSpread.LOG_UNIFORM) -> SieveTable:
+    def from_csv(
+        cls,
+        path,
+        *,
+        top_size: float | None = None,
+        pan_size: float | None = None,
+        column: str | None = None,
+        spread=SizeSpread.LOG_UNIFORM,
+    ) -> SieveTable:
         """Read a sieve analysis (one row per sieve, as printed in a lab sheet) into a table.
 
         Rows: a size column (``sieve_um``, ``sieve_mm``, ``size_m``, ...; the name's suffix gives the unit)
@@ -391,18 +453,29 @@ class SieveTable(_Moments):
         low = {n: n.strip().lower() for n in names}
         size_col = next((n for n in names if low[n].startswith(("sieve", "size", "aperture", "mesh_"))), None)
         if size_col is None:
-            raise ValueError(f"{where}: columns {names} have no sieve size column; expected a name starting "
-                             f"with 'sieve', 'size' or 'aperture' and ending in _um, _mm or _m")
-        scale = next((s for suffix, s in (("_um", 1e-6), ("_µm", 1e-6), ("_micron", 1e-6), ("_mm", 1e-3),
-                                          ("_m", 1.0)) if low[size_col].endswith(suffix)), None)
+            raise ValueError(
+                f"{where}: columns {names} have no sieve size column; expected a name starting "
+                f"with 'sieve', 'size' or 'aperture' and ending in _um, _mm or _m"
+            )
+        scale = next(
+            (
+                s
+                for suffix, s in (("_um", 1e-6), ("_µm", 1e-6), ("_micron", 1e-6), ("_mm", 1e-3), ("_m", 1.0))
+                if low[size_col].endswith(suffix)
+            ),
+            None,
+        )
         if scale is None:
             raise ValueError(f"{where}: size column {size_col!r} has no unit suffix; expected one of _um, _mm, _m")
 
         def is_cum(n):
             return "cum" in low[n]
 
-        candidates = [n for n in names if "retained" in low[n] and not is_cum(n)
-                      and any(t in low[n] for t in ("pct", "percent", "%", "frac"))]
+        candidates = [
+            n
+            for n in names
+            if "retained" in low[n] and not is_cum(n) and any(t in low[n] for t in ("pct", "percent", "%", "frac"))
+        ]
         candidates += [n for n in names if "retained" in low[n] and not is_cum(n) and n not in candidates]
         candidates += [n for n in names if "retained" in low[n] and is_cum(n)]
         candidates += [n for n in names if any(t in low[n] for t in ("passing", "finer", "undersize"))]
@@ -433,18 +506,30 @@ class SieveTable(_Moments):
                 has_pan = True
         sieves = aperture[:-1] if has_pan else aperture
         if sieves.size < 2:
-            raise ValueError(f"{where}: {sieves.size} sieve(s) with an aperture > 0; expected at least 2 to "
-                             f"extrapolate the open classes")
+            raise ValueError(
+                f"{where}: {sieves.size} sieve(s) with an aperture > 0; expected at least 2 to "
+                f"extrapolate the open classes"
+            )
         if top_size is None:
             top_size = sieves[0] ** 2 / sieves[1]
-        _check(_finite(top_size) and top_size > sieves[0], where, "top_size", top_size,
-               f"a diameter > the coarsest sieve {sieves[0]!r} m")
+        _check(
+            _finite(top_size) and top_size > sieves[0],
+            where,
+            "top_size",
+            top_size,
+            f"a diameter > the coarsest sieve {sieves[0]!r} m",
+        )
         edges = [float(top_size), *sieves]
         if has_pan:
             if pan_size is None:
                 pan_size = sieves[-1] ** 2 / sieves[-2]
-            _check(_finite(pan_size) and 0.0 < pan_size < sieves[-1], where, "pan_size", pan_size,
-                   f"a diameter in (0, {sieves[-1]!r}) m, below the finest sieve")
+            _check(
+                _finite(pan_size) and 0.0 < pan_size < sieves[-1],
+                where,
+                "pan_size",
+                pan_size,
+                f"a diameter in (0, {sieves[-1]!r}) m, below the finest sieve",
+            )
             edges.append(float(pan_size))
         edges, retained = np.array(edges[::-1]), np.asarray(retained[::-1], dtype=float)
         # Empty classes at either end (e.g. 100 % passing the coarsest sieve) carry no mass: drop them so
@@ -453,7 +538,7 @@ class SieveTable(_Moments):
         if used.size == 0:
             raise ValueError(f"{where}: column {col!r} gives no retained mass in any class")
         keep = slice(used[0], used[-1] + 1)
-        return cls.normalised(edges[used[0]:used[-1] + 2], retained[keep], spread)
+        return cls.normalised(edges[used[0] : used[-1] + 2], retained[keep], spread)
 
     # -- derived quantities
 
@@ -571,8 +656,13 @@ class Box:
 
     def inset(self, margin: float) -> Box:
         """The box shrunk by ``margin`` [m] on every side."""
-        _check(_finite(margin) and 0.0 <= margin < self.inradius, "Box.inset", "margin", margin,
-               f"a margin in [0, {self.inradius!r}) m (half the smallest side)")
+        _check(
+            _finite(margin) and 0.0 <= margin < self.inradius,
+            "Box.inset",
+            "margin",
+            margin,
+            f"a margin in [0, {self.inradius!r}) m (half the smallest side)",
+        )
         return Box(np.add(self.lo, margin), np.subtract(self.hi, margin))
 
     def sample_uniform(self, rng, n: int) -> np.ndarray:
@@ -702,8 +792,12 @@ class _Frustum:
         phi = 2.0 * math.pi * u[2]
         a = np.asarray(self.axis)
         e1, e2 = _perpendicular_basis(a)
-        return (np.asarray(self.base_center) + h[:, None] * a
-                + (rho * np.cos(phi))[:, None] * e1 + (rho * np.sin(phi))[:, None] * e2)
+        return (
+            np.asarray(self.base_center)
+            + h[:, None] * a
+            + (rho * np.cos(phi))[:, None] * e1
+            + (rho * np.sin(phi))[:, None] * e2
+        )
 
 
 @dataclass(frozen=True)
@@ -734,10 +828,19 @@ class Cylinder(_Frustum):
 
     def inset(self, margin: float) -> Cylinder:
         """The cylinder shrunk by ``margin`` [m] on its side and both ends."""
-        _check(_finite(margin) and 0.0 <= margin < self.inradius, "Cylinder.inset", "margin", margin,
-               f"a margin in [0, {self.inradius!r}) m (min(radius, height / 2))")
-        return Cylinder(np.asarray(self.base_center) + margin * np.asarray(self.axis), self.axis,
-                        self.radius - margin, self.height - 2.0 * margin)
+        _check(
+            _finite(margin) and 0.0 <= margin < self.inradius,
+            "Cylinder.inset",
+            "margin",
+            margin,
+            f"a margin in [0, {self.inradius!r}) m (min(radius, height / 2))",
+        )
+        return Cylinder(
+            np.asarray(self.base_center) + margin * np.asarray(self.axis),
+            self.axis,
+            self.radius - margin,
+            self.height - 2.0 * margin,
+        )
 
 
 @dataclass(frozen=True)
@@ -766,8 +869,13 @@ class Cone(_Frustum):
             value = getattr(self, name)
             _check(_finite(value) and value >= 0.0, where, name, value, "a radius >= 0 m")
             object.__setattr__(self, name, float(value))
-        _check(self.base_radius > 0.0 or self.top_radius > 0.0, where, "top_radius", self.top_radius,
-               "a radius > 0 m when base_radius is 0")
+        _check(
+            self.base_radius > 0.0 or self.top_radius > 0.0,
+            where,
+            "top_radius",
+            self.top_radius,
+            "a radius > 0 m when base_radius is 0",
+        )
         object.__setattr__(self, "height", _positive(where, "height", self.height, "a height > 0 m"))
 
     def _radii_height(self):
@@ -775,8 +883,13 @@ class Cone(_Frustum):
 
     def inset(self, margin: float) -> Cone:
         """The frustum of centres of spheres of radius ``margin`` [m] that fit (cut at an apex if needed)."""
-        _check(_finite(margin) and 0.0 <= margin < self.inradius, "Cone.inset", "margin", margin,
-               f"a margin in [0, {self.inradius!r}) m (the largest sphere that fits)")
+        _check(
+            _finite(margin) and 0.0 <= margin < self.inradius,
+            "Cone.inset",
+            "margin",
+            margin,
+            f"a margin in [0, {self.inradius!r}) m (the largest sphere that fits)",
+        )
         h0, h1, r0, r1, _ = (float(v) for v in self._inset_params(float(margin)))
         return Cone(np.asarray(self.base_center) + h0 * np.asarray(self.axis), self.axis, r0, r1, h1 - h0)
 
@@ -888,13 +1001,25 @@ def _check_existing(where: str, existing_x, existing_r) -> tuple[np.ndarray, np.
     r = np.asarray(existing_r, dtype=float).ravel()
     _check(len(x) == len(r), where, "existing_r", f"shape {r.shape}", f"shape ({len(x)},) to match existing_x")
     _check(bool(np.all(np.isfinite(x))), where, "existing_x", "non-finite entries", "finite positions [m]")
-    _check(bool(np.all(np.isfinite(r) & (r >= 0.0))), where, "existing_r",
-           r[~(np.isfinite(r) & (r >= 0.0))][:3] if len(r) else r, "finite radii >= 0 m")
+    _check(
+        bool(np.all(np.isfinite(r) & (r >= 0.0))),
+        where,
+        "existing_r",
+        r[~(np.isfinite(r) & (r >= 0.0))][:3] if len(r) else r,
+        "finite radii >= 0 m",
+    )
     return x, r
 
 
-def _rsa(region, radius: np.ndarray, order: np.ndarray, rng: np.random.Generator, existing_x: np.ndarray,
-         existing_r: np.ndarray, max_attempts: int):
+def _rsa(
+    region,
+    radius: np.ndarray,
+    order: np.ndarray,
+    rng: np.random.Generator,
+    existing_x: np.ndarray,
+    existing_r: np.ndarray,
+    max_attempts: int,
+):
     """Random sequential addition of spheres ``radius`` (n,) into ``region``, tried in ``order``.
 
     Vectorised in rounds: the next B pending spheres each get T_i uniform proposals inside
@@ -977,8 +1102,13 @@ def _sizes_for(where: str, sizes, rng: np.random.Generator, count, mass, density
     if count is not None:
         return np.asarray(sizes.sample(rng, _count(where, "count", count)), dtype=float)
     _check(_finite(mass) and mass > 0.0, where, "mass", mass, "a mass > 0 kg")
-    _check(density is not None and _finite(density) and density > 0.0, where, "density", density,
-           "a density > 0 kg/m^3 (needed for a mass target)")
+    _check(
+        density is not None and _finite(density) and density > 0.0,
+        where,
+        "density",
+        density,
+        "a density > 0 kg/m^3 (needed for a mass target)",
+    )
     mean_mass = sizes.mean_mass(density)
     chunk = int(min(max(1.1 * mass / mean_mass + 16, 16), 1e8)) if mean_mass > 0 else 1024
     drawn, total = [], 0.0
@@ -997,15 +1127,22 @@ def _sizes_for(where: str, sizes, rng: np.random.Generator, count, mass, density
 
 def _check_region_sizes(where: str, region, sizes) -> None:
     _check(isinstance(region, (Box, Cylinder, Cone)), where, "region", region, "a Box, Cylinder or Cone")
-    _check(isinstance(sizes, (FixedSize, TruncatedNormal, LogNormal, SieveTable)), where, "sizes", sizes,
-           "a FixedSize, TruncatedNormal, LogNormal or SieveTable")
+    _check(
+        isinstance(sizes, (FixedSize, TruncatedNormal, LogNormal, SieveTable)),
+        where,
+        "sizes",
+        sizes,
+        "a FixedSize, TruncatedNormal, LogNormal or SieveTable",
+    )
 
 
 def _check_fits(where: str, region, bound: np.ndarray) -> None:
     if len(bound) and not bool(region._fits(float(bound.max()))):
-        raise ValueError(f"{where}: sizes: a particle of bounding radius {float(bound.max())!r} m does not fit in "
-                         f"{region}; expected at most {region.inradius!r} m (the largest sphere that fits): use "
-                         f"smaller sizes or a larger region")
+        raise ValueError(
+            f"{where}: sizes: a particle of bounding radius {float(bound.max())!r} m does not fit in "
+            f"{region}; expected at most {region.inradius!r} m (the largest sphere that fits): use "
+            f"smaller sizes or a larger region"
+        )
 
 
 def _stream(seed: int, purpose: int, *more: int) -> np.random.Generator:
@@ -1016,9 +1153,20 @@ def _stream(seed: int, purpose: int, *more: int) -> np.random.Generator:
 _SIZES, _PLACE, _ORIENT, _WORLD = 0, 1, 2, 3
 
 
-def fill_region(region, sizes, *, count: int | None = None, mass: float | None = None,
-                density: float | None = None, rng_seed: int = 0, existing_x=None, existing_r=None,
-                max_attempts: int = 10000, bounding_ratio: float = 1.0, orientations: bool = False):
+def fill_region(
+    region,
+    sizes,
+    *,
+    count: int | None = None,
+    mass: float | None = None,
+    density: float | None = None,
+    rng_seed: int = 0,
+    existing_x=None,
+    existing_r=None,
+    max_attempts: int = 10000,
+    bounding_ratio: float = 1.0,
+    orientations: bool = False,
+):
     """Fill ``region`` with non-overlapping particles by random sequential addition (static factory).
 
     Sizes are drawn from ``sizes`` first: exactly ``count``, or for ``mass`` [kg] the fewest whose mass
@@ -1052,8 +1200,13 @@ def fill_region(region, sizes, *, count: int | None = None, mass: float | None =
     where = "fill_region"
     _check_region_sizes(where, region, sizes)
     _check(isinstance(rng_seed, (int, np.integer)) and rng_seed >= 0, where, "rng_seed", rng_seed, "an integer >= 0")
-    _check(isinstance(max_attempts, (int, np.integer)) and max_attempts >= 1, where, "max_attempts", max_attempts,
-           "an integer >= 1")
+    _check(
+        isinstance(max_attempts, (int, np.integer)) and max_attempts >= 1,
+        where,
+        "max_attempts",
+        max_attempts,
+        "an integer >= 1",
+    )
     _check(_finite(bounding_ratio) and bounding_ratio >= 1.0, where, "bounding_ratio", bounding_ratio, "a ratio >= 1")
     ex_x, ex_r = _check_existing(where, existing_x, existing_r)
     r = _sizes_for(where, sizes, _stream(rng_seed, _SIZES), count, mass, density)
@@ -1069,7 +1222,10 @@ def fill_region(region, sizes, *, count: int | None = None, mass: float | None =
             f"{where}: only {k} of {n} particles fitted in {region} (volume fraction {phi:.3f}; all {n} would "
             f"need {phi_all:.3f}) after {max_attempts} attempts for one particle. Random sequential addition "
             f"jams near a volume fraction of {RSA_SATURATION} for equal spheres (less near walls): use a larger "
-            f"region, fewer or smaller particles, or fill in stages and let them settle.", k, n)
+            f"region, fewer or smaller particles, or fill in stages and let them settle.",
+            k,
+            n,
+        )
     if orientations:
         return x, r, random_quaternions(_stream(rng_seed, _ORIENT), len(r))
     return x, r
@@ -1133,26 +1289,44 @@ class DynamicFactory:
     def __post_init__(self):
         where = "DynamicFactory"
         _check_region_sizes(where, self.region, self.sizes)
-        _check((self.rate is None) != (self.mass_rate is None), where, "rate/mass_rate",
-               (self.rate, self.mass_rate), "exactly one of rate [particles/s] or mass_rate [kg/s]")
+        _check(
+            (self.rate is None) != (self.mass_rate is None),
+            where,
+            "rate/mass_rate",
+            (self.rate, self.mass_rate),
+            "exactly one of rate [particles/s] or mass_rate [kg/s]",
+        )
         if self.rate is not None:
             object.__setattr__(self, "rate", _positive(where, "rate", self.rate, "a rate > 0 particles/s"))
         if self.mass_rate is not None:
             object.__setattr__(self, "mass_rate", _positive(where, "mass_rate", self.mass_rate, "a rate > 0 kg/s"))
         if self.mass_rate is not None or self.mass is not None:
-            object.__setattr__(self, "density", _positive(where, "density", self.density,
-                                                          "a density > 0 kg/m^3 (needed for mass or mass_rate)"))
+            object.__setattr__(
+                self,
+                "density",
+                _positive(where, "density", self.density, "a density > 0 kg/m^3 (needed for mass or mass_rate)"),
+            )
         elif self.density is not None:
             object.__setattr__(self, "density", _positive(where, "density", self.density, "a density > 0 kg/m^3"))
-        _check(_finite(self.start_time) and self.start_time >= 0.0, where, "start_time", self.start_time,
-               "a time >= 0 s")
-        _check(isinstance(self.seed, (int, np.integer)) and self.seed >= 0, where, "seed", self.seed,
-               "an integer >= 0")
+        _check(
+            _finite(self.start_time) and self.start_time >= 0.0, where, "start_time", self.start_time, "a time >= 0 s"
+        )
+        _check(isinstance(self.seed, (int, np.integer)) and self.seed >= 0, where, "seed", self.seed, "an integer >= 0")
         object.__setattr__(self, "initial_velocity", _vec3(where, "initial_velocity", self.initial_velocity))
-        _check(_finite(self.bounding_ratio) and self.bounding_ratio >= 1.0, where, "bounding_ratio",
-               self.bounding_ratio, "a ratio >= 1")
-        _check(isinstance(self.max_attempts, (int, np.integer)) and self.max_attempts >= 1, where, "max_attempts",
-               self.max_attempts, "an integer >= 1")
+        _check(
+            _finite(self.bounding_ratio) and self.bounding_ratio >= 1.0,
+            where,
+            "bounding_ratio",
+            self.bounding_ratio,
+            "a ratio >= 1",
+        )
+        _check(
+            isinstance(self.max_attempts, (int, np.integer)) and self.max_attempts >= 1,
+            where,
+            "max_attempts",
+            self.max_attempts,
+            "an integer >= 1",
+        )
         radii = _sizes_for(where, self.sizes, _stream(self.seed, _SIZES), self.count, self.mass, self.density)
         radii.setflags(write=False)
         _check_fits(where, self.region, self.bounding_ratio * radii)
@@ -1186,8 +1360,13 @@ class DynamicFactory:
     @property
     def masses(self) -> np.ndarray:
         """Particle masses density * 4/3 pi r^3 [kg], shape (capacity,) (needs ``density``)."""
-        _check(self.density is not None, "DynamicFactory", "density", self.density,
-               "a density > 0 kg/m^3 to compute masses")
+        _check(
+            self.density is not None,
+            "DynamicFactory",
+            "density",
+            self.density,
+            "a density > 0 kg/m^3 to compute masses",
+        )
         return self.density * sphere_volume(self._radii)
 
     @property
@@ -1249,11 +1428,16 @@ class DynamicFactory:
         where = "DynamicFactory.place"
         first = _count(where, "first", first)
         count = _count(where, "count", count)
-        _check(first + count <= self.capacity(), where, "count", count,
-               f"at most capacity - first = {self.capacity() - first}")
+        _check(
+            first + count <= self.capacity(),
+            where,
+            "count",
+            count,
+            f"at most capacity - first = {self.capacity() - first}",
+        )
         ex_x, ex_r = _check_existing(where, existing_x, existing_r)
         rng = _stream(self.seed, _PLACE, first) if rng is None else _rng(rng)
-        r = self._radii[first:first + count]
+        r = self._radii[first : first + count]
         x, placed = _rsa(self.region, self.bounding_ratio * r, np.arange(count), rng, ex_x, ex_r, self.max_attempts)
         lead = int(np.argmin(placed)) if not placed.all() else count
         return x[:lead], r[:lead].copy()

@@ -28,8 +28,9 @@ def _segments(radius: float, cell: float, minimum: int = 16) -> int:
     return int(max(minimum, math.ceil(2 * math.pi * radius / cell)))
 
 
-def grid_plate(size_x: float, size_y: float, cell: float, z: float = 0.0, center=(0.0, 0.0),
-               up: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def grid_plate(
+    size_x: float, size_y: float, cell: float, z: float = 0.0, center=(0.0, 0.0), up: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """Rectangle in the plane z = ``z``, split into squares of about ``cell`` [m] (two triangles each), so
     that per-face statistics (impacts) resolve where things happen. Normal +z when ``up`` else -z."""
     nx, ny = max(1, math.ceil(size_x / cell)), max(1, math.ceil(size_y / cell))
@@ -65,8 +66,9 @@ def disc(radius: float, cell: float, z: float = 0.0, up: bool = True) -> tuple[n
     return np.concatenate(verts), (t if up else t[:, ::-1])
 
 
-def frustum(r_bottom: float, r_top: float, z_bottom: float, z_top: float, cell: float,
-            inward: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def frustum(
+    r_bottom: float, r_top: float, z_bottom: float, z_top: float, cell: float, inward: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """Open lateral surface of a truncated cone about the z axis (a cylinder when the radii are equal, a
     funnel when ``r_top > r_bottom``), rings about ``cell`` [m] apart. Normals point to the axis when
     ``inward`` (particles inside: funnel, die, lifting cylinder), else away from it."""
@@ -91,8 +93,14 @@ def frustum(r_bottom: float, r_top: float, z_bottom: float, z_top: float, cell: 
     return np.concatenate(verts), (t[:, ::-1] if inward else t)
 
 
-def funnel(top_diameter: float, outlet_diameter: float, cone_angle_deg: float, stem_length: float,
-           outlet_height: float, cell: float) -> tuple[np.ndarray, np.ndarray]:
+def funnel(
+    top_diameter: float,
+    outlet_diameter: float,
+    cone_angle_deg: float,
+    stem_length: float,
+    outlet_height: float,
+    cell: float,
+) -> tuple[np.ndarray, np.ndarray]:
     """Laboratory funnel, axis z, outlet (stem end) at height ``outlet_height`` [m]: a stem of
     ``stem_length`` [m] and ``outlet_diameter`` [m], then a cone of included angle ``cone_angle_deg`` opening
     to ``top_diameter`` [m]. Normals inward."""
@@ -111,8 +119,9 @@ def funnel_height(top_diameter: float, outlet_diameter: float, cone_angle_deg: f
     return (top_diameter - outlet_diameter) / 2 / math.tan(math.radians(cone_angle_deg) / 2)
 
 
-def open_box(length: float, width: float, height: float, cell: float, open_sides=("top",),
-             origin=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+def open_box(
+    length: float, width: float, height: float, cell: float, open_sides=("top",), origin=(0.0, 0.0, 0.0)
+) -> tuple[np.ndarray, np.ndarray]:
     """Box x in [0, length], y in [-width/2, width/2], z in [0, height] shifted by ``origin``, without the
     faces named in ``open_sides`` (any of top, bottom, front (x = 0), rear (x = length), left (y < 0),
     right (y > 0)). Normals point into the box."""

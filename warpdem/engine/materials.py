@@ -55,25 +55,50 @@ class Material:
         where = f"Material {self.name!r}"
         _check(isinstance(self.name, str) and self.name != "", where, "name", self.name, "a non-empty string")
         _check(_finite(self.density) and self.density > 0, where, "density", self.density, "a density > 0 kg/m^3")
-        _check(_finite(self.poisson_ratio) and -1.0 < self.poisson_ratio < 0.5, where, "poisson_ratio",
-               self.poisson_ratio, "a value in (-1, 0.5)")
+        _check(
+            _finite(self.poisson_ratio) and -1.0 < self.poisson_ratio < 0.5,
+            where,
+            "poisson_ratio",
+            self.poisson_ratio,
+            "a value in (-1, 0.5)",
+        )
         if self.youngs_modulus is None and self.shear_modulus is None:
             raise ValueError(f"{where}: give youngs_modulus or shear_modulus (neither was given)")
         nu = float(self.poisson_ratio)
         if self.youngs_modulus is not None:
-            _check(_finite(self.youngs_modulus) and self.youngs_modulus > 0, where, "youngs_modulus",
-                   self.youngs_modulus, "a modulus > 0 Pa")
+            _check(
+                _finite(self.youngs_modulus) and self.youngs_modulus > 0,
+                where,
+                "youngs_modulus",
+                self.youngs_modulus,
+                "a modulus > 0 Pa",
+            )
         if self.shear_modulus is not None:
-            _check(_finite(self.shear_modulus) and self.shear_modulus > 0, where, "shear_modulus",
-                   self.shear_modulus, "a modulus > 0 Pa")
+            _check(
+                _finite(self.shear_modulus) and self.shear_modulus > 0,
+                where,
+                "shear_modulus",
+                self.shear_modulus,
+                "a modulus > 0 Pa",
+            )
         if self.youngs_modulus is not None and self.shear_modulus is not None:
             e, g = float(self.youngs_modulus), float(self.shear_modulus)
             if nu >= 0.0:
-                _check(g <= 0.5 * e * (1 + 1e-9), where, "shear_modulus", g,
-                       f"at most E/2 = {0.5 * e:.6g} Pa for a non-negative Poisson's ratio")
+                _check(
+                    g <= 0.5 * e * (1 + 1e-9),
+                    where,
+                    "shear_modulus",
+                    g,
+                    f"at most E/2 = {0.5 * e:.6g} Pa for a non-negative Poisson's ratio",
+                )
             implied = 0.5 * e / (1.0 + nu)
-            _check(abs(g - implied) <= 0.01 * implied, where, "shear_modulus", g,
-                   f"E/(2(1+nu)) = {implied:.6g} Pa within 1% (E = {e:.6g} Pa, nu = {nu})")
+            _check(
+                abs(g - implied) <= 0.01 * implied,
+                where,
+                "shear_modulus",
+                g,
+                f"E/(2(1+nu)) = {implied:.6g} Pa within 1% (E = {e:.6g} Pa, nu = {nu})",
+            )
         elif self.youngs_modulus is None:
             object.__setattr__(self, "youngs_modulus", 2.0 * float(self.shear_modulus) * (1.0 + nu))
         else:
@@ -127,26 +152,76 @@ class Interaction:
 
     def __post_init__(self):
         where = "Interaction"
-        _check(_finite(self.restitution) and 0.0 < self.restitution <= 1.0, where, "restitution",
-               self.restitution, "a coefficient of restitution in (0, 1]")
-        _check(_finite(self.static_friction) and self.static_friction >= 0.0, where, "static_friction",
-               self.static_friction, "a friction coefficient >= 0")
-        _check(_finite(self.rolling_friction) and self.rolling_friction >= 0.0, where, "rolling_friction",
-               self.rolling_friction, "a rolling friction coefficient >= 0")
-        _check(_finite(self.rolling_damping) and self.rolling_damping >= 0.0, where, "rolling_damping",
-               self.rolling_damping, "a damping ratio >= 0")
-        _check(_finite(self.surface_energy) and self.surface_energy >= 0.0, where, "surface_energy",
-               self.surface_energy, "a surface energy >= 0 J/m^2")
-        _check(_finite(self.pull_off_force) and self.pull_off_force <= 0.0, where, "pull_off_force",
-               self.pull_off_force, "a constant pull-off force <= 0 N (attractive)")
-        _check(_finite(self.slope_exponent) and 1.0 <= self.slope_exponent <= 2.0, where, "slope_exponent",
-               self.slope_exponent, "an exponent in [1, 2]")
-        _check(_finite(self.plasticity_ratio) and 0.0 <= self.plasticity_ratio < 1.0, where, "plasticity_ratio",
-               self.plasticity_ratio, "a ratio in [0, 1)")
-        _check(_finite(self.tensile_exponent) and 0.0 < self.tensile_exponent <= 3.0, where, "tensile_exponent",
-               self.tensile_exponent, "an exponent in (0, 3]")
-        _check(_finite(self.tangential_stiffness_multiplier) and self.tangential_stiffness_multiplier > 0.0, where,
-               "tangential_stiffness_multiplier", self.tangential_stiffness_multiplier, "a factor > 0")
+        _check(
+            _finite(self.restitution) and 0.0 < self.restitution <= 1.0,
+            where,
+            "restitution",
+            self.restitution,
+            "a coefficient of restitution in (0, 1]",
+        )
+        _check(
+            _finite(self.static_friction) and self.static_friction >= 0.0,
+            where,
+            "static_friction",
+            self.static_friction,
+            "a friction coefficient >= 0",
+        )
+        _check(
+            _finite(self.rolling_friction) and self.rolling_friction >= 0.0,
+            where,
+            "rolling_friction",
+            self.rolling_friction,
+            "a rolling friction coefficient >= 0",
+        )
+        _check(
+            _finite(self.rolling_damping) and self.rolling_damping >= 0.0,
+            where,
+            "rolling_damping",
+            self.rolling_damping,
+            "a damping ratio >= 0",
+        )
+        _check(
+            _finite(self.surface_energy) and self.surface_energy >= 0.0,
+            where,
+            "surface_energy",
+            self.surface_energy,
+            "a surface energy >= 0 J/m^2",
+        )
+        _check(
+            _finite(self.pull_off_force) and self.pull_off_force <= 0.0,
+            where,
+            "pull_off_force",
+            self.pull_off_force,
+            "a constant pull-off force <= 0 N (attractive)",
+        )
+        _check(
+            _finite(self.slope_exponent) and 1.0 <= self.slope_exponent <= 2.0,
+            where,
+            "slope_exponent",
+            self.slope_exponent,
+            "an exponent in [1, 2]",
+        )
+        _check(
+            _finite(self.plasticity_ratio) and 0.0 <= self.plasticity_ratio < 1.0,
+            where,
+            "plasticity_ratio",
+            self.plasticity_ratio,
+            "a ratio in [0, 1)",
+        )
+        _check(
+            _finite(self.tensile_exponent) and 0.0 < self.tensile_exponent <= 3.0,
+            where,
+            "tensile_exponent",
+            self.tensile_exponent,
+            "an exponent in (0, 3]",
+        )
+        _check(
+            _finite(self.tangential_stiffness_multiplier) and self.tangential_stiffness_multiplier > 0.0,
+            where,
+            "tangential_stiffness_multiplier",
+            self.tangential_stiffness_multiplier,
+            "a factor > 0",
+        )
         object.__setattr__(self, "rolling_model", _enum(RollingModel, self.rolling_model, where, "rolling_model"))
         object.__setattr__(self, "law", _enum(ContactLaw, self.law, where, "law"))
         _check(self.law != ContactLaw.NONE, where, "law", self.law, "a contact law other than NONE")
@@ -163,9 +238,17 @@ def _enum(cls, value, where, name):
         return value
     if isinstance(value, str):
         key = value.strip().upper().replace("-", "_").replace(" ", "_")
-        aliases = {"A": "CONSTANT_TORQUE", "TYPE_A": "CONSTANT_TORQUE", "STANDARD": "CONSTANT_TORQUE",
-                   "C": "EPSD", "TYPE_C": "EPSD", "HM": "HERTZ_MINDLIN", "HM_JKR": "JKR",
-                   "HERTZ_MINDLIN_JKR": "JKR", "HERTZ_MINDLIN_WITH_JKR": "JKR"}
+        aliases = {
+            "A": "CONSTANT_TORQUE",
+            "TYPE_A": "CONSTANT_TORQUE",
+            "STANDARD": "CONSTANT_TORQUE",
+            "C": "EPSD",
+            "TYPE_C": "EPSD",
+            "HM": "HERTZ_MINDLIN",
+            "HM_JKR": "JKR",
+            "HERTZ_MINDLIN_JKR": "JKR",
+            "HERTZ_MINDLIN_WITH_JKR": "JKR",
+        }
         key = aliases.get(key, key)
         if key in cls.__members__:
             return cls[key]
@@ -204,10 +287,24 @@ def effective_moduli(ma: Material, mb: Material) -> tuple[float, float]:
 def pair_table(materials_per_world: list[list[Material]], tables_per_world: list[InteractionTable]) -> np.ndarray:
     """Dense PairParams fields, shape (W, M, M), as a NumPy structured array (W = len of the lists, 1 or world_count)."""
     w_count, m_count = len(materials_per_world), len(materials_per_world[0])
-    dtype = np.dtype([("e_star", np.float32), ("g_star", np.float32), ("beta", np.float32), ("mu_s", np.float32),
-                      ("mu_r", np.float32), ("rolling_model", np.int32), ("rolling_damping", np.float32),
-                      ("law", np.int32), ("gamma", np.float32), ("f0", np.float32), ("eepa_n", np.float32),
-                      ("lambda_p", np.float32), ("chi", np.float32), ("ks_fac", np.float32)])
+    dtype = np.dtype(
+        [
+            ("e_star", np.float32),
+            ("g_star", np.float32),
+            ("beta", np.float32),
+            ("mu_s", np.float32),
+            ("mu_r", np.float32),
+            ("rolling_model", np.int32),
+            ("rolling_damping", np.float32),
+            ("law", np.int32),
+            ("gamma", np.float32),
+            ("f0", np.float32),
+            ("eepa_n", np.float32),
+            ("lambda_p", np.float32),
+            ("chi", np.float32),
+            ("ks_fac", np.float32),
+        ]
+    )
     out = np.zeros((w_count, m_count, m_count), dtype=dtype)
     for w in range(w_count):
         mats, table = materials_per_world[w], tables_per_world[w]
@@ -215,8 +312,20 @@ def pair_table(materials_per_world: list[list[Material]], tables_per_world: list
             for b in range(m_count):
                 ia = table.get(mats[a].name, mats[b].name)
                 e_star, g_star = effective_moduli(mats[a], mats[b])
-                out[w, a, b] = (e_star, g_star, ia.beta, ia.static_friction, ia.rolling_friction,
-                                int(ia.rolling_model), ia.rolling_damping, int(ia.law), ia.surface_energy,
-                                ia.pull_off_force, ia.slope_exponent, ia.plasticity_ratio, ia.tensile_exponent,
-                                ia.tangential_stiffness_multiplier)
+                out[w, a, b] = (
+                    e_star,
+                    g_star,
+                    ia.beta,
+                    ia.static_friction,
+                    ia.rolling_friction,
+                    int(ia.rolling_model),
+                    ia.rolling_damping,
+                    int(ia.law),
+                    ia.surface_energy,
+                    ia.pull_off_force,
+                    ia.slope_exponent,
+                    ia.plasticity_ratio,
+                    ia.tensile_exponent,
+                    ia.tangential_stiffness_multiplier,
+                )
     return out

@@ -34,10 +34,14 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of quaternions in (x, y, z, w) order (Warp's wp.quat layout)."""
     ax, ay, az, aw = a
     bx, by, bz, bw = b
-    return np.array([aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw,
-                     aw * bw - ax * bx - ay * by - az * bz])
+    return np.array(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ]
+    )
 
 
 def quat_from_rotvec(r: np.ndarray) -> np.ndarray:
@@ -110,8 +114,10 @@ class WallMotion:
             if not isinstance(s, Segment):
                 raise ValueError(f"WallMotion: segments[{k}] = {s!r} is not allowed; expected a Segment")
             if s.start < last - 1e-12:
-                raise ValueError(f"WallMotion: segments[{k}].start = {s.start} is not allowed; expected segments in "
-                                 f"time order without overlap (previous ends at {last})")
+                raise ValueError(
+                    f"WallMotion: segments[{k}].start = {s.start} is not allowed; expected segments in "
+                    f"time order without overlap (previous ends at {last})"
+                )
             last = s.end
         if self.keyframe_times:
             t = np.asarray(self.keyframe_times, dtype=np.float64)
@@ -147,14 +153,18 @@ class WallMotion:
         """Absolute poses at ``times`` [s]: translations (n, 3) [m], rotations (n, 4) quaternions (x, y, z, w)."""
         t = tuple(float(x) for x in np.asarray(times, dtype=np.float64).reshape(-1))
         tr = np.asarray(translations, dtype=np.float64).reshape(len(t), 3)
-        rot = np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)) if rotations is None else \
-            np.asarray(rotations, dtype=np.float64).reshape(len(t), 4)
+        rot = (
+            np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1))
+            if rotations is None
+            else np.asarray(rotations, dtype=np.float64).reshape(len(t), 4)
+        )
         norms = np.linalg.norm(rot, axis=1)
         if np.any(np.abs(norms - 1.0) > 1e-3):
             raise ValueError(f"WallMotion.keyframes: rotations have norms {norms.tolist()}; expected unit quaternions")
         rot = rot / norms[:, None]
-        return WallMotion(keyframe_times=t, keyframe_translations=tuple(map(tuple, tr)),
-                          keyframe_rotations=tuple(map(tuple, rot)))
+        return WallMotion(
+            keyframe_times=t, keyframe_translations=tuple(map(tuple, tr)), keyframe_rotations=tuple(map(tuple, rot))
+        )
 
     # compile ---------------------------------------------------------------------------------
     def table(self) -> list[tuple]:
@@ -229,5 +239,6 @@ class MotionTable:
                 return np.array([min(float(x), big) for x in vals], dtype=np.float64)
             return np.array(vals, dtype=np.float64).reshape(-1, width)
 
-        return MotionTable(np.array(start, dtype=np.int32), col(0), col(1), col(2, 3), col(3, 3), col(4, 3),
-                           col(5, 3), col(6, 4))
+        return MotionTable(
+            np.array(start, dtype=np.int32), col(0), col(1), col(2, 3), col(3, 3), col(4, 3), col(5, 3), col(6, 4)
+        )

@@ -22,6 +22,7 @@ class SimulationError(RuntimeError):
 CLUMP_CONTACT_MASSES = ("shared", "body")
 """The values of SolverOptions.clump_contact_mass (also a stage's warpdem:run:clumpContactMass)."""
 
+
 @dataclass(frozen=True)
 class SolverOptions:
     """Solver settings, validated at construction.
@@ -89,8 +90,18 @@ CUDA_GRAPH_STEPS = 32
 # neighbour cells per longest reach (2 r_max + skin + cohesive reach): 2 makes the walked box of cells hug
 # each sphere's own reach
 CELLS_PER_REACH = 2.0
-LIST_ARRAYS = ("neighbor_count", "neighbor_index", "neighbor_spring", "neighbor_roll", "neighbor_aux",
-               "mesh_count", "mesh_face", "mesh_spring", "mesh_roll", "mesh_aux")
+LIST_ARRAYS = (
+    "neighbor_count",
+    "neighbor_index",
+    "neighbor_spring",
+    "neighbor_roll",
+    "neighbor_aux",
+    "mesh_count",
+    "mesh_face",
+    "mesh_spring",
+    "mesh_roll",
+    "mesh_aux",
+)
 """The Contacts arrays a rebuild writes (into ``Contacts.scratch``, then committed)."""
 
 
@@ -119,11 +130,16 @@ class Solver:
             if self.dt > auto:
                 warnings.warn(
                     f"time step {self.dt:.3g} s exceeds {self.options.dt_fraction:.0%} of the Rayleigh time "
-                    f"({model.rayleigh_time:.3g} s): contacts may be under-resolved", stacklevel=2)
-        self.skin = self.options.skin if self.options.skin is not None else self.options.skin_fraction * model.radius_min
+                    f"({model.rayleigh_time:.3g} s): contacts may be under-resolved",
+                    stacklevel=2,
+                )
+        self.skin = (
+            self.options.skin if self.options.skin is not None else self.options.skin_fraction * model.radius_min
+        )
         self._clock = wp.zeros(1, dtype=int, device=model.device)
-        self._wall_lanes = wp.zeros((max(model.plane_count + model.wall_count, 1), int(_st.WALL_LANES)),
-                                    dtype=wp.vec3, device=model.device)
+        self._wall_lanes = wp.zeros(
+            (max(model.plane_count + model.wall_count, 1), int(_st.WALL_LANES)), dtype=wp.vec3, device=model.device
+        )
         self._wall_t_lanes = wp.zeros_like(self._wall_lanes)
         self._time = wp.zeros(2, dtype=wp.float64, device=model.device)
         """Device time [s]: [0] the start of the step being taken, [1] its end (the time of state_out)."""
@@ -201,42 +217,102 @@ class Solver:
         history over."""
         m, c = self.model, contacts
         if m.domain is not None:
-            wp.launch(_st.retire_escaped, dim=m.sphere_count,
-                      inputs=[wp.vec3(*m.domain[0]), wp.vec3(*m.domain[1]), m.sphere_clump, m.sphere_world,
-                              m.sphere_wall, m.clump_sphere_start, state.sphere_x, state.clump_x],
-                      outputs=[state.sphere_active, state.sphere_v, state.sphere_w, state.clump_v,
-                               state.clump_angmom, state.clump_w, state.world_removed], device=m.device)
+            wp.launch(
+                _st.retire_escaped,
+                dim=m.sphere_count,
+                inputs=[
+                    wp.vec3(*m.domain[0]),
+                    wp.vec3(*m.domain[1]),
+                    m.sphere_clump,
+                    m.sphere_world,
+                    m.sphere_wall,
+                    m.clump_sphere_start,
+                    state.sphere_x,
+                    state.clump_x,
+                ],
+                outputs=[
+                    state.sphere_active,
+                    state.sphere_v,
+                    state.sphere_w,
+                    state.clump_v,
+                    state.clump_angmom,
+                    state.clump_w,
+                    state.world_removed,
+                ],
+                device=m.device,
+            )
         reach = m.contact_reach
         inv_cell = CELLS_PER_REACH / (2.0 * m.radius_max + self.skin + reach)
         head, nxt = c.cells["head"], c.cells["next"]
         wp.launch(_nb.clear_cells, dim=head.shape[0], inputs=[head, self._rebuild_count], device=m.device)
-        wp.launch(_nb.bin_spheres, dim=m.sphere_count, inputs=[state.sphere_x, state.sphere_active, m.sphere_world,
-                                                               inv_cell], outputs=[head, nxt], device=m.device)
+        wp.launch(
+            _nb.bin_spheres,
+            dim=m.sphere_count,
+            inputs=[state.sphere_x, state.sphere_active, m.sphere_world, inv_cell],
+            outputs=[head, nxt],
+            device=m.device,
+        )
         s = c.scratch
         wp.launch(
             _nb.build_contacts,
             dim=m.sphere_count,
             inputs=[
-                head, nxt, inv_cell, m.sphere_radius, m.sphere_world, m.sphere_clump, m.sphere_wall, m.radius_max,
-                m.wall_mesh, m.wall_face_start, m.wall_world,
-                state.sphere_x, state.sphere_active, state.wall_pose, self.skin, reach,
-                c.neighbor_count, c.neighbor_index, c.neighbor_spring, c.neighbor_roll, c.neighbor_aux,
-                c.mesh_count, c.mesh_face, c.mesh_spring, c.mesh_roll, c.mesh_aux,
+                head,
+                nxt,
+                inv_cell,
+                m.sphere_radius,
+                m.sphere_world,
+                m.sphere_clump,
+                m.sphere_wall,
+                m.radius_max,
+                m.wall_mesh,
+                m.wall_face_start,
+                m.wall_world,
+                state.sphere_x,
+                state.sphere_active,
+                state.wall_pose,
+                self.skin,
+                reach,
+                c.neighbor_count,
+                c.neighbor_index,
+                c.neighbor_spring,
+                c.neighbor_roll,
+                c.neighbor_aux,
+                c.mesh_count,
+                c.mesh_face,
+                c.mesh_spring,
+                c.mesh_roll,
+                c.mesh_aux,
             ],
             outputs=[
-                s["neighbor_count"], s["neighbor_index"], s["neighbor_spring"], s["neighbor_roll"], s["neighbor_aux"],
-                s["mesh_count"], s["mesh_face"], s["mesh_spring"], s["mesh_roll"], s["mesh_aux"],
-                c.build_x, c.overflow,
+                s["neighbor_count"],
+                s["neighbor_index"],
+                s["neighbor_spring"],
+                s["neighbor_roll"],
+                s["neighbor_aux"],
+                s["mesh_count"],
+                s["mesh_face"],
+                s["mesh_spring"],
+                s["mesh_roll"],
+                s["mesh_aux"],
+                c.build_x,
+                c.overflow,
             ],
             device=m.device,
         )
-        wp.launch(_nb.commit_contacts, dim=m.sphere_count, inputs=[s[k] for k in LIST_ARRAYS],
-                  outputs=[getattr(c, k) for k in LIST_ARRAYS], device=m.device)
+        wp.launch(
+            _nb.commit_contacts,
+            dim=m.sphere_count,
+            inputs=[s[k] for k in LIST_ARRAYS],
+            outputs=[getattr(c, k) for k in LIST_ARRAYS],
+            device=m.device,
+        )
         wp.copy(c.wall_build_pose, state.wall_pose)
         c.rebuild.zero_()
 
-    def step(self, state_in: State, state_out: State, control: Control | None, contacts: Contacts,
-             dt: float | None = None) -> None:
+    def step(
+        self, state_in: State, state_out: State, control: Control | None, contacts: Contacts, dt: float | None = None
+    ) -> None:
         """Advance ``state_in`` by one step into ``state_out`` (rebuilding the lists first if due)."""
         for name in State.TWIN_SHARED:
             setattr(state_out, name, getattr(state_in, name))
@@ -247,8 +323,9 @@ class Solver:
         """Device time of the next step's start (host write, never inside a capture)."""
         self._time.assign(np.array([time, time], dtype=np.float64))
 
-    def _step(self, state_in: State, state_out: State, control: Control | None, contacts: Contacts,
-              dt: float | None = None) -> None:
+    def _step(
+        self, state_in: State, state_out: State, control: Control | None, contacts: Contacts, dt: float | None = None
+    ) -> None:
         if not state_in.half_step:
             self._start(state_in, control, contacts)
         wp.capture_if(contacts.rebuild, on_true=lambda: self.rebuild(state_in, contacts))
@@ -260,85 +337,214 @@ class Solver:
         if m.wall_count:
             self._move_walls(state, control, contacts, rebuild=self._no_rebuild)
         if m.clump_count:
-            wp.launch(_st.init_clumps, dim=m.clump_count,
-                      inputs=[m.clump_material, m.clump_world, m.clump_volume, m.clump_inertia, m.material_density,
-                              state.clump_q, state.clump_w],
-                      outputs=[state.clump_angmom], device=m.device)
+            wp.launch(
+                _st.init_clumps,
+                dim=m.clump_count,
+                inputs=[
+                    m.clump_material,
+                    m.clump_world,
+                    m.clump_volume,
+                    m.clump_inertia,
+                    m.material_density,
+                    state.clump_q,
+                    state.clump_w,
+                ],
+                outputs=[state.clump_angmom],
+                device=m.device,
+            )
 
     def _move_walls(self, state: State, control: Control | None, contacts: Contacts, rebuild) -> None:
         """Poses of the walls at the device time[1] into ``state``; ``rebuild`` is flagged when they moved far."""
         m, ctl = self.model, control or self.control
-        wp.launch(_st.move_walls, dim=m.wall_count,
-                  inputs=[ctl.segment_start, ctl.segment_t0, ctl.segment_t1, ctl.segment_v, ctl.segment_w,
-                          ctl.segment_pivot, ctl.segment_pose, m.wall_radius, contacts.wall_build_pose,
-                          self.skin, self._time, 1],
-                  outputs=[state.wall_pose, state.wall_v, state.wall_w, rebuild], device=m.device)
+        wp.launch(
+            _st.move_walls,
+            dim=m.wall_count,
+            inputs=[
+                ctl.segment_start,
+                ctl.segment_t0,
+                ctl.segment_t1,
+                ctl.segment_v,
+                ctl.segment_w,
+                ctl.segment_pivot,
+                ctl.segment_pose,
+                m.wall_radius,
+                contacts.wall_build_pose,
+                self.skin,
+                self._time,
+                1,
+            ],
+            outputs=[state.wall_pose, state.wall_v, state.wall_w, rebuild],
+            device=m.device,
+        )
         if m.attached_count:
-            wp.launch(_st.follow_walls, dim=m.attached_count,
-                      inputs=[m.attached_index, m.sphere_wall, m.sphere_offset, state.wall_pose, state.wall_v,
-                              state.wall_w, contacts.build_x, self.skin],
-                      outputs=[state.sphere_x, state.sphere_v, state.sphere_w, rebuild], device=m.device)
+            wp.launch(
+                _st.follow_walls,
+                dim=m.attached_count,
+                inputs=[
+                    m.attached_index,
+                    m.sphere_wall,
+                    m.sphere_offset,
+                    state.wall_pose,
+                    state.wall_v,
+                    state.wall_w,
+                    contacts.build_x,
+                    self.skin,
+                ],
+                outputs=[state.sphere_x, state.sphere_v, state.sphere_w, rebuild],
+                device=m.device,
+            )
 
-    def _advance(self, state_in: State, state_out: State, contacts: Contacts, control: Control | None = None,
-                 dt: float | None = None) -> None:
+    def _advance(
+        self,
+        state_in: State,
+        state_out: State,
+        contacts: Contacts,
+        control: Control | None = None,
+        dt: float | None = None,
+    ) -> None:
         """Forces and integration of one step, without the rebuild check."""
         m, c = self.model, contacts
         dt = self.dt if dt is None else float(dt)
         kick = dt if state_in.half_step else 0.5 * dt
-        wp.launch(_st.begin_step, dim=self._wall_lanes.shape, inputs=[wp.float64(dt)],
-                  outputs=[self._wall_lanes, self._wall_t_lanes, self._clock, self._time], device=m.device)
+        wp.launch(
+            _st.begin_step,
+            dim=self._wall_lanes.shape,
+            inputs=[wp.float64(dt)],
+            outputs=[self._wall_lanes, self._wall_t_lanes, self._clock, self._time],
+            device=m.device,
+        )
         wp.launch(
             _st.step_spheres,
             dim=m.sphere_count,
             inputs=[
-                m.sphere_radius, m.sphere_material, m.sphere_world, m.sphere_clump, m.sphere_body_volume,
-                c.partner_key, c.partner_count, int(self.options.clump_contact_mass == "shared"), m.sphere_wall,
-                m.material_density, m.pair_params, m.world_gravity,
-                m.plane_point, m.plane_normal, m.plane_material, m.plane_world,
-                m.wall_mesh, m.wall_face_start, m.triangle_wall, m.wall_material,
-                c.neighbor_count, c.neighbor_index, c.neighbor_spring, c.neighbor_roll, c.neighbor_aux,
-                c.plane_spring, c.plane_roll, c.plane_aux,
-                c.mesh_count, c.mesh_face, c.mesh_spring, c.mesh_roll, c.mesh_aux, c.build_x,
-                state_in.sphere_x, state_in.sphere_v, state_in.sphere_w, state_in.sphere_active,
-                state_in.wall_pose, state_in.wall_v, state_in.wall_w,
-                dt, kick, self.skin, self.options.velocity_limit, self.options.impact_speed_min, self._clock,
+                m.sphere_radius,
+                m.sphere_material,
+                m.sphere_world,
+                m.sphere_clump,
+                m.sphere_body_volume,
+                c.partner_key,
+                c.partner_count,
+                int(self.options.clump_contact_mass == "shared"),
+                m.sphere_wall,
+                m.material_density,
+                m.pair_params,
+                m.world_gravity,
+                m.plane_point,
+                m.plane_normal,
+                m.plane_material,
+                m.plane_world,
+                m.wall_mesh,
+                m.wall_face_start,
+                m.triangle_wall,
+                m.wall_material,
+                c.neighbor_count,
+                c.neighbor_index,
+                c.neighbor_spring,
+                c.neighbor_roll,
+                c.neighbor_aux,
+                c.plane_spring,
+                c.plane_roll,
+                c.plane_aux,
+                c.mesh_count,
+                c.mesh_face,
+                c.mesh_spring,
+                c.mesh_roll,
+                c.mesh_aux,
+                c.build_x,
+                state_in.sphere_x,
+                state_in.sphere_v,
+                state_in.sphere_w,
+                state_in.sphere_active,
+                state_in.wall_pose,
+                state_in.wall_v,
+                state_in.wall_w,
+                dt,
+                kick,
+                self.skin,
+                self.options.velocity_limit,
+                self.options.impact_speed_min,
+                self._clock,
             ],
             outputs=[
-                state_out.sphere_x, state_out.sphere_v, state_out.sphere_w, state_out.sphere_f, state_out.sphere_t,
-                self._wall_lanes, self._wall_t_lanes, state_in.face_impact_count, state_in.face_impact_energy,
-                state_in.face_impact_speed, self._partner_key_next, self._partner_count_next, c.rebuild,
+                state_out.sphere_x,
+                state_out.sphere_v,
+                state_out.sphere_w,
+                state_out.sphere_f,
+                state_out.sphere_t,
+                self._wall_lanes,
+                self._wall_t_lanes,
+                state_in.face_impact_count,
+                state_in.face_impact_energy,
+                state_in.face_impact_speed,
+                self._partner_key_next,
+                self._partner_count_next,
+                c.rebuild,
                 self._blowup,
             ],
             device=m.device,
         )
         if m.clump_count and self.options.clump_contact_mass == "shared":
-            wp.launch(_st.roll_partners, dim=self._partner_key_next.shape[0],
-                      inputs=[self._partner_key_next, self._partner_count_next],
-                      outputs=[c.partner_key, c.partner_count], device=m.device)
+            wp.launch(
+                _st.roll_partners,
+                dim=self._partner_key_next.shape[0],
+                inputs=[self._partner_key_next, self._partner_count_next],
+                outputs=[c.partner_key, c.partner_count],
+                device=m.device,
+            )
         if m.clump_count:
             wp.launch_tiled(
                 _st.integrate_clumps,
                 dim=[m.clump_count],
                 block_dim=self._clump_lanes,
                 inputs=[
-                    m.clump_sphere_start, m.clump_sphere_end, m.clump_material, m.clump_world, m.clump_volume, m.clump_inertia,
-                    m.sphere_offset, m.material_density, m.world_gravity, c.build_x,
-                    state_in.sphere_active, state_out.sphere_f, state_out.sphere_t,
-                    state_in.clump_x, state_in.clump_q, state_in.clump_v, state_in.clump_angmom,
-                    dt, kick, self.skin, self.options.velocity_limit, self._clock, self._clump_lanes,
+                    m.clump_sphere_start,
+                    m.clump_sphere_end,
+                    m.clump_material,
+                    m.clump_world,
+                    m.clump_volume,
+                    m.clump_inertia,
+                    m.sphere_offset,
+                    m.material_density,
+                    m.world_gravity,
+                    c.build_x,
+                    state_in.sphere_active,
+                    state_out.sphere_f,
+                    state_out.sphere_t,
+                    state_in.clump_x,
+                    state_in.clump_q,
+                    state_in.clump_v,
+                    state_in.clump_angmom,
+                    dt,
+                    kick,
+                    self.skin,
+                    self.options.velocity_limit,
+                    self._clock,
+                    self._clump_lanes,
                 ],
                 outputs=[
-                    state_out.clump_x, state_out.clump_q, state_out.clump_v, state_out.clump_angmom, state_out.clump_w,
-                    state_out.clump_f, state_out.clump_t, state_out.sphere_x, state_out.sphere_v, state_out.sphere_w,
-                    c.rebuild, self._blowup,
+                    state_out.clump_x,
+                    state_out.clump_q,
+                    state_out.clump_v,
+                    state_out.clump_angmom,
+                    state_out.clump_w,
+                    state_out.clump_f,
+                    state_out.clump_t,
+                    state_out.sphere_x,
+                    state_out.sphere_v,
+                    state_out.sphere_w,
+                    c.rebuild,
+                    self._blowup,
                 ],
                 device=m.device,
             )
         if m.plane_count + m.wall_count:
-            wp.launch(_st.sum_wall_forces, dim=m.plane_count + m.wall_count,
-                      inputs=[self._wall_lanes, self._wall_t_lanes, state_in.wall_impulse, wp.float64(dt)],
-                      outputs=[state_out.wall_f, state_out.wall_t, state_out.wall_impulse],
-                      device=m.device)
+            wp.launch(
+                _st.sum_wall_forces,
+                dim=m.plane_count + m.wall_count,
+                inputs=[self._wall_lanes, self._wall_t_lanes, state_in.wall_impulse, wp.float64(dt)],
+                outputs=[state_out.wall_f, state_out.wall_t, state_out.wall_impulse],
+                device=m.device,
+            )
         if state_out.sphere_active is not state_in.sphere_active:
             wp.copy(state_out.sphere_active, state_in.sphere_active)
         if m.wall_count:
@@ -348,8 +554,14 @@ class Solver:
         state_out.half_step = True
 
     # driver ---------------------------------------------------------------------------------
-    def run(self, state: State, contacts: Contacts, steps: int, control: Control | None = None,
-            use_graph: bool | None = None) -> State:
+    def run(
+        self,
+        state: State,
+        contacts: Contacts,
+        steps: int,
+        control: Control | None = None,
+        use_graph: bool | None = None,
+    ) -> State:
         """Take ``steps`` steps starting from ``state``; returns the final state (``state`` or its twin).
 
         On CPU, pairs of steps are replayed as one captured graph with the rebuild as a conditional
@@ -395,8 +607,11 @@ class Solver:
                                 src, dst = (a, b) if i % 2 == 0 else (b, a)
                                 self._step(src, dst, control, contacts)
                     except Exception as exc:  # an older driver without conditional nodes: host-read path
-                        warnings.warn(f"CUDA graph with a conditional rebuild failed ({exc}); "
-                                      "falling back to one host read of the rebuild flag per step", stacklevel=2)
+                        warnings.warn(
+                            f"CUDA graph with a conditional rebuild failed ({exc}); "
+                            "falling back to one host read of the rebuild flag per step",
+                            stacklevel=2,
+                        )
                         self.cuda_graph_steps = 0
                         cap = None
                     a.time, a.step, b.time, b.step = times
@@ -464,8 +679,9 @@ class Solver:
         self.check(contacts)
         return a
 
-    def release(self, state: State, contacts: Contacts, sphere_index, sphere_x, sphere_v, clump_index, clump_x,
-                clump_q, clump_v) -> None:
+    def release(
+        self, state: State, contacts: Contacts, sphere_index, sphere_x, sphere_v, clump_index, clump_x, clump_q, clump_v
+    ) -> None:
         """Activate parked particles at the given places (host arrays; spheres shape (n,), (n, 3); clumps
         (k,), (k, 3), (k, 4) quaternions (x, y, z, w), (k, 3)) and flag a rebuild."""
         m, dev = self.model, self.model.device
@@ -481,14 +697,34 @@ class Solver:
         n = len(sphere_index) + len(clump_index)
         if n == 0:
             return
-        wp.launch(_st.place_bodies, dim=n,
-                  inputs=[wp.array(np.asarray(sphere_index, dtype=np.int32), dtype=int, device=dev),
-                          arr(sphere_x, wp.vec3, 3), arr(sphere_v, wp.vec3, 3),
-                          arr(clump_index, int), arr(clump_x, wp.vec3, 3), arr(clump_q, wp.quat, 4),
-                          arr(clump_v, wp.vec3, 3), m.clump_sphere_start, m.clump_sphere_end, m.sphere_offset],
-                  outputs=[state.sphere_x, state.sphere_v, state.sphere_w, state.sphere_active, state.clump_x,
-                           state.clump_q, state.clump_v, state.clump_angmom, contacts.rebuild],
-                  device=dev)
+        wp.launch(
+            _st.place_bodies,
+            dim=n,
+            inputs=[
+                wp.array(np.asarray(sphere_index, dtype=np.int32), dtype=int, device=dev),
+                arr(sphere_x, wp.vec3, 3),
+                arr(sphere_v, wp.vec3, 3),
+                arr(clump_index, int),
+                arr(clump_x, wp.vec3, 3),
+                arr(clump_q, wp.quat, 4),
+                arr(clump_v, wp.vec3, 3),
+                m.clump_sphere_start,
+                m.clump_sphere_end,
+                m.sphere_offset,
+            ],
+            outputs=[
+                state.sphere_x,
+                state.sphere_v,
+                state.sphere_w,
+                state.sphere_active,
+                state.clump_x,
+                state.clump_q,
+                state.clump_v,
+                state.clump_angmom,
+                contacts.rebuild,
+            ],
+            device=dev,
+        )
 
     @property
     def rebuild_count(self) -> int:
@@ -507,8 +743,11 @@ class Solver:
         end = state.time + float(duration)
         eps = 0.5 * self.dt
         while True:
-            due = {f: t for f in range(len(self.model.factories))
-                   if (t := self._next_release(state, f)) is not None and t <= end + eps}
+            due = {
+                f: t
+                for f in range(len(self.model.factories))
+                if (t := self._next_release(state, f)) is not None and t <= end + eps
+            }
             if not due:
                 steps = int(round((end - state.time) / self.dt))
                 return self.run(state, contacts, steps, control) if steps > 0 else state
@@ -540,8 +779,11 @@ class Solver:
         plan = fac.plan()
         cum = np.cumsum([c for _, c in plan])
         times = np.array([t for t, _ in plan])
-        target = int(cum[np.searchsorted(times, state.time + 0.5 * self.dt, side="right") - 1]) \
-            if times[0] <= state.time + 0.5 * self.dt else 0
+        target = (
+            int(cum[np.searchsorted(times, state.time + 0.5 * self.dt, side="right") - 1])
+            if times[0] <= state.time + 0.5 * self.dt
+            else 0
+        )
         want = max(target - done, 0)
         if want == 0:
             return
@@ -571,14 +813,16 @@ class Solver:
                 c_x.append(x)
                 c_q.append(np.asarray(fac.quaternions)[k])
                 c_v.append(vel)
+
         # every world releases the same particles: the fewest any world could place
         def cut(parts, width=None):
             if not parts:
                 return np.zeros((0, width) if width else 0)
             return np.concatenate([p[:placed] for p in parts])
 
-        self.release(state, contacts, cut(s_idx), cut(s_x, 3), cut(s_v, 3), cut(c_idx), cut(c_x, 3), cut(c_q, 4),
-                     cut(c_v, 3))
+        self.release(
+            state, contacts, cut(s_idx), cut(s_x, 3), cut(s_v, 3), cut(c_idx), cut(c_x, 3), cut(c_q, 4), cut(c_v, 3)
+        )
         log["count"] = done + int(placed)
         # a crowded region defers the rest of its batch by one interval
         log["retry"] = state.time + fac.interval if placed < want else -math.inf
@@ -606,6 +850,7 @@ class Solver:
             raise SimulationError(
                 f"blow-up at step {int(blow[1])}: sphere {i} (world {world}) has a non-finite state or a speed "
                 f"above velocity_limit = {self.options.velocity_limit} m/s; reduce dt (now {self.dt:.3g} s, "
-                f"Rayleigh time {self.model.rayleigh_time:.3g} s) or check the inputs{cause}")
+                f"Rayleigh time {self.model.rayleigh_time:.3g} s) or check the inputs{cause}"
+            )
         if dropped:
             raise SimulationError(dropped)

@@ -279,7 +279,6 @@ class State:
     """Dynamic factory progress (host-side): factory index -> {"count": released so far, "retry": earliest
     time [s] of the next try after a crowded batch}."""
 
-
     SHARED_RECORDS: ClassVar[tuple] = ("face_impact_count", "face_impact_energy", "face_impact_speed")
     """Running records a solver's twin states share (every step adds to them)."""
     TWIN_SHARED: ClassVar[tuple] = SHARED_RECORDS + ("world_removed",)
@@ -324,13 +323,15 @@ class Control:
             return wp.array(a if len(a) else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=device)
 
         def f64(a):
-            return wp.array(np.asarray(a, dtype=np.float64) if len(a) else np.zeros(1), dtype=wp.float64,
-                            device=device)
+            return wp.array(np.asarray(a, dtype=np.float64) if len(a) else np.zeros(1), dtype=wp.float64, device=device)
 
         return Control(
             segment_start=wp.array(table.start, dtype=int, device=device),
-            segment_t0=f64(table.t0), segment_t1=f64(table.t1),
-            segment_v=vec(table.velocity), segment_w=vec(table.angular_velocity), segment_pivot=vec(table.pivot),
+            segment_t0=f64(table.t0),
+            segment_t1=f64(table.t1),
+            segment_v=vec(table.velocity),
+            segment_w=vec(table.angular_velocity),
+            segment_pivot=vec(table.pivot),
             segment_pose=wp.array(pose, dtype=wp.transform, device=device),
         )
 

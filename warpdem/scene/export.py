@@ -48,6 +48,7 @@ __all__ = ["ResultWriter", "ShapeGeometry", "WallGeometry", "expand_clumps", "qu
 
 # -- validation helpers -----------------------------------------------------------------------------------------
 
+
 def _short(a) -> str:
     """A compact repr for error messages (arrays can be long)."""
     if isinstance(a, np.ndarray):
@@ -63,8 +64,9 @@ def _shape_ok(shape: tuple, want: tuple) -> bool:
     return len(shape) == len(want) and all(w is None or s == w for s, w in zip(shape, want))
 
 
-def _floats(value, where: str, name: str, want: tuple, allowed: str, *, positive: bool = False,
-            unit: str = "") -> np.ndarray:
+def _floats(
+    value, where: str, name: str, want: tuple, allowed: str, *, positive: bool = False, unit: str = ""
+) -> np.ndarray:
     """``value`` as a float64 array of shape ``want`` (None = any length), finite (and > 0 if ``positive``)."""
     try:
         a = np.array(value, dtype=np.float64)
@@ -84,8 +86,9 @@ def _floats(value, where: str, name: str, want: tuple, allowed: str, *, positive
     return a
 
 
-def _ints(value, where: str, name: str, want: tuple, allowed: str, lo: int | None = None,
-          hi: int | None = None) -> np.ndarray:
+def _ints(
+    value, where: str, name: str, want: tuple, allowed: str, lo: int | None = None, hi: int | None = None
+) -> np.ndarray:
     """``value`` as an int64 array of shape ``want``, entries in [lo, hi) where given."""
     a = np.asarray(value)
     if a.dtype.kind not in "iu" and not (a.size == 0 and a.dtype.kind == "f"):
@@ -144,6 +147,7 @@ def _identifiers(names: list[str], fallback: str) -> list[str]:
 
 # -- geometry ---------------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class WallGeometry:
     """A triangle mesh wall as the writer draws it.
@@ -162,12 +166,20 @@ class WallGeometry:
         where = f"WallGeometry {self.name!r}"
         if not isinstance(self.name, str) or not self.name:
             _fail(where, "name", self.name, "a non-empty string")
-        v = _floats(self.vertices, where, "vertices", (None, 3), "an (V, 3) array of vertex positions in m, V >= 3",
-                     unit="m")
+        v = _floats(
+            self.vertices, where, "vertices", (None, 3), "an (V, 3) array of vertex positions in m, V >= 3", unit="m"
+        )
         if v.shape[0] < 3:
             _fail(where, "vertices.shape", v.shape, "(V, 3) with V >= 3")
-        t = _ints(self.triangles, where, "triangles", (None, 3), f"an (F, 3) array of vertex indices in [0, {len(v)})",
-                  0, len(v))
+        t = _ints(
+            self.triangles,
+            where,
+            "triangles",
+            (None, 3),
+            f"an (F, 3) array of vertex indices in [0, {len(v)})",
+            0,
+            len(v),
+        )
         if t.shape[0] < 1:
             _fail(where, "triangles.shape", t.shape, "(F, 3) with F >= 1")
         object.__setattr__(self, "vertices", _readonly(v))
@@ -196,12 +208,20 @@ class ShapeGeometry:
         where = f"ShapeGeometry {self.name!r}"
         if not isinstance(self.name, str) or not self.name:
             _fail(where, "name", self.name, "a non-empty string")
-        c = _floats(self.sphere_offset, where, "sphere_offset", (None, 3), "an (s, 3) array of offsets in m, s >= 1",
-                     unit="m")
+        c = _floats(
+            self.sphere_offset, where, "sphere_offset", (None, 3), "an (s, 3) array of offsets in m, s >= 1", unit="m"
+        )
         if c.shape[0] < 1:
             _fail(where, "sphere_offset.shape", c.shape, "(s, 3) with s >= 1")
-        r = _floats(self.sphere_radius, where, "sphere_radius", (c.shape[0],),
-                    f"({c.shape[0]},): one radius per row of sphere_offset", positive=True, unit="m")
+        r = _floats(
+            self.sphere_radius,
+            where,
+            "sphere_radius",
+            (c.shape[0],),
+            f"({c.shape[0]},): one radius per row of sphere_offset",
+            positive=True,
+            unit="m",
+        )
         object.__setattr__(self, "sphere_offset", _readonly(c))
         object.__setattr__(self, "sphere_radius", _readonly(r))
 
@@ -239,13 +259,13 @@ def _check_clumps(where: str, clump_x, clump_q, clump_shape, clump_scale, n_shap
     x = _floats(clump_x, where, "clump_x", (None, 3), "a (k, 3) array of clump centres in m", unit="m")
     k = x.shape[0]
     q = _quats(clump_q, where, "clump_q", k, f"({k}, 4): one quaternion (x, y, z, w) per row of clump_x")
-    s = _ints(clump_shape, where, "clump_shape", (k,), f"({k},): one shape index per row of clump_x",
-              0, n_shapes)
+    s = _ints(clump_shape, where, "clump_shape", (k,), f"({k},): one shape index per row of clump_x", 0, n_shapes)
     if clump_scale is None:
         sc = np.ones(k)
     else:
-        sc = _floats(clump_scale, where, "clump_scale", (k,), f"({k},): one scale factor per row of clump_x",
-                     positive=True)
+        sc = _floats(
+            clump_scale, where, "clump_scale", (k,), f"({k},): one scale factor per row of clump_x", positive=True
+        )
     return x, q, s, sc
 
 
@@ -339,9 +359,19 @@ class ResultWriter:
             readable file; 0 saves only at :meth:`close` and :meth:`flush`.
     """
 
-    def __init__(self, out_dir, walls: list[WallGeometry], shapes: list[ShapeGeometry], *,
-                 usd_name: str = "result.usdc", vtk: bool = True, frames_per_second: float | None = None,
-                 up_axis: str = "Z", meters_per_unit: float = 1.0, flush_every: int = 20):
+    def __init__(
+        self,
+        out_dir,
+        walls: list[WallGeometry],
+        shapes: list[ShapeGeometry],
+        *,
+        usd_name: str = "result.usdc",
+        vtk: bool = True,
+        frames_per_second: float | None = None,
+        up_axis: str = "Z",
+        meters_per_unit: float = 1.0,
+        flush_every: int = 20,
+    ):
         where = "ResultWriter"
         try:
             walls = list(walls)
@@ -352,8 +382,11 @@ class ResultWriter:
                 _fail(where, f"walls[{i}]", wall, "a WallGeometry")
         shapes = _shape_list(shapes, where)
         shapes = [sh if isinstance(sh, ShapeGeometry) else ShapeGeometry.from_template(sh) for sh in shapes]
-        if not isinstance(usd_name, str) or os.path.basename(usd_name) != usd_name or \
-                os.path.splitext(usd_name)[1].lower() not in (".usd", ".usdc", ".usda"):
+        if (
+            not isinstance(usd_name, str)
+            or os.path.basename(usd_name) != usd_name
+            or os.path.splitext(usd_name)[1].lower() not in (".usd", ".usdc", ".usda")
+        ):
             _fail(where, "usd_name", usd_name, "a file name (no directory) ending in .usdc, .usd or .usda")
         if frames_per_second is not None and not (_finite(frames_per_second) and frames_per_second > 0):
             _fail(where, "frames_per_second", frames_per_second, "None or a rate > 0 per second")
@@ -381,8 +414,13 @@ class ResultWriter:
         self._result: dict | None = None
 
         if Sdf.Layer.Find(str(self.usd_path)):
-            _fail(where, "usd_name", usd_name, f"a file not open in this process ({self.usd_path} is; close the "
-                  "ResultWriter or stage holding it first)")
+            _fail(
+                where,
+                "usd_name",
+                usd_name,
+                f"a file not open in this process ({self.usd_path} is; close the "
+                "ResultWriter or stage holding it first)",
+            )
         stage = Usd.Stage.CreateNew(str(self.usd_path))
         self._stage = stage
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if up_axis.upper() == "Z" else UsdGeom.Tokens.y)
@@ -396,8 +434,12 @@ class ResultWriter:
         pts.CreateDisplayColorAttr([_SAND])
         self._pts = pts
         self._pts_attrs = {
-            "points": pts.CreatePointsAttr(), "widths": pts.CreateWidthsAttr(), "ids": pts.CreateIdsAttr(),
-            "velocities": pts.CreateVelocitiesAttr(), "extent": pts.CreateExtentAttr()}
+            "points": pts.CreatePointsAttr(),
+            "widths": pts.CreateWidthsAttr(),
+            "ids": pts.CreateIdsAttr(),
+            "velocities": pts.CreateVelocitiesAttr(),
+            "extent": pts.CreateExtentAttr(),
+        }
         pts.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
 
         self._build_instancer(stage)
@@ -416,10 +458,14 @@ class ResultWriter:
         inst = UsdGeom.PointInstancer.Define(stage, "/World/Clumps")
         self._inst = inst
         self._inst_attrs = {
-            "positions": inst.CreatePositionsAttr(), "orientations": inst.CreateOrientationsAttr(),
-            "scales": inst.CreateScalesAttr(), "protoIndices": inst.CreateProtoIndicesAttr(),
-            "ids": inst.CreateIdsAttr(), "velocities": inst.CreateVelocitiesAttr(),
-            "extent": inst.CreateExtentAttr()}
+            "positions": inst.CreatePositionsAttr(),
+            "orientations": inst.CreateOrientationsAttr(),
+            "scales": inst.CreateScalesAttr(),
+            "protoIndices": inst.CreateProtoIndicesAttr(),
+            "ids": inst.CreateIdsAttr(),
+            "velocities": inst.CreateVelocitiesAttr(),
+            "extent": inst.CreateExtentAttr(),
+        }
         root = "/World/Clumps/Prototypes"
         self.prototype_paths = [f"{root}/{n}" for n in _identifiers([s.name for s in self.shapes], "shape")]
         u = self._unit
@@ -452,8 +498,9 @@ class ResultWriter:
             v = np.ascontiguousarray(wall.vertices * u, dtype=np.float32)
             mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(v))
             mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(wall.face_count, 3, np.int32)))
-            mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(
-                np.ascontiguousarray(wall.triangles.reshape(-1), dtype=np.int32)))
+            mesh.CreateFaceVertexIndicesAttr(
+                Vt.IntArray.FromNumpy(np.ascontiguousarray(wall.triangles.reshape(-1), dtype=np.int32))
+            )
             mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([v.min(axis=0), v.max(axis=0)])))
             # Walls are faceted triangle meshes (often open, like a cone): no subdivision, both sides lit.
             mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
@@ -475,9 +522,24 @@ class ResultWriter:
     def frame_count(self) -> int:
         return len(self._times)
 
-    def add_frame(self, time: float, *, sphere_x=None, sphere_r=None, sphere_id=None, sphere_v=None,
-                  clump_x=None, clump_q=None, clump_shape=None, clump_scale=None, clump_id=None, clump_v=None,
-                  wall_pose=None, face_impacts=None, face_energy=None) -> None:
+    def add_frame(
+        self,
+        time: float,
+        *,
+        sphere_x=None,
+        sphere_r=None,
+        sphere_id=None,
+        sphere_v=None,
+        clump_x=None,
+        clump_q=None,
+        clump_shape=None,
+        clump_scale=None,
+        clump_id=None,
+        clump_v=None,
+        wall_pose=None,
+        face_impacts=None,
+        face_energy=None,
+    ) -> None:
         """Append one frame (its time code is the frame index).
 
         Counts may change between frames and may be zero. The sphere group (``sphere_x``, ``sphere_r``,
@@ -506,8 +568,22 @@ class ResultWriter:
         """
         if self._result is not None:
             raise RuntimeError(f"ResultWriter.add_frame: the writer of {self.usd_path} is closed")
-        f = self._validate_frame(time, sphere_x, sphere_r, sphere_id, sphere_v, clump_x, clump_q, clump_shape,
-                                 clump_scale, clump_id, clump_v, wall_pose, face_impacts, face_energy)
+        f = self._validate_frame(
+            time,
+            sphere_x,
+            sphere_r,
+            sphere_id,
+            sphere_v,
+            clump_x,
+            clump_q,
+            clump_shape,
+            clump_scale,
+            clump_id,
+            clump_v,
+            wall_pose,
+            face_impacts,
+            face_energy,
+        )
         frame = len(self._times)
         self._write_usd(frame, f)
         if self.vtk:
@@ -516,8 +592,23 @@ class ResultWriter:
         if self.flush_every and len(self._times) % self.flush_every == 0:
             self.flush()
 
-    def _validate_frame(self, time, sphere_x, sphere_r, sphere_id, sphere_v, clump_x, clump_q, clump_shape,
-                        clump_scale, clump_id, clump_v, wall_pose, face_impacts, face_energy) -> dict:
+    def _validate_frame(
+        self,
+        time,
+        sphere_x,
+        sphere_r,
+        sphere_id,
+        sphere_v,
+        clump_x,
+        clump_q,
+        clump_shape,
+        clump_scale,
+        clump_id,
+        clump_v,
+        wall_pose,
+        face_impacts,
+        face_energy,
+    ) -> dict:
         """Every input checked (and converted) before anything is written, so a bad frame leaves no trace."""
         where = "ResultWriter.add_frame"
         if not _finite(time):
@@ -530,29 +621,45 @@ class ResultWriter:
         given = [k for k, v in group.items() if v is not None]
         if given and len(given) < 3:
             missing = [k for k in group if k not in given][0]
-            _fail(where, missing, None, f"an array, since {given[0]} is given (sphere_x, sphere_r, sphere_id "
-                  "are all given or all None)")
+            _fail(
+                where,
+                missing,
+                None,
+                f"an array, since {given[0]} is given (sphere_x, sphere_r, sphere_id are all given or all None)",
+            )
         if given:
-            sx = _floats(sphere_x, where, "sphere_x", (None, 3), "an (n, 3) array of sphere centres in m",
-                         unit="m")
+            sx = _floats(sphere_x, where, "sphere_x", (None, 3), "an (n, 3) array of sphere centres in m", unit="m")
             n = sx.shape[0]
-            sr = _floats(sphere_r, where, "sphere_r", (n,), f"({n},): one radius per row of sphere_x "
-                         f"(shape {sx.shape})", positive=True, unit="m")
+            sr = _floats(
+                sphere_r,
+                where,
+                "sphere_r",
+                (n,),
+                f"({n},): one radius per row of sphere_x (shape {sx.shape})",
+                positive=True,
+                unit="m",
+            )
             sid = _ints(sphere_id, where, "sphere_id", (n,), f"({n},): one id per row of sphere_x (shape {sx.shape})")
         else:
             n = 0
             sx, sr, sid = np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64)
         sv = None
         if sphere_v is not None:
-            sv = _floats(sphere_v, where, "sphere_v", (n, 3), f"({n}, 3): one velocity in m/s per loose sphere, "
-                         "or None")
+            sv = _floats(
+                sphere_v, where, "sphere_v", (n, 3), f"({n}, 3): one velocity in m/s per loose sphere, or None"
+            )
 
         group = {"clump_x": clump_x, "clump_q": clump_q, "clump_shape": clump_shape, "clump_id": clump_id}
         given = [k for k, v in group.items() if v is not None]
         if given and len(given) < 4:
             missing = [k for k in group if k not in given][0]
-            _fail(where, missing, None, f"an array, since {given[0]} is given (clump_x, clump_q, clump_shape, "
-                  "clump_id are all given or all None)")
+            _fail(
+                where,
+                missing,
+                None,
+                f"an array, since {given[0]} is given (clump_x, clump_q, clump_shape, "
+                "clump_id are all given or all None)",
+            )
         if given:
             cx, cq, cs, cscale = _check_clumps(where, clump_x, clump_q, clump_shape, clump_scale, len(self.shapes))
             k = cx.shape[0]
@@ -571,13 +678,32 @@ class ResultWriter:
         if wall_pose is None:
             pose = np.tile([0.0, 0, 0, 0, 0, 0, 1], (w, 1))
         else:
-            pose = _floats(wall_pose, where, "wall_pose", (w, 7), f"({w}, 7): one row [px, py, pz, qx, qy, qz, qw] "
-                           "per wall, or None")
+            pose = _floats(
+                wall_pose,
+                where,
+                "wall_pose",
+                (w, 7),
+                f"({w}, 7): one row [px, py, pz, qx, qy, qz, qw] per wall, or None",
+            )
             pose[:, 3:] = _quats(pose[:, 3:], where, "wall_pose[:, 3:]", w, "unit quaternions (x, y, z, w)")
         impacts = self._per_face(where, "face_impacts", face_impacts, integer=True)
         energy = self._per_face(where, "face_energy", face_energy, integer=False)
-        return dict(time=time, sx=sx, sr=sr, sid=sid, sv=sv, cx=cx, cq=cq, cs=cs, cscale=cscale, cid=cid, cv=cv,
-                    pose=pose, impacts=impacts, energy=energy)
+        return dict(
+            time=time,
+            sx=sx,
+            sr=sr,
+            sid=sid,
+            sv=sv,
+            cx=cx,
+            cq=cq,
+            cs=cs,
+            cscale=cscale,
+            cid=cid,
+            cv=cv,
+            pose=pose,
+            impacts=impacts,
+            energy=energy,
+        )
 
     def _per_face(self, where: str, name: str, value, integer: bool):
         if value is None:
@@ -644,10 +770,13 @@ class ResultWriter:
         a["positions"].Set(vec3f(cx), frame)
         # GfQuath stores (imaginary, real) in memory, so an (x, y, z, w) row is already its layout; read
         # back, GetReal() is w and GetImaginary() is (x, y, z).
-        a["orientations"].Set(Vt.QuathArray.FromNumpy(np.ascontiguousarray(cq, dtype=np.float16).reshape(-1, 4)),
-                              frame)
-        a["scales"].Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(
-            np.repeat(cscale[:, None], 3, axis=1), dtype=np.float32).reshape(-1, 3)), frame)
+        a["orientations"].Set(Vt.QuathArray.FromNumpy(np.ascontiguousarray(cq, dtype=np.float16).reshape(-1, 4)), frame)
+        a["scales"].Set(
+            Vt.Vec3fArray.FromNumpy(
+                np.ascontiguousarray(np.repeat(cscale[:, None], 3, axis=1), dtype=np.float32).reshape(-1, 3)
+            ),
+            frame,
+        )
         a["protoIndices"].Set(Vt.IntArray.FromNumpy(np.ascontiguousarray(cs, dtype=np.int32)), frame)
         a["ids"].Set(Vt.Int64Array.FromNumpy(np.ascontiguousarray(f["cid"])), frame)
         self._set_optional(a["velocities"], None if f["cv"] is None else vec3f(f["cv"]), frame)
@@ -729,12 +858,16 @@ class ResultWriter:
         self._pvd.append((f["time"], 1, f"vtk/{name}", "walls"))
 
     def _write_pvd(self):
-        lines = ['<?xml version="1.0"?>',
-                 '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
-                 "  <Collection>"]
+        lines = [
+            '<?xml version="1.0"?>',
+            '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
+            "  <Collection>",
+        ]
         for time, part, file, name in self._pvd:
-            lines.append(f'    <DataSet timestep="{time!r}" group="" part="{part}" name={quoteattr(name)} '
-                         f"file={quoteattr(file)}/>")
+            lines.append(
+                f'    <DataSet timestep="{time!r}" group="" part="{part}" name={quoteattr(name)} '
+                f"file={quoteattr(file)}/>"
+            )
         lines += ["  </Collection>", "</VTKFile>", ""]
         # Written to a side file and renamed, so a crash mid-write never leaves a truncated collection.
         tmp = self.pvd_path.with_suffix(".pvd.tmp")
@@ -765,8 +898,11 @@ class ResultWriter:
             self._pts = self._inst = None
             self._pts_attrs = self._inst_attrs = {}
             self._wall_ops, self._wall_primvars, self._time_attr = [], [], None
-            self._result = {"usd": str(self.usd_path), "vtk_series": str(self.pvd_path) if self.vtk else None,
-                            "frames": len(self._times)}
+            self._result = {
+                "usd": str(self.usd_path),
+                "vtk_series": str(self.pvd_path) if self.vtk else None,
+                "frames": len(self._times),
+            }
         return dict(self._result)
 
     def __enter__(self) -> ResultWriter:
@@ -790,8 +926,9 @@ def _finite(x) -> bool:
 _VIEWS = {"x": (1, 2, +1.0), "y": (0, 2, -1.0), "z": (0, 1, +1.0)}
 
 
-def _outline_edges(v: np.ndarray, tri: np.ndarray, h: int, vax: int,
-                   feature_cos: float = math.cos(math.radians(30.0))) -> np.ndarray:
+def _outline_edges(
+    v: np.ndarray, tri: np.ndarray, h: int, vax: int, feature_cos: float = math.cos(math.radians(30.0))
+) -> np.ndarray:
     """Edges (e, 2) worth drawing in a projection onto axes (h, vax): boundary, non-manifold, silhouette
     and sharp edges.
 
@@ -827,9 +964,19 @@ def _outline_edges(v: np.ndarray, tri: np.ndarray, h: int, vax: int,
     return uniq[draw]
 
 
-def side_view_png(path, sphere_x, sphere_r, walls_world=None, axis: str = "y", title: str | None = None,
-                  colour_by=None, *, figsize: tuple[float, float] = (8.0, 6.0), dpi: int = 150,
-                  colour_label: str | None = None) -> str:
+def side_view_png(
+    path,
+    sphere_x,
+    sphere_r,
+    walls_world=None,
+    axis: str = "y",
+    title: str | None = None,
+    colour_by=None,
+    *,
+    figsize: tuple[float, float] = (8.0, 6.0),
+    dpi: int = 150,
+    colour_label: str | None = None,
+) -> str:
     """Orthographic side view of a sphere pile, saved as a PNG (the seeds' photo of the pile).
 
     Every sphere is a filled disc of its true radius, drawn back to front so nearer spheres cover
@@ -859,8 +1006,9 @@ def side_view_png(path, sphere_x, sphere_r, walls_world=None, axis: str = "y", t
         _fail(where, "axis", axis, '"x", "y" or "z"')
     x = _floats(sphere_x, where, "sphere_x", (None, 3), "an (n, 3) array of sphere centres in m")
     n = x.shape[0]
-    r = _floats(sphere_r, where, "sphere_r", (n,), f"({n},): one radius per row of sphere_x (shape {x.shape})",
-                positive=True)
+    r = _floats(
+        sphere_r, where, "sphere_r", (n,), f"({n},): one radius per row of sphere_x (shape {x.shape})", positive=True
+    )
     values = None
     if colour_by is not None:
         values = _floats(colour_by, where, "colour_by", (n,), f"({n},): one value per sphere, or None")
@@ -872,8 +1020,15 @@ def side_view_png(path, sphere_x, sphere_r, walls_world=None, axis: str = "y", t
             if not isinstance(item, (list, tuple)) or len(item) != 2:
                 _fail(where, f"walls_world[{i}]", item, "a pair (vertices (V, 3), triangles (F, 3))")
             v = _floats(item[0], where, f"walls_world[{i}][0]", (None, 3), "a (V, 3) array of vertices in m")
-            t = _ints(item[1], where, f"walls_world[{i}][1]", (None, 3),
-                      f"an (F, 3) array of vertex indices in [0, {len(v)})", 0, len(v))
+            t = _ints(
+                item[1],
+                where,
+                f"walls_world[{i}][1]",
+                (None, 3),
+                f"an (F, 3) array of vertex indices in [0, {len(v)})",
+                0,
+                len(v),
+            )
             walls.append((v, t))
     if not isinstance(dpi, (int, np.integer)) or isinstance(dpi, bool) or not 10 <= dpi <= 2000:
         _fail(where, "dpi", dpi, "an integer in [10, 2000]")
@@ -917,9 +1072,18 @@ def side_view_png(path, sphere_x, sphere_r, walls_world=None, axis: str = "y", t
             diam = 2.0 * r[order] * mm
             # An outline helps separate touching discs, but at 1e5 spheres it would be all you see.
             lw = 0.3 if n <= 20000 else 0.0
-            discs = EllipseCollection(diam, diam, np.zeros(n), units="xy", offsets=centres,
-                                      offset_transform=ax.transData, facecolors=rgba,
-                                      edgecolors=np.clip(rgba * [0.6, 0.6, 0.6, 1], 0, 1), linewidths=lw, zorder=2)
+            discs = EllipseCollection(
+                diam,
+                diam,
+                np.zeros(n),
+                units="xy",
+                offsets=centres,
+                offset_transform=ax.transData,
+                facecolors=rgba,
+                edgecolors=np.clip(rgba * [0.6, 0.6, 0.6, 1], 0, 1),
+                linewidths=lw,
+                zorder=2,
+            )
             ax.add_collection(discs)
             lo = np.minimum(lo, (x[:, [h, vax]] - r[:, None]).min(axis=0) * mm)
             hi = np.maximum(hi, (x[:, [h, vax]] + r[:, None]).max(axis=0) * mm)

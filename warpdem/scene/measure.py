@@ -64,6 +64,7 @@ _LATTICE_TURN = math.atan(1.0 / ((1.0 + math.sqrt(5.0)) / 2.0) ** 2)
 # input checks
 # --------------------------------------------------------------------------------------------------
 
+
 def _bad(name: str, value, allowed: str):
     raise ValueError(f"{name} = {value!r} is not allowed; expected {allowed}")
 
@@ -139,14 +140,19 @@ def _base_layer(x: np.ndarray, r: np.ndarray, base_z: float) -> np.ndarray:
     # spheres wholly under the base fell through it: not part of the pile
     near = (top > base_z) & ((x[:, 2] - base_z) < BASE_LAYER_RADII * r.max())
     if not near.any():
-        _bad("x", _short(x), f"a pile with spheres on the base plane z = base_z = {base_z} m "
-                             f"(none has its centre within {BASE_LAYER_RADII} radii of it)")
+        _bad(
+            "x",
+            _short(x),
+            f"a pile with spheres on the base plane z = base_z = {base_z} m "
+            f"(none has its centre within {BASE_LAYER_RADII} radii of it)",
+        )
     return near
 
 
 # --------------------------------------------------------------------------------------------------
 # angle of repose
 # --------------------------------------------------------------------------------------------------
+
 
 def pile_spheres(x, r, base_z: float = 0.0, gap: float = 0.1) -> np.ndarray:
     """Mask of the spheres that belong to the pile: connected to the base through a chain of touching spheres.
@@ -180,8 +186,16 @@ def pile_spheres(x, r, base_z: float = 0.0, gap: float = 0.1) -> np.ndarray:
     return np.isin(label, np.unique(label[grounded]))
 
 
-def angle_surface_fit(x, r, slices: int = 8, bins: int = 12, base_z: float = 0.0, center=(0.0, 0.0),
-                      inner: float = 0.2, outer: float = 0.8) -> dict:
+def angle_surface_fit(
+    x,
+    r,
+    slices: int = 8,
+    bins: int = 12,
+    base_z: float = 0.0,
+    center=(0.0, 0.0),
+    inner: float = 0.2,
+    outer: float = 0.8,
+) -> dict:
     """Angle of repose [deg] by straight-line fits of the pile surface in azimuthal sectors.
 
     The pile is cut into ``slices`` equal sectors around its axis. In each sector the radial range
@@ -242,8 +256,10 @@ def angle_surface_fit(x, r, slices: int = 8, bins: int = 12, base_z: float = 0.0
     sector = np.minimum(turn.astype(int), slices - 1)
     # Cell maxima of a grid and of grids shifted by half a cell: about 2-4 times more surface points
     # for the same cell size, so less scatter; a sphere found twice counts once.
-    picks = [_cell_maxima(rho, turn - sector, sector, top, width, extent, inner, outer, slices, shift)
-             for shift in _GRID_SHIFTS]
+    picks = [
+        _cell_maxima(rho, turn - sector, sector, top, width, extent, inner, outer, slices, shift)
+        for shift in _GRID_SHIFTS
+    ]
     best = np.unique(np.concatenate(picks))
     best_sector = sector[best]
 
@@ -259,10 +275,18 @@ def angle_surface_fit(x, r, slices: int = 8, bins: int = 12, base_z: float = 0.0
             f"angle_surface_fit: only {len(angles)} of slices = {slices} sectors have >= 3 surface points "
             f"between inner = {inner} and outer = {outer} of the extent {extent:.4g} m with bins "
             f"{width:.4g} m wide (>= {MIN_BIN_DIAMETERS} sphere diameters); the pile is too small or too "
-            f"sparse: need >= 2 sectors with >= 3 points (use fewer slices or a larger pile)")
+            f"sparse: need >= 2 sectors with >= 3 points (use fewer slices or a larger pile)"
+        )
     a = np.array(angles)
-    return {"mean_deg": float(a.mean()), "sd_deg": float(a.std(ddof=1)), "per_slice_deg": a.tolist(),
-            "slices": len(a), "extent_m": extent, "bin_width_m": width, "center": (cx, cy)}
+    return {
+        "mean_deg": float(a.mean()),
+        "sd_deg": float(a.std(ddof=1)),
+        "per_slice_deg": a.tolist(),
+        "slices": len(a),
+        "extent_m": extent,
+        "bin_width_m": width,
+        "center": (cx, cy),
+    }
 
 
 def _cell_maxima(rho, frac, sector, top, width, extent, inner, outer, slices, shift) -> np.ndarray:
@@ -345,8 +369,9 @@ def angle_cone(x, r, base_z: float = 0.0, center=(0.0, 0.0), toe_correction: boo
     return math.degrees(math.atan2(2.0 * h, d))
 
 
-def silhouette(x, r, azimuth_deg: float = 0.0, pixel: float | None = None, base_z: float = 0.0,
-               center=(0.0, 0.0)) -> dict:
+def silhouette(
+    x, r, azimuth_deg: float = 0.0, pixel: float | None = None, base_z: float = 0.0, center=(0.0, 0.0)
+) -> dict:
     """Binary side view of a sphere pile: every sphere projected orthographically as a filled disc.
 
     The camera looks horizontally at the axis from azimuth ``azimuth_deg`` (0 = from +x, 90 = from +y).
@@ -424,8 +449,17 @@ def _top_boundary(image: np.ndarray) -> np.ndarray:
     return np.where(filled, np.argmax(image, axis=0), -1)
 
 
-def angle_image(x, r, views: int = 4, pixel: float | None = None, base_z: float = 0.0, center=(0.0, 0.0),
-                inner: float = 0.2, outer: float = 0.8, return_images: bool = False) -> dict:
+def angle_image(
+    x,
+    r,
+    views: int = 4,
+    pixel: float | None = None,
+    base_z: float = 0.0,
+    center=(0.0, 0.0),
+    inner: float = 0.2,
+    outer: float = 0.8,
+    return_images: bool = False,
+) -> dict:
     """Angle of repose [deg] by the seeds' image method on orthographic side views of the pile.
 
     For each of ``views`` viewing directions evenly spaced in azimuth (4 = front, right, rear, left)
@@ -478,31 +512,48 @@ def angle_image(x, r, views: int = 4, pixel: float | None = None, base_z: float 
         for side in (-1.0, 1.0):
             on = side * uc > 0
             if not on.any():
-                raise ValueError(f"angle_image: view {k} has no silhouette on the "
-                                 f"{'left' if side < 0 else 'right'} of the axis center = {(cx, cy)}; "
-                                 f"expected a pile around the axis")
+                raise ValueError(
+                    f"angle_image: view {k} has no silhouette on the "
+                    f"{'left' if side < 0 else 'right'} of the axis center = {(cx, cy)}; "
+                    f"expected a pile around the axis"
+                )
             w = float((side * uc[on]).max())
             keep = on & (side * uc >= inner * w) & (side * uc <= outer * w)
             if keep.sum() < 3:
-                raise ValueError(f"angle_image: view {k}, {'left' if side < 0 else 'right'} flank has "
-                                 f"{int(keep.sum())} columns between inner = {inner} and outer = {outer} of its "
-                                 f"width {w:.4g} m at pixel = {p:.4g} m; expected >= 3 (use a smaller pixel)")
+                raise ValueError(
+                    f"angle_image: view {k}, {'left' if side < 0 else 'right'} flank has "
+                    f"{int(keep.sum())} columns between inner = {inner} and outer = {outer} of its "
+                    f"width {w:.4g} m at pixel = {p:.4g} m; expected >= 3 (use a smaller pixel)"
+                )
             slope = np.polyfit(uc[keep], height[keep], 1)[0]
             angles.append(math.degrees(math.atan(abs(slope))))
         if return_images:
             images.append(img)
             geometry.append({"u0_m": sil["u0_m"], "z0_m": sil["z0_m"], "axis_column": sil["axis_column"]})
     a = np.array(angles)
-    out = {"mean_deg": float(a.mean()), "sd_deg": float(a.std(ddof=1)), "per_side_deg": a.tolist(),
-           "views": views, "pixel_m": p, "center": (cx, cy)}
+    out = {
+        "mean_deg": float(a.mean()),
+        "sd_deg": float(a.std(ddof=1)),
+        "per_side_deg": a.tolist(),
+        "views": views,
+        "pixel_m": p,
+        "center": (cx, cy),
+    }
     if return_images:
         out["images"] = images
         out["geometry"] = geometry
     return out
 
 
-def synthetic_cone(angle_deg: float, base_radius: float, sphere_radius: float, seed: int = 0,
-                   polydispersity: float = 0.0, base_z: float = 0.0, center=(0.0, 0.0)):
+def synthetic_cone(
+    angle_deg: float,
+    base_radius: float,
+    sphere_radius: float,
+    seed: int = 0,
+    polydispersity: float = 0.0,
+    base_z: float = 0.0,
+    center=(0.0, 0.0),
+):
     """A sphere pile of known slope, for testing the angle-of-repose measures.
 
     The cone has slope ``angle_deg``, base radius ``base_radius`` [m] and apex height
@@ -546,8 +597,12 @@ def synthetic_cone(angle_deg: float, base_radius: float, sphere_radius: float, s
     height = big_r * tan_a
     r_max = r0 * (1 + pd)
     if height < 2 * r_max:
-        _bad("base_radius", base_radius, f"a cone at least one largest sphere diameter ({2 * r_max:.4g} m) high; "
-                                         f"base_radius * tan(angle_deg) = {height:.4g} m")
+        _bad(
+            "base_radius",
+            base_radius,
+            f"a cone at least one largest sphere diameter ({2 * r_max:.4g} m) high; "
+            f"base_radius * tan(angle_deg) = {height:.4g} m",
+        )
     rng = np.random.default_rng(seed)
     spacing = 2.2 * r_max
     jit = 0.1 * r_max
@@ -586,6 +641,7 @@ def synthetic_cone(angle_deg: float, base_radius: float, sphere_radius: float, s
 # die press
 # --------------------------------------------------------------------------------------------------
 
+
 def _press_arrays(piston_z, piston_force) -> tuple[np.ndarray, np.ndarray]:
     z = np.asarray(piston_z, dtype=float)
     f = np.asarray(piston_force, dtype=float)
@@ -622,8 +678,7 @@ def press_curve(piston_z, piston_force, contact_z: float | None = None) -> dict:
     if contact_z is None:
         fmax = float(f.max())
         if fmax <= 0:
-            _bad("piston_force", _short(f), "some positive force (the piston never touched the bed); "
-                                            "or give contact_z")
+            _bad("piston_force", _short(f), "some positive force (the piston never touched the bed); or give contact_z")
         i0 = int(np.argmax(f > 0.01 * fmax))
         zc = float(z[i0])
     else:
@@ -635,8 +690,9 @@ def press_curve(piston_z, piston_force, contact_z: float | None = None) -> dict:
     return {"displacement_m": zc - z[i0:], "force_n": f[i0:].copy(), "contact_z_m": zc, "contact_index": i0}
 
 
-def press_summary(piston_z, piston_force, fill_height: float, force_limit: float | None = None,
-                  backstop_z: float = 0.0) -> dict:
+def press_summary(
+    piston_z, piston_force, fill_height: float, force_limit: float | None = None, backstop_z: float = 0.0
+) -> dict:
     """Key numbers of a die-press stroke (seed 001 reports max displacement and compression ratio).
 
     The loose bed fills the die from the backstop at ``backstop_z`` to ``backstop_z + fill_height``.
@@ -677,20 +733,28 @@ def press_summary(piston_z, piston_force, fill_height: float, force_limit: float
                 z_end = float(z[i - 1] + w * (z[i] - z[i - 1]))
             f_max = lim
     disp = max(0.0, backstop_z + fill - z_end)
-    return {"max_displacement_m": disp, "compression_ratio": disp / fill, "max_force_n": f_max,
-            "final_height_m": z_end - backstop_z, "limit_reached": reached}
+    return {
+        "max_displacement_m": disp,
+        "compression_ratio": disp / fill,
+        "max_force_n": f_max,
+        "final_height_m": z_end - backstop_z,
+        "limit_reached": reached,
+    }
 
 
 # --------------------------------------------------------------------------------------------------
 # impacts on wall faces
 # --------------------------------------------------------------------------------------------------
 
+
 def _impact_arrays(face_count, face_energy, face_max_speed, face_area):
     c = np.asarray(face_count)
     if c.ndim != 1 or c.size == 0:
         _bad("face_count", _short(c), "impact counts of shape (F,) with F >= 1")
-    if not (np.issubdtype(c.dtype, np.integer) or
-            (np.issubdtype(c.dtype, np.floating) and np.all(np.isfinite(c)) and np.all(c == np.round(c)))):
+    if not (
+        np.issubdtype(c.dtype, np.integer)
+        or (np.issubdtype(c.dtype, np.floating) and np.all(np.isfinite(c)) and np.all(c == np.round(c)))
+    ):
         _bad("face_count", _short(c), "whole-number impact counts")
     c = c.astype(np.int64)
     if np.any(c < 0):
@@ -735,10 +799,14 @@ def impact_summary(face_count, face_energy, face_max_speed, face_area=None, hot:
     energy = float(e.sum())
     order = np.argsort(-c, kind="stable")
     hot_faces = [int(i) for i in order[:hot] if c[i] > 0]
-    out = {"total_count": total, "total_energy_j": energy, "max_speed_m_s": float(v.max()),
-           "max_speed_face": int(np.argmax(v)),
-           "mean_energy_per_impact_j": energy / total if total > 0 else float("nan"),
-           "hot_faces": hot_faces}
+    out = {
+        "total_count": total,
+        "total_energy_j": energy,
+        "max_speed_m_s": float(v.max()),
+        "max_speed_face": int(np.argmax(v)),
+        "mean_energy_per_impact_j": energy / total if total > 0 else float("nan"),
+        "hot_faces": hot_faces,
+    }
     if area is not None:
         out["energy_per_area_j_m2"] = energy / float(area.sum())
         out["face_energy_per_area_j_m2"] = e / area
@@ -761,8 +829,11 @@ def impact_phases(snapshots: Mapping[str, Sequence], face_area=None) -> dict:
         dict phase name -> :func:`impact_summary` of that phase.
     """
     if not isinstance(snapshots, Mapping) or len(snapshots) == 0:
-        _bad("snapshots", type(snapshots).__name__ if not isinstance(snapshots, Mapping) else snapshots,
-             "a non-empty dict phase name -> (face_count, face_energy, face_max_speed)")
+        _bad(
+            "snapshots",
+            type(snapshots).__name__ if not isinstance(snapshots, Mapping) else snapshots,
+            "a non-empty dict phase name -> (face_count, face_energy, face_max_speed)",
+        )
     out = {}
     prev_c = prev_e = None
     for name, snap in snapshots.items():
@@ -791,6 +862,7 @@ def impact_phases(snapshots: Mapping[str, Sequence], face_area=None) -> dict:
 # --------------------------------------------------------------------------------------------------
 # settling
 # --------------------------------------------------------------------------------------------------
+
 
 class SettleMonitor:
     """Decides when a packing has settled: kinetic energy per particle below a threshold for a while.
@@ -838,6 +910,7 @@ class SettleMonitor:
 # --------------------------------------------------------------------------------------------------
 # plots
 # --------------------------------------------------------------------------------------------------
+
 
 def _pyplot():
     import matplotlib

@@ -41,8 +41,10 @@ def _check_params(p) -> None:
         if f.name in getattr(p, "_may_be_negative", ()):
             continue
         if v < 0 or (v == 0 and f.name not in p._may_be_zero):
-            raise ValueError(f"{type(p).__name__}: {f.name} = {v!r} is not allowed; expected a value > 0"
-                             + (" (0 allowed)" if f.name in p._may_be_zero else ""))
+            raise ValueError(
+                f"{type(p).__name__}: {f.name} = {v!r} is not allowed; expected a value > 0"
+                + (" (0 allowed)" if f.name in p._may_be_zero else "")
+            )
 
 
 def _bound3(shape: ShapeSpec) -> float:
@@ -62,8 +64,7 @@ def _shape(kind: str, where: str) -> tuple[ShapeSpec, float]:
         return ShapeSpec("sphere", "sphere"), 1.0
     templates = {"pellet": pellet_template, "phosphate": phosphate_template}
     if kind not in templates:
-        raise ValueError(f"{where}: particle = {kind!r} is not allowed; expected sphere, "
-                         + ", ".join(templates))
+        raise ValueError(f"{where}: particle = {kind!r} is not allowed; expected sphere, " + ", ".join(templates))
     t = templates[kind]()
     return ShapeSpec(kind, "clump", np.asarray(t.sphere_offset), np.asarray(t.sphere_radius)), t.equivalent_radius
 
@@ -72,8 +73,13 @@ def _sizes(radius: float, spread: float) -> dict:
     """Radius normally distributed with relative SD ``spread``, truncated at +-2 SD (fixed when 0)."""
     if spread == 0:
         return {"distribution": "fixed", "radius": radius}
-    return {"distribution": "normal", "mean": radius, "std": spread * radius, "low": radius * (1 - 2 * spread),
-            "high": radius * (1 + 2 * spread)}
+    return {
+        "distribution": "normal",
+        "mean": radius,
+        "std": spread * radius,
+        "low": radius * (1 - 2 * spread),
+        "high": radius * (1 + 2 * spread),
+    }
 
 
 def _plate_domain(size_x: float, size_y: float, center, margin: float, top: float) -> tuple:
@@ -194,8 +200,10 @@ class Funnel:
         if self.material not in ("pellet", "feed"):
             raise ValueError(f"Funnel: material = {self.material!r} is not allowed; expected pellet or feed")
         if self.outlet_diameter >= self.top_diameter:
-            raise ValueError(f"Funnel: outlet_diameter = {self.outlet_diameter} is not allowed; expected less than "
-                             f"top_diameter = {self.top_diameter}")
+            raise ValueError(
+                f"Funnel: outlet_diameter = {self.outlet_diameter} is not allowed; expected less than "
+                f"top_diameter = {self.top_diameter}"
+            )
         if not 0 < self.cone_angle < 180:
             raise ValueError(f"Funnel: cone_angle = {self.cone_angle} is not allowed; expected (0, 180) degrees")
 
@@ -216,27 +224,59 @@ class Funnel:
             # spheres need the elastic-plastic spring-dashpot rolling model to rest in a pile
             law = ContactLaw.JKR if self.surface_energy > 0 else ContactLaw.HERTZ_MINDLIN
             epsd = RollingModel.EPSD
-            pp = Interaction(restitution=0.15, static_friction=0.51, rolling_friction=0.21, rolling_model=epsd,
-                             law=law, surface_energy=self.surface_energy)
+            pp = Interaction(
+                restitution=0.15,
+                static_friction=0.51,
+                rolling_friction=0.21,
+                rolling_model=epsd,
+                law=law,
+                surface_energy=self.surface_energy,
+            )
             pw = Interaction(restitution=0.1, static_friction=0.45, rolling_friction=0.2, rolling_model=epsd)
-        pairs = [("grain", "grain", pp), ("grain", "steel", pw),
-                 ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3))]
+        pairs = [
+            ("grain", "grain", pp),
+            ("grain", "steel", pw),
+            ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3)),
+        ]
         cone_h = geo.funnel_height(self.top_diameter, self.outlet_diameter, self.cone_angle)
         top_z = self.outlet_height + self.stem_length + cone_h
-        fv, ft = geo.funnel(self.top_diameter, self.outlet_diameter, self.cone_angle, self.stem_length,
-                            self.outlet_height, min(self.cell, self.outlet_diameter / 4))
+        fv, ft = geo.funnel(
+            self.top_diameter,
+            self.outlet_diameter,
+            self.cone_angle,
+            self.stem_length,
+            self.outlet_height,
+            min(self.cell, self.outlet_diameter / 4),
+        )
         pv, pt = geo.grid_plate(self.plate_size, self.plate_size, max(self.cell, self.plate_size / 40))
         bound = radius * (1 + 2 * self.radius_spread) * (1.42 if shape.kind == "clump" else 1.0)
         region = ("cylinder", (0.0, 0.0, top_z + 2 * bound), 0.4 * self.top_diameter, max(8 * bound, 0.02), None)
-        fac = FactorySpec("pour", "dynamic", region, "grain", shape.name, _sizes(radius, self.radius_spread),
-                          count=int(self.count), rate=self.rate, seed=int(self.seed), interval=POUR_INTERVAL)
+        fac = FactorySpec(
+            "pour",
+            "dynamic",
+            region,
+            "grain",
+            shape.name,
+            _sizes(radius, self.radius_spread),
+            count=int(self.count),
+            rate=self.rate,
+            seed=int(self.seed),
+            interval=POUR_INTERVAL,
+        )
         return SceneSpec(
-            rig="funnel", materials=[grain, STEEL], pairs=pairs, shapes=[shape],
+            rig="funnel",
+            materials=[grain, STEEL],
+            pairs=pairs,
+            shapes=[shape],
             walls=[WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "steel")],
             factories=[fac],
-            run=RunSpec(duration=self.duration, dt_fraction=self.dt_fraction,
-                        settle_energy=_settle_energy(grain, radius), settle_after=self.count / self.rate,
-                        output_interval=0.05),
+            run=RunSpec(
+                duration=self.duration,
+                dt_fraction=self.dt_fraction,
+                settle_energy=_settle_energy(grain, radius),
+                settle_after=self.count / self.rate,
+                output_interval=0.05,
+            ),
             measure=MeasureSpec("angle_of_repose", base_height=0.0, center=(0.0, 0.0)),
             domain=_plate_domain(self.plate_size, self.plate_size, (0.0, 0.0, 0.0), bound, top_z + 0.5),
         )
@@ -278,8 +318,16 @@ class LiftingCylinder:
     cell: float = 0.02
     dt_fraction: float = 0.2
     seed: int = 1
-    _may_be_zero = ("count", "mass", "lift_height", "coat_radius", "radius_spread", "seed", "surface_energy",
-                    "pour_speed")
+    _may_be_zero = (
+        "count",
+        "mass",
+        "lift_height",
+        "coat_radius",
+        "radius_spread",
+        "seed",
+        "surface_energy",
+        "pour_speed",
+    )
     _may_be_negative = ("pull_off_force",)
 
     def __post_init__(self):
@@ -291,12 +339,20 @@ class LiftingCylinder:
         shape, _ = _shape(self.particle, "LiftingCylinder")
         r = self.particle_radius
         ore = Material("ore", density=2404.0, poisson_ratio=0.25, shear_modulus=2.5e6)
-        eepa = Interaction(restitution=0.15, static_friction=0.7, rolling_friction=0.3, law=ContactLaw.EEPA,
-                           surface_energy=self.surface_energy, pull_off_force=self.pull_off_force,
-                           rolling_model=RollingModel.CONSTANT_TORQUE)
-        pairs = [("ore", "ore", eepa),
-                 ("ore", "steel", Interaction(restitution=0.15, static_friction=0.5, rolling_friction=0.1)),
-                 ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3))]
+        eepa = Interaction(
+            restitution=0.15,
+            static_friction=0.7,
+            rolling_friction=0.3,
+            law=ContactLaw.EEPA,
+            surface_energy=self.surface_energy,
+            pull_off_force=self.pull_off_force,
+            rolling_model=RollingModel.CONSTANT_TORQUE,
+        )
+        pairs = [
+            ("ore", "ore", eepa),
+            ("ore", "steel", Interaction(restitution=0.15, static_friction=0.5, rolling_friction=0.1)),
+            ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3)),
+        ]
         R, H = self.inner_diameter / 2, self.height
         lift = self.lift_height or H + 0.02
         coat_r = self.coat_radius or r
@@ -304,31 +360,60 @@ class LiftingCylinder:
         v_mean = 4.0 / 3.0 * math.pi * r**3 * (1 + 3 * self.radius_spread**2)
         count = self.count or self.mass / (ore.density * v_mean)
         pour_r = R - margin
-        rate = _pour_rate(math.pi * pour_r**2 * self.pour_height, v_mean, _bound3(shape), self.pour_height,
-                          self.pour_speed)
+        rate = _pour_rate(
+            math.pi * pour_r**2 * self.pour_height, v_mean, _bound3(shape), self.pour_height, self.pour_speed
+        )
         t0 = count / rate + self.settle_time
         t1 = t0 + lift / self.lift_speed
         cv, ct = geo.frustum(R, R, 0.0, H, self.cell)
         bv, bt = geo.grid_plate(self.base_size, self.base_size, max(self.cell, self.base_size / 30))
         times = np.array([0.0, t0, t1])
-        cyl = WallSpec("Cylinder", cv, ct, "steel", times, np.array([[0, 0, 0], [0, 0, 0], [0, 0, lift]], float),
-                       np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)))
+        cyl = WallSpec(
+            "Cylinder",
+            cv,
+            ct,
+            "steel",
+            times,
+            np.array([[0, 0, 0], [0, 0, 0], [0, 0, lift]], float),
+            np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)),
+        )
         base = WallSpec("Base", bv, bt, "steel")
         if self.coated:
             cyl.coat = {"radius": coat_r, "material": "ore", "side": 1, "seed": self.seed}
             base.coat = {"radius": coat_r, "material": "ore", "side": 1, "seed": self.seed + 1}
         region = ("cylinder", (0.0, 0.0, H + r), pour_r, self.pour_height, None)
-        fac = FactorySpec("pour", "dynamic", region, "ore", shape.name, _sizes(r, self.radius_spread),
-                          count=self.count or None, mass=self.mass or None, rate=rate, seed=self.seed, interval=POUR_INTERVAL,
-                          initial_velocity=(0.0, 0.0, -self.pour_speed))
+        fac = FactorySpec(
+            "pour",
+            "dynamic",
+            region,
+            "ore",
+            shape.name,
+            _sizes(r, self.radius_spread),
+            count=self.count or None,
+            mass=self.mass or None,
+            rate=rate,
+            seed=self.seed,
+            interval=POUR_INTERVAL,
+            initial_velocity=(0.0, 0.0, -self.pour_speed),
+        )
         return SceneSpec(
-            rig="lifting_cylinder", materials=[ore, STEEL], pairs=pairs, shapes=[shape], walls=[cyl, base],
+            rig="lifting_cylinder",
+            materials=[ore, STEEL],
+            pairs=pairs,
+            shapes=[shape],
+            walls=[cyl, base],
             factories=[fac],
-            run=RunSpec(duration=t1 + self.after_lift, dt_fraction=self.dt_fraction,
-                        settle_energy=_settle_energy(ore, r), settle_after=t1, output_interval=0.05),
+            run=RunSpec(
+                duration=t1 + self.after_lift,
+                dt_fraction=self.dt_fraction,
+                settle_energy=_settle_energy(ore, r),
+                settle_after=t1,
+                output_interval=0.05,
+            ),
             measure=MeasureSpec("angle_of_repose", base_height=2 * coat_r if self.coated else 0.0),
-            domain=_plate_domain(self.base_size, self.base_size, (0.0, 0.0, 0.0), margin,
-                                 H + lift + self.pour_height + 0.5),
+            domain=_plate_domain(
+                self.base_size, self.base_size, (0.0, 0.0, 0.0), margin, H + lift + self.pour_height + 0.5
+            ),
         )
 
 
@@ -366,8 +451,10 @@ class DiePress:
     def __post_init__(self):
         _check_params(self)
         if self.inlet_diameter <= self.die_diameter:
-            raise ValueError(f"DiePress: inlet_diameter = {self.inlet_diameter} is not allowed; expected more than "
-                             f"die_diameter = {self.die_diameter}")
+            raise ValueError(
+                f"DiePress: inlet_diameter = {self.inlet_diameter} is not allowed; expected more than "
+                f"die_diameter = {self.die_diameter}"
+            )
         if not 0 < self.max_travel < 1:
             raise ValueError(f"DiePress: max_travel = {self.max_travel} is not allowed; expected a fraction in (0, 1)")
 
@@ -375,12 +462,31 @@ class DiePress:
         r = self.particle_radius
         feed = Material("feed", density=440.0, poisson_ratio=0.25, shear_modulus=10.0e6)
         steel = Material("steel", density=7850.0, poisson_ratio=0.3, shear_modulus=7.0e10)
-        pairs = [("feed", "feed", Interaction(restitution=0.15, static_friction=0.51, rolling_friction=0.21,
-                                              law=ContactLaw.JKR, surface_energy=0.65,
-                                              rolling_model=RollingModel.CONSTANT_TORQUE)),
-                 ("feed", "steel", Interaction(restitution=0.1, static_friction=0.45, rolling_friction=0.2,
-                                               rolling_model=RollingModel.CONSTANT_TORQUE)),
-                 ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3))]
+        pairs = [
+            (
+                "feed",
+                "feed",
+                Interaction(
+                    restitution=0.15,
+                    static_friction=0.51,
+                    rolling_friction=0.21,
+                    law=ContactLaw.JKR,
+                    surface_energy=0.65,
+                    rolling_model=RollingModel.CONSTANT_TORQUE,
+                ),
+            ),
+            (
+                "feed",
+                "steel",
+                Interaction(
+                    restitution=0.1,
+                    static_friction=0.45,
+                    rolling_friction=0.2,
+                    rolling_model=RollingModel.CONSTANT_TORQUE,
+                ),
+            ),
+            ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3)),
+        ]
         R = self.die_diameter / 2
         # a die a few particles wide packs a static fill more loosely still (wall effect)
         packing_loose, packing_bed = 0.6 * LOOSE_PACKING, 0.58
@@ -399,15 +505,35 @@ class DiePress:
         travel = self.max_travel * self.fill_height + self.gap
         t_c = t_b + travel / self.piston_speed
         ident = np.tile([0.0, 0.0, 0.0, 1.0], (4, 1))
-        piston = WallSpec("Piston", pv, pt, "steel", np.array([0.0, t_a, t_b, t_c]),
-                          np.array([[0, 0, park], [0, 0, park], [0, 0, start], [0, 0, start - travel]]), ident)
-        fac = FactorySpec("fill", "fill", ("cylinder", (0.0, 0.0, 0.0), R - 1.1 * r * (1 + 2 * self.radius_spread),
-                                           fill_region_h, None),
-                          "feed", "sphere", _sizes(r, self.radius_spread), count=count, seed=self.seed)
+        piston = WallSpec(
+            "Piston",
+            pv,
+            pt,
+            "steel",
+            np.array([0.0, t_a, t_b, t_c]),
+            np.array([[0, 0, park], [0, 0, park], [0, 0, start], [0, 0, start - travel]]),
+            ident,
+        )
+        fac = FactorySpec(
+            "fill",
+            "fill",
+            ("cylinder", (0.0, 0.0, 0.0), R - 1.1 * r * (1 + 2 * self.radius_spread), fill_region_h, None),
+            "feed",
+            "sphere",
+            _sizes(r, self.radius_spread),
+            count=count,
+            seed=self.seed,
+        )
         return SceneSpec(
-            rig="die_press", materials=[feed, steel], pairs=pairs, shapes=[ShapeSpec("sphere", "sphere")],
-            walls=[WallSpec("Die", np.concatenate([dv, iv]), np.concatenate([dt_, it + len(dv)]), "steel"),
-                   WallSpec("Backstop", bv, bt, "steel"), piston],
+            rig="die_press",
+            materials=[feed, steel],
+            pairs=pairs,
+            shapes=[ShapeSpec("sphere", "sphere")],
+            walls=[
+                WallSpec("Die", np.concatenate([dv, iv]), np.concatenate([dt_, it + len(dv)]), "steel"),
+                WallSpec("Backstop", bv, bt, "steel"),
+                piston,
+            ],
             factories=[fac],
             run=RunSpec(duration=t_c, dt_fraction=self.dt_fraction, output_interval=self.gap / self.piston_speed / 8),
             measure=MeasureSpec("press", piston="Piston", force_limit=self.force_limit, backstop_height=0.0),
@@ -457,23 +583,48 @@ class TruckTipper:
     def __post_init__(self):
         _check_params(self)
         if self.bucket_width >= self.body_width:
-            raise ValueError(f"TruckTipper: bucket_width = {self.bucket_width} is not allowed; expected less than "
-                             f"body_width = {self.body_width}")
+            raise ValueError(
+                f"TruckTipper: bucket_width = {self.bucket_width} is not allowed; expected less than "
+                f"body_width = {self.body_width}"
+            )
         if self.lip_height >= self.body_height + self.bucket_height:
-            raise ValueError(f"TruckTipper: lip_height = {self.lip_height} is not allowed; expected below "
-                             f"body_height + bucket_height = {self.body_height + self.bucket_height}")
+            raise ValueError(
+                f"TruckTipper: lip_height = {self.lip_height} is not allowed; expected below "
+                f"body_height + bucket_height = {self.body_height + self.bucket_height}"
+            )
 
     def spec(self) -> SceneSpec:
         shape, _ = _shape(self.particle, "TruckTipper")
         r = self.particle_radius
         ore = Material("ore", density=2404.0, poisson_ratio=0.25, shear_modulus=2.5e6)
-        pairs = [("ore", "ore", Interaction(restitution=0.15, static_friction=0.7, rolling_friction=0.3,
-                                            law=ContactLaw.EEPA, surface_energy=1.0, pull_off_force=-0.009,
-                                            rolling_model=RollingModel.CONSTANT_TORQUE)),
-                 ("ore", "steel", Interaction(restitution=0.3, static_friction=0.5, rolling_friction=0.1,
-                                              law=ContactLaw.JKR, surface_energy=0.1,
-                                              rolling_model=RollingModel.CONSTANT_TORQUE)),
-                 ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3))]
+        pairs = [
+            (
+                "ore",
+                "ore",
+                Interaction(
+                    restitution=0.15,
+                    static_friction=0.7,
+                    rolling_friction=0.3,
+                    law=ContactLaw.EEPA,
+                    surface_energy=1.0,
+                    pull_off_force=-0.009,
+                    rolling_model=RollingModel.CONSTANT_TORQUE,
+                ),
+            ),
+            (
+                "ore",
+                "steel",
+                Interaction(
+                    restitution=0.3,
+                    static_friction=0.5,
+                    rolling_friction=0.1,
+                    law=ContactLaw.JKR,
+                    surface_energy=0.1,
+                    rolling_model=RollingModel.CONSTANT_TORQUE,
+                ),
+            ),
+            ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3)),
+        ]
         L, W, H = self.body_length, self.body_width, self.body_height
         body_v, body_t = geo.open_box(L, W, H, self.cell, open_sides=("top", "rear"))
         gate_v, gate_t = geo.open_box(L, W, H, self.cell, open_sides=("top", "bottom", "front", "left", "right"))
@@ -482,8 +633,9 @@ class TruckTipper:
         # bucket: open box, pour edge (front top) at x = bucket_x + depth, z = lip_height
         bd, bw, bh = self.bucket_depth, self.bucket_width, self.bucket_height
         bx0 = self.bucket_x
-        buck_v, buck_t = geo.open_box(bd, bw, bh, self.cell / 2, open_sides=("top",),
-                                      origin=(bx0, 0.0, self.lip_height - bh))
+        buck_v, buck_t = geo.open_box(
+            bd, bw, bh, self.cell / 2, open_sides=("top",), origin=(bx0, 0.0, self.lip_height - bh)
+        )
         edge = (bx0 + bd, 0.0, self.lip_height)
         margin = r * (1 + 2 * self.radius_spread) * 1.45
         area = (bd - 2 * margin) * (bw - 2 * margin)
@@ -491,8 +643,11 @@ class TruckTipper:
         # clumps settle to about 0.5 of the space (by equivalent-sphere volume): the bed tops out at the
         # fill fraction of the bucket and nothing spills before the dump
         count = int(0.5 * area * self.fill_fraction * (bh - margin) / v_mean)
-        region = ("box", (bx0 + margin, -bw / 2 + margin, self.lip_height + r),
-                  (bx0 + bd - margin, bw / 2 - margin, self.lip_height + r + self.pour_height))
+        region = (
+            "box",
+            (bx0 + margin, -bw / 2 + margin, self.lip_height + r),
+            (bx0 + bd - margin, bw / 2 - margin, self.lip_height + r + self.pour_height),
+        )
         rate = _pour_rate(area * self.pour_height, v_mean, _bound3(shape), self.pour_height, self.pour_speed)
         t_dump0 = self.dump_start or count / rate + 0.5
         t_dump1 = t_dump0 + self.dump_duration
@@ -523,37 +678,104 @@ class TruckTipper:
         body = WallSpec("Body", body_v, body_t, "steel", *_pose_samples(tt, body_pose))
         gate = WallSpec("Tailgate", gate_v, gate_t, "steel", *_pose_samples(tt, gate_pose))
         ground = WallSpec("Ground", ground_v, ground_t, "steel")
-        fac = FactorySpec("load", "dynamic", region, "ore", shape.name, _sizes(r, self.radius_spread), count=count,
-                          rate=rate, seed=self.seed, interval=POUR_INTERVAL,
-                          initial_velocity=(0.0, 0.0, -self.pour_speed))
+        fac = FactorySpec(
+            "load",
+            "dynamic",
+            region,
+            "ore",
+            shape.name,
+            _sizes(r, self.radius_spread),
+            count=count,
+            rate=rate,
+            seed=self.seed,
+            interval=POUR_INTERVAL,
+            initial_velocity=(0.0, 0.0, -self.pour_speed),
+        )
         return SceneSpec(
-            rig="truck_tipper", materials=[ore, STEEL], pairs=pairs, shapes=[shape],
-            walls=[body, gate, bucket, ground], factories=[fac],
+            rig="truck_tipper",
+            materials=[ore, STEEL],
+            pairs=pairs,
+            shapes=[shape],
+            walls=[body, gate, bucket, ground],
+            factories=[fac],
             run=RunSpec(duration=end, dt_fraction=self.dt_fraction, output_interval=0.1),
-            measure=MeasureSpec("impacts", walls=["Body", "Tailgate"], phase_names=["loading", "discharge"],
-                                phase_ends=[t_load, end]),
-            domain=_plate_domain(L + 12.0, W + 4.0, (L / 2 + 4.0, 0.0, -self.chassis_height), margin,
-                                 self.lip_height + bh + self.pour_height + 4.0),
+            measure=MeasureSpec(
+                "impacts", walls=["Body", "Tailgate"], phase_names=["loading", "discharge"], phase_ends=[t_load, end]
+            ),
+            domain=_plate_domain(
+                L + 12.0,
+                W + 4.0,
+                (L / 2 + 4.0, 0.0, -self.chassis_height),
+                margin,
+                self.lip_height + bh + self.pour_height + 4.0,
+            ),
         )
 
 
 RIGS = {"funnel": Funnel, "lifting_cylinder": LiftingCylinder, "die_press": DiePress, "truck_tipper": TruckTipper}
 
 SMOKE = {
-    "funnel": {"particle": "sphere", "material": "feed", "particle_radius": 0.002, "count": 300, "rate": 1500.0, "top_diameter": 0.07,
-               "outlet_diameter": 0.02, "stem_length": 0.01, "outlet_height": 0.025, "plate_size": 0.16,
-               "cell": 0.01, "duration": 1.6},
-    "lifting_cylinder": {"particle": "sphere", "particle_radius": 0.0025, "mass": 0.0, "count": 450,
-                         "inner_diameter": 0.06, "height": 0.06, "lift_speed": 0.1, "base_size": 0.16, "pour_height": 0.04,
-                         "settle_time": 0.25, "after_lift": 0.6, "cell": 0.01, "surface_energy": 0.0,
-                         "pull_off_force": 0.0},
-    "die_press": {"particle_radius": 0.0005, "die_diameter": 0.006, "fill_height": 0.01, "inlet_diameter": 0.01,
-                  "inlet_height": 0.003, "piston_speed": 0.2, "gap": 0.002, "force_limit": 10.0, "settle_time": 0.1,
-                  "cell": 0.002},
-    "truck_tipper": {"particle": "sphere", "particle_radius": 0.012, "body_length": 0.6, "body_width": 0.34,
-                     "body_height": 0.2, "bucket_width": 0.24, "bucket_depth": 0.14, "bucket_height": 0.1,
-                     "bucket_x": 0.08, "lip_height": 0.16, "pour_height": 0.1, "dump_duration": 0.5, "load_settle": 0.5,
-                     "tilt_duration": 1.0, "after_tilt": 0.5, "chassis_height": 0.2, "cell": 0.05},
+    "funnel": {
+        "particle": "sphere",
+        "material": "feed",
+        "particle_radius": 0.002,
+        "count": 300,
+        "rate": 1500.0,
+        "top_diameter": 0.07,
+        "outlet_diameter": 0.02,
+        "stem_length": 0.01,
+        "outlet_height": 0.025,
+        "plate_size": 0.16,
+        "cell": 0.01,
+        "duration": 1.6,
+    },
+    "lifting_cylinder": {
+        "particle": "sphere",
+        "particle_radius": 0.0025,
+        "mass": 0.0,
+        "count": 450,
+        "inner_diameter": 0.06,
+        "height": 0.06,
+        "lift_speed": 0.1,
+        "base_size": 0.16,
+        "pour_height": 0.04,
+        "settle_time": 0.25,
+        "after_lift": 0.6,
+        "cell": 0.01,
+        "surface_energy": 0.0,
+        "pull_off_force": 0.0,
+    },
+    "die_press": {
+        "particle_radius": 0.0005,
+        "die_diameter": 0.006,
+        "fill_height": 0.01,
+        "inlet_diameter": 0.01,
+        "inlet_height": 0.003,
+        "piston_speed": 0.2,
+        "gap": 0.002,
+        "force_limit": 10.0,
+        "settle_time": 0.1,
+        "cell": 0.002,
+    },
+    "truck_tipper": {
+        "particle": "sphere",
+        "particle_radius": 0.012,
+        "body_length": 0.6,
+        "body_width": 0.34,
+        "body_height": 0.2,
+        "bucket_width": 0.24,
+        "bucket_depth": 0.14,
+        "bucket_height": 0.1,
+        "bucket_x": 0.08,
+        "lip_height": 0.16,
+        "pour_height": 0.1,
+        "dump_duration": 0.5,
+        "load_settle": 0.5,
+        "tilt_duration": 1.0,
+        "after_tilt": 0.5,
+        "chassis_height": 0.2,
+        "cell": 0.05,
+    },
 }
 """Overrides that make each rig a CPU smoke test with a few hundred particles."""
 

@@ -85,16 +85,21 @@ def _frame(writer, model, state, h, spec, t):
         first = model.clump_sphere_start.numpy()
         sel = act[first] & (h["clump_world"] == 0)
         ids = np.flatnonzero(sel)
-        kw.update(clump_x=state.clump_x.numpy()[sel], clump_q=state.clump_q.numpy()[sel],
-                  clump_shape=np.asarray(model.clump_template)[sel], clump_scale=np.asarray(model.clump_scale)[sel],
-                  clump_id=ids, clump_v=state.clump_v.numpy()[sel])
+        kw.update(
+            clump_x=state.clump_x.numpy()[sel],
+            clump_q=state.clump_q.numpy()[sel],
+            clump_shape=np.asarray(model.clump_template)[sel],
+            clump_scale=np.asarray(model.clump_scale)[sel],
+            clump_id=ids,
+            clump_v=state.clump_v.numpy()[sel],
+        )
     if model.wall_count:
         kw["wall_pose"] = state.wall_pose.numpy()[: model.wall_count]
         counts = state.face_impact_count.numpy()[0]
         energy = state.face_impact_energy.numpy()[0]
         start = model.wall_face_start.numpy()
-        kw["face_impacts"] = [counts[start[k]:start[k + 1]] for k in range(model.wall_count)]
-        kw["face_energy"] = [energy[start[k]:start[k + 1]].astype(np.float32) for k in range(model.wall_count)]
+        kw["face_impacts"] = [counts[start[k] : start[k + 1]] for k in range(model.wall_count)]
+        kw["face_energy"] = [energy[start[k] : start[k + 1]].astype(np.float32) for k in range(model.wall_count)]
     writer.add_frame(t, **kw)
 
 
@@ -120,8 +125,10 @@ class RunStopped(RuntimeError):
 
     def __init__(self, checkpoint, simulated_s: float, wall_s: float):
         self.checkpoint, self.simulated_s, self.wall_s = Path(checkpoint), float(simulated_s), float(wall_s)
-        super().__init__(f"stopped after {wall_s:.0f} s of wall time at {simulated_s:.4g} s simulated; "
-                         f"checkpoint saved to {checkpoint}; run the same command again to resume")
+        super().__init__(
+            f"stopped after {wall_s:.0f} s of wall time at {simulated_s:.4g} s simulated; "
+            f"checkpoint saved to {checkpoint}; run the same command again to resume"
+        )
 
 
 def check_stop_after(stop_after: float, out_dir, frames: bool) -> None:
@@ -129,8 +136,9 @@ def check_stop_after(stop_after: float, out_dir, frames: bool) -> None:
     if not (math.isfinite(stop_after) and stop_after >= 0):
         raise ValueError(f"stop_after = {stop_after!r} is not allowed; expected wall seconds >= 0 (0: no limit)")
     if stop_after > 0 and (out_dir is None or frames):
-        raise ValueError("stop_after needs out_dir and frames=False, i.e. warpdem run --no-frames "
-                         "(it stops by saving a checkpoint)")
+        raise ValueError(
+            "stop_after needs out_dir and frames=False, i.e. warpdem run --no-frames (it stops by saving a checkpoint)"
+        )
 
 
 def scene_solver(model, run, skin: float | None = None):
@@ -139,18 +147,35 @@ def scene_solver(model, run, skin: float | None = None):
     from warpdem.engine.solver import Solver, SolverOptions
 
     # rig meshes have fans and seams where one sphere may touch many triangles
-    solver = Solver(model, SolverOptions(dt_fraction=run.dt_fraction, impact_speed_min=run.impact_speed_min,
-                                         mesh_capacity=32, clump_contact_mass=run.clump_contact_mass,
-                                         skin_fraction=run.skin_fraction, skin=skin))
+    solver = Solver(
+        model,
+        SolverOptions(
+            dt_fraction=run.dt_fraction,
+            impact_speed_min=run.impact_speed_min,
+            mesh_capacity=32,
+            clump_contact_mass=run.clump_contact_mass,
+            skin_fraction=run.skin_fraction,
+            skin=skin,
+        ),
+    )
     # a compacted bed (die press) or glued layers hold more partners per sphere than a loose packing
-    solver.options = dataclasses.replace(solver.options,
-                                         neighbor_capacity=max(32, solver.default_neighbor_capacity()))
+    solver.options = dataclasses.replace(solver.options, neighbor_capacity=max(32, solver.default_neighbor_capacity()))
     return solver
 
 
-def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: int = 1,
-              variations: dict | None = None, frames: bool = True, progress=None, quiet: bool = False,
-              world_seeds=None, checkpoint_every: float = 0.0, stop_after: float = 0.0) -> RunResult:
+def run_scene(
+    spec: SceneSpec,
+    device: str = "cpu",
+    out_dir=None,
+    world_count: int = 1,
+    variations: dict | None = None,
+    frames: bool = True,
+    progress=None,
+    quiet: bool = False,
+    world_seeds=None,
+    checkpoint_every: float = 0.0,
+    stop_after: float = 0.0,
+) -> RunResult:
     """Run ``spec`` on ``device``; with ``out_dir`` write metrics.json, result.usdc (+ VTK series), pile.png.
 
     Args:
@@ -190,8 +215,10 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     if out is not None and frames:
         from .export import ResultWriter, ShapeGeometry, WallGeometry
 
-        walls = [WallGeometry(n, m.points.numpy(), m.indices.numpy().reshape(-1, 3))
-                 for n, m in zip(names, model.wall_meshes)]
+        walls = [
+            WallGeometry(n, m.points.numpy(), m.indices.numpy().reshape(-1, 3))
+            for n, m in zip(names, model.wall_meshes)
+        ]
         shapes = [ShapeGeometry.from_template(t) for t in model.clump_templates]
         writer = ResultWriter(out, walls, shapes, usd_name="result.usdc")
 
@@ -209,8 +236,11 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
     settled_since = 0
     settle_needed = 3
     eps = 0.5 * solver.dt
-    ckpt = (out / "checkpoint.npz"
-            if (out is not None and (checkpoint_every > 0 or stop_after > 0) and writer is None) else None)
+    ckpt = (
+        out / "checkpoint.npz"
+        if (out is not None and (checkpoint_every > 0 or stop_after > 0) and writer is None)
+        else None
+    )
     fingerprint = _fingerprint(spec, device, world_count, variations, world_seeds)
     resumed_from = None
     if ckpt is not None and ckpt.exists():
@@ -251,22 +281,29 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             series["bed_top"].append(float(np.percentile(xb[:, 2] + rb, 99)) if len(rb) else 0.0)
         for te in phase_ends:
             if abs(t - te) <= eps and len(phase_snap) < len(phase_ends):
-                phase_snap.append({"count": state.face_impact_count.numpy().copy(),
-                                   "energy": state.face_impact_energy.numpy().copy(),
-                                   "speed": state.face_impact_speed.numpy().copy()})
+                phase_snap.append(
+                    {
+                        "count": state.face_impact_count.numpy().copy(),
+                        "energy": state.face_impact_energy.numpy().copy(),
+                        "speed": state.face_impact_speed.numpy().copy(),
+                    }
+                )
                 state.reset_impacts()
         if writer is not None:
             _frame(writer, model, state, h, spec, t)
         if progress:
             steps = state.step - step0
-            progress(min(t / run.duration, 1.0),
-                     f"t = {t:.3f} s, {steps / max(series['tick_wall_s'][-1], 1e-9):.0f} steps/s, "
-                     f"a rebuild every {steps / max(rebuilds, 1):.1f} steps")
+            progress(
+                min(t / run.duration, 1.0),
+                f"t = {t:.3f} s, {steps / max(series['tick_wall_s'][-1], 1e-9):.0f} steps/s, "
+                f"a rebuild every {steps / max(rebuilds, 1):.1f} steps",
+            )
         if piston is not None and m.force_limit > 0 and series["piston_force"][-1] >= m.force_limit:
             stop_reason = "force_limit"
             break
-        factories_done = all(state.released.get(f, {}).get("count", 0) >= rec["count"]
-                             for f, rec in enumerate(model.factories))
+        factories_done = all(
+            state.released.get(f, {}).get("count", 0) >= rec["count"] for f, rec in enumerate(model.factories)
+        )
         if run.settle_energy > 0 and t >= run.settle_after and factories_done:
             settled_since = settled_since + 1 if np.all(ke < run.settle_energy) else 0
             if settled_since >= settle_needed:
@@ -276,9 +313,19 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
         # a dense bed can take a minute per tick on the GPU: stop before the tick that would overrun
         stopping = stop_after > 0 and (now - t_wall0) + (now - t_tick) >= stop_after
         if ckpt is not None and (stopping or (checkpoint_every > 0 and now - t_ckpt >= checkpoint_every)):
-            _save_checkpoint(ckpt, fingerprint, state, contacts, {
-                "series": series, "impulse_prev": impulse_prev, "t_prev": t_prev, "phase_snap": phase_snap,
-                "settled_since": settled_since})
+            _save_checkpoint(
+                ckpt,
+                fingerprint,
+                state,
+                contacts,
+                {
+                    "series": series,
+                    "impulse_prev": impulse_prev,
+                    "t_prev": t_prev,
+                    "phase_snap": phase_snap,
+                    "settled_since": settled_since,
+                },
+            )
             t_ckpt = time.perf_counter()
             if stopping:
                 raise RunStopped(ckpt, state.time, time.perf_counter() - t_wall0)
@@ -303,10 +350,14 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
             try:
                 fit = ms.angle_surface_fit(x, r, base_z=m.base_height, center=m.center)
                 img = ms.angle_image(x, r, base_z=m.base_height, center=m.center)
-                mw.update(angle_fit_deg=fit["mean_deg"], angle_fit_sd_deg=fit["sd_deg"],
-                          angle_fit_slices_deg=list(map(float, fit["per_slice_deg"])),
-                          angle_image_deg=img["mean_deg"], angle_image_sd_deg=img["sd_deg"],
-                          angle_cone_deg=float(ms.angle_cone(x, r, base_z=m.base_height, center=m.center)))
+                mw.update(
+                    angle_fit_deg=fit["mean_deg"],
+                    angle_fit_sd_deg=fit["sd_deg"],
+                    angle_fit_slices_deg=list(map(float, fit["per_slice_deg"])),
+                    angle_image_deg=img["mean_deg"],
+                    angle_image_sd_deg=img["sd_deg"],
+                    angle_cone_deg=float(ms.angle_cone(x, r, base_z=m.base_height, center=m.center)),
+                )
             except ValueError as e:
                 mw["angle_error"] = str(e)
         elif m.kind == "press":
@@ -316,12 +367,24 @@ def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, world_count: i
         elif m.kind == "impacts":
             mw["phases"] = _impact_metrics(model, names, m, phase_snap, w)
         metrics.append(mw)
-    info = {"rig": spec.rig, "device": str(device), "worlds": W, "spheres": model.sphere_count,
-            "clumps": model.clump_count, "glued_spheres": model.attached_count, "dt_s": solver.dt,
-            "steps": state.step, "simulated_s": state.time, "wall_s": wall_s, "stop": stop_reason,
-            "resumed_from_s": resumed_from, "rebuilds": int(sum(series.get("rebuilds", []))),
-            "tick_time_s": list(series["time"]), "tick_wall_s": list(series.get("tick_wall_s", [])),
-            "tick_rebuilds": list(series.get("rebuilds", []))}
+    info = {
+        "rig": spec.rig,
+        "device": str(device),
+        "worlds": W,
+        "spheres": model.sphere_count,
+        "clumps": model.clump_count,
+        "glued_spheres": model.attached_count,
+        "dt_s": solver.dt,
+        "steps": state.step,
+        "simulated_s": state.time,
+        "wall_s": wall_s,
+        "stop": stop_reason,
+        "resumed_from_s": resumed_from,
+        "rebuilds": int(sum(series.get("rebuilds", []))),
+        "tick_time_s": list(series["time"]),
+        "tick_wall_s": list(series.get("tick_wall_s", [])),
+        "tick_rebuilds": list(series.get("rebuilds", [])),
+    }
     result = RunResult(metrics, info, series)
     if out is not None:
         files = {}
@@ -353,8 +416,9 @@ def _fingerprint(spec, device, world_count, variations, world_seeds) -> str:
     """Hash of what a run is made of: a checkpoint only resumes the run it was saved from."""
     import hashlib
 
-    text = json.dumps([repr(spec), str(device), int(world_count), variations, world_seeds], sort_keys=True,
-                      default=_json_default)
+    text = json.dumps(
+        [repr(spec), str(device), int(world_count), variations, world_seeds], sort_keys=True, default=_json_default
+    )
     return hashlib.sha1(text.encode()).hexdigest()
 
 
@@ -380,9 +444,17 @@ def _save_checkpoint(path: Path, fingerprint: str, state, contacts, book: dict) 
     for i, snap in enumerate(book["phase_snap"]):
         for k, v in snap.items():
             arrays[f"snap.{i}.{k}"] = v
-    meta = {"fingerprint": fingerprint, "time": state.time, "step": state.step, "half_step": state.half_step,
-            "released": {str(f): v for f, v in state.released.items()}, "series": book["series"],
-            "t_prev": book["t_prev"], "settled_since": book["settled_since"], "snaps": len(book["phase_snap"])}
+    meta = {
+        "fingerprint": fingerprint,
+        "time": state.time,
+        "step": state.step,
+        "half_step": state.half_step,
+        "released": {str(f): v for f, v in state.released.items()},
+        "series": book["series"],
+        "t_prev": book["t_prev"],
+        "settled_since": book["settled_since"],
+        "snaps": len(book["phase_snap"]),
+    }
     arrays["meta"] = np.frombuffer(json.dumps(meta, default=_json_default).encode(), dtype=np.uint8)
     tmp = path.with_name(path.stem + ".tmp.npz")
     np.savez(tmp, **arrays)
@@ -403,9 +475,13 @@ def _load_checkpoint(path: Path, fingerprint: str, state, contacts) -> dict | No
                     full[: a.shape[0]] = a
                     a = full
                 v.assign(a)
-        book = {"impulse_prev": z["book.impulse_prev"].copy(),
-                "phase_snap": [{k.split(".", 2)[2]: z[k].copy() for k in z.files if k.startswith(f"snap.{i}.")}
-                               for i in range(meta["snaps"])]}
+        book = {
+            "impulse_prev": z["book.impulse_prev"].copy(),
+            "phase_snap": [
+                {k.split(".", 2)[2]: z[k].copy() for k in z.files if k.startswith(f"snap.{i}.")}
+                for i in range(meta["snaps"])
+            ],
+        }
     state.time, state.step, state.half_step = meta["time"], meta["step"], meta["half_step"]
     state.released = {int(f): v for f, v in meta["released"].items()}
     book.update(series=meta["series"], t_prev=meta["t_prev"], settled_since=meta["settled_since"])
@@ -444,8 +520,12 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
     pressing = p > 0.01 * p.max()
     inertial = speed[pressing] / height[pressing] * d / np.sqrt(p[pressing] / mat.density)
     out = {k: (float(v) if np.isscalar(v) else v) for k, v in summ.items()}
-    out.update(fill_height_m=fill, inertial_number_max=float(inertial.max()) if inertial.size else None,
-               displacement_m=list(map(float, curve["displacement_m"])), force_n=list(map(float, curve["force_n"])))
+    out.update(
+        fill_height_m=fill,
+        inertial_number_max=float(inertial.max()) if inertial.size else None,
+        displacement_m=list(map(float, curve["displacement_m"])),
+        force_n=list(map(float, curve["force_n"])),
+    )
     return out
 
 
@@ -471,8 +551,11 @@ def _impact_metrics(model, names, m, snaps, w) -> dict:
             s = ms.impact_summary(snap["count"][w, sl], snap["energy"][w, sl], snap["speed"][w, sl], face_area=area)
             # per-face arrays live in the USD primvars and impacts.npz; metrics.json keeps the summary
             phase[wall] = {k: v for k, v in s.items() if not (isinstance(v, (list, np.ndarray)) and len(v) > 10)}
-            phase[wall]["faces"] = {"count": snap["count"][w, sl], "energy_j": snap["energy"][w, sl],
-                                    "max_speed_m_s": snap["speed"][w, sl]}
+            phase[wall]["faces"] = {
+                "count": snap["count"][w, sl],
+                "energy_j": snap["energy"][w, sl],
+                "max_speed_m_s": snap["speed"][w, sl],
+            }
         out[name] = phase
     return out
 
@@ -514,8 +597,9 @@ def _pictures(out: Path, spec, model, state, h, result) -> dict:
         title += f": angle of repose {m0['angle_fit_deg']:.1f} deg (fit), {m0['angle_image_deg']:.1f} deg (image)"
     files["pile_png"] = side_view_png(str(out / "pile.png"), xs, rs, walls_world=walls, axis="y", title=title)
     if spec.measure.kind == "press" and "force_n" in m0:
-        ms.plot_press({"displacement_m": np.asarray(m0["displacement_m"]), "force_n": np.asarray(m0["force_n"])},
-                      str(out / "press.png"))
+        ms.plot_press(
+            {"displacement_m": np.asarray(m0["displacement_m"]), "force_n": np.asarray(m0["force_n"])},
+            str(out / "press.png"),
+        )
         files["press_png"] = str(out / "press.png")
     return files
-

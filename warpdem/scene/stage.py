@@ -195,11 +195,39 @@ PAIR_FIELDS = [f.name for f in dataclasses.fields(Interaction)]
 RUN_FIELDS = [f.name for f in dataclasses.fields(RunSpec)]
 RUN_TOKENS = {"clump_contact_mass": CLUMP_CONTACT_MASSES}
 """Run settings that are words, with the words allowed (the others are numbers)."""
-MEASURE_SCALARS = ["kind", "base_height", "center", "piston", "force_limit", "backstop_height", "walls",
-                   "phase_names", "phase_ends"]
-FACTORY_FIELDS = ["mode", "material", "shape", "count", "mass", "rate", "mass_rate", "start_time", "seed",
-                  "initial_velocity", "interval", "top_radius", "size_distribution", "size_radius", "size_mean",
-                  "size_std", "size_low", "size_high", "size_median", "size_sigma_log"]
+MEASURE_SCALARS = [
+    "kind",
+    "base_height",
+    "center",
+    "piston",
+    "force_limit",
+    "backstop_height",
+    "walls",
+    "phase_names",
+    "phase_ends",
+]
+FACTORY_FIELDS = [
+    "mode",
+    "material",
+    "shape",
+    "count",
+    "mass",
+    "rate",
+    "mass_rate",
+    "start_time",
+    "seed",
+    "initial_velocity",
+    "interval",
+    "top_radius",
+    "size_distribution",
+    "size_radius",
+    "size_mean",
+    "size_std",
+    "size_low",
+    "size_high",
+    "size_median",
+    "size_sigma_log",
+]
 COAT_FIELDS = ["radius", "material", "side", "seed", "spacing"]
 
 KNOWN = {
@@ -256,10 +284,14 @@ def write_stage(spec: SceneSpec, path=None):
     if m.piston:
         wp_.CreateRelationship(NS + "measure:piston").SetTargets([Sdf.Path(f"/World/Walls/{_ident(m.piston)}")])
     if m.walls:
-        wp_.CreateRelationship(NS + "measure:walls").SetTargets([Sdf.Path(f"/World/Walls/{_ident(w)}") for w in m.walls])
+        wp_.CreateRelationship(NS + "measure:walls").SetTargets(
+            [Sdf.Path(f"/World/Walls/{_ident(w)}") for w in m.walls]
+        )
     if m.phase_names:
         wp_.CreateAttribute(NS + "measure:phaseNames", Sdf.ValueTypeNames.StringArray).Set(list(m.phase_names))
-        wp_.CreateAttribute(NS + "measure:phaseEnds", Sdf.ValueTypeNames.DoubleArray).Set([float(t) for t in m.phase_ends])
+        wp_.CreateAttribute(NS + "measure:phaseEnds", Sdf.ValueTypeNames.DoubleArray).Set(
+            [float(t) for t in m.phase_ends]
+        )
 
     scene = UsdPhysics.Scene.Define(stage, "/World/PhysicsScene")
     g = np.asarray(spec.gravity, dtype=float)
@@ -289,13 +321,16 @@ def write_stage(spec: SceneSpec, path=None):
     for a, b, ia in spec.pairs:
         prim = UsdGeom.Scope.Define(stage, f"/World/Materials/Pairs/{_ident(a)}__{_ident(b)}").GetPrim()
         prim.CreateRelationship(NS + "pair:materials").SetTargets(
-            [Sdf.Path(f"/World/Materials/{_ident(a)}"), Sdf.Path(f"/World/Materials/{_ident(b)}")])
+            [Sdf.Path(f"/World/Materials/{_ident(a)}"), Sdf.Path(f"/World/Materials/{_ident(b)}")]
+        )
         for f in PAIR_FIELDS:
             v = getattr(ia, f)
             if f == "law":
                 prim.CreateAttribute(NS + "pair:law", Sdf.ValueTypeNames.Token).Set(ContactLaw(v).name.lower())
             elif f == "rolling_model":
-                prim.CreateAttribute(NS + "pair:rollingModel", Sdf.ValueTypeNames.Token).Set(RollingModel(v).name.lower())
+                prim.CreateAttribute(NS + "pair:rollingModel", Sdf.ValueTypeNames.Token).Set(
+                    RollingModel(v).name.lower()
+                )
             else:
                 prim.CreateAttribute(NS + "pair:" + _camel(f), Sdf.ValueTypeNames.Double).Set(float(v))
 
@@ -324,7 +359,9 @@ def write_stage(spec: SceneSpec, path=None):
         UsdPhysics.CollisionAPI.Apply(prim)
         UsdShade.MaterialBindingAPI.Apply(prim).Bind(
             UsdShade.Material(stage.GetPrimAtPath(f"/World/Materials/{_ident(w.material)}")),
-            UsdShade.Tokens.weakerThanDescendants, "physics")
+            UsdShade.Tokens.weakerThanDescendants,
+            "physics",
+        )
         t_op = mesh.AddTranslateOp()
         # double precision: a round trip through the stage returns the authored poses exactly
         o_op = mesh.AddOrientOp(UsdGeom.XformOp.PrecisionDouble)
@@ -340,11 +377,13 @@ def write_stage(spec: SceneSpec, path=None):
             c = w.coat
             prim.CreateAttribute(NS + "coat:radius", Sdf.ValueTypeNames.Double).Set(float(c["radius"]))
             prim.CreateRelationship(NS + "coat:material").SetTargets(
-                [Sdf.Path(f"/World/Materials/{_ident(c['material'])}")])
+                [Sdf.Path(f"/World/Materials/{_ident(c['material'])}")]
+            )
             prim.CreateAttribute(NS + "coat:side", Sdf.ValueTypeNames.Int).Set(int(c.get("side", 1)))
             prim.CreateAttribute(NS + "coat:seed", Sdf.ValueTypeNames.Int).Set(int(c.get("seed", 0)))
             prim.CreateAttribute(NS + "coat:spacing", Sdf.ValueTypeNames.Double).Set(
-                float(c.get("spacing") or 2.0 * c["radius"]))
+                float(c.get("spacing") or 2.0 * c["radius"])
+            )
 
     UsdGeom.Scope.Define(stage, "/World/Factories")
     for fac in spec.factories:
@@ -371,15 +410,22 @@ def write_stage(spec: SceneSpec, path=None):
             prim.CreateAttribute(NS + "factory:" + name, getattr(Sdf.ValueTypeNames, tname)).Set(value)
 
         fa("mode", "Token", fac.mode)
-        prim.CreateRelationship(NS + "factory:material").SetTargets([Sdf.Path(f"/World/Materials/{_ident(fac.material)}")])
+        prim.CreateRelationship(NS + "factory:material").SetTargets(
+            [Sdf.Path(f"/World/Materials/{_ident(fac.material)}")]
+        )
         prim.CreateRelationship(NS + "factory:shape").SetTargets([Sdf.Path(f"/World/Shapes/{_ident(fac.shape)}")])
         if kind == "cylinder" and fac.region[4] is not None:
             fa("topRadius", "Double", float(fac.region[4]))
         for name, value in (("count", fac.count), ("seed", fac.seed)):
             if value is not None:
                 fa(name, "Int", int(value))
-        for name, value in (("mass", fac.mass), ("rate", fac.rate), ("massRate", fac.mass_rate),
-                            ("startTime", fac.start_time), ("interval", fac.interval)):
+        for name, value in (
+            ("mass", fac.mass),
+            ("rate", fac.rate),
+            ("massRate", fac.mass_rate),
+            ("startTime", fac.start_time),
+            ("interval", fac.interval),
+        ):
             if value is not None:
                 fa(name, "Double", float(value))
         fa("initialVelocity", "Double3", Gf.Vec3d(*map(float, fac.initial_velocity)))
@@ -496,12 +542,25 @@ def read_stage(path_or_stage) -> SceneSpec:
     r.check_names(world, "world")
     rig = r.get(world, NS + "rig", "token")
     authoring = json.loads(r.get(world, NS + "authoring", "string", required=False, default="{}") or "{}")
-    run = RunSpec(**{f: r.get(world, NS + "run:" + _camel(f), "token" if f in RUN_TOKENS else "number",
-                              required=(f == "duration"), default=getattr(RunSpec, f)) for f in RUN_FIELDS})
+    run = RunSpec(
+        **{
+            f: r.get(
+                world,
+                NS + "run:" + _camel(f),
+                "token" if f in RUN_TOKENS else "number",
+                required=(f == "duration"),
+                default=getattr(RunSpec, f),
+            )
+            for f in RUN_FIELDS
+        }
+    )
     for f, allowed in RUN_TOKENS.items():
         if getattr(run, f) not in allowed:
-            r.fail(world, NS + "run:" + _camel(f), f"= {getattr(run, f)!r} is not allowed; expected "
-                   + " or ".join(allowed))
+            r.fail(
+                world,
+                NS + "run:" + _camel(f),
+                f"= {getattr(run, f)!r} is not allowed; expected " + " or ".join(allowed),
+            )
     if run.duration <= 0:
         r.fail(world, NS + "run:duration", f"= {run.duration} is not allowed; expected a duration > 0 s")
     if not 0 < run.dt_fraction <= 1:
@@ -509,8 +568,11 @@ def read_stage(path_or_stage) -> SceneSpec:
     if run.output_interval <= 0:
         r.fail(world, NS + "run:outputInterval", f"= {run.output_interval} is not allowed; expected > 0 s")
     if not (math.isfinite(run.skin_fraction) and run.skin_fraction > 0):
-        r.fail(world, NS + "run:skinFraction", f"= {run.skin_fraction} is not allowed; expected a fraction of the "
-               "smallest radius > 0")
+        r.fail(
+            world,
+            NS + "run:skinFraction",
+            f"= {run.skin_fraction} is not allowed; expected a fraction of the smallest radius > 0",
+        )
 
     lo = r.get(world, NS + "domainMin", "vec3", required=False)
     hi = r.get(world, NS + "domainMax", "vec3", required=False)
@@ -520,8 +582,11 @@ def read_stage(path_or_stage) -> SceneSpec:
         r.fail(world, NS + missing, "is missing; a domain needs both warpdem:domainMin and warpdem:domainMax (double3)")
     if lo is not None:
         if not all(a < b for a, b in zip(lo, hi)):
-            r.fail(world, NS + "domainMax", f"= {hi} is not allowed; expected greater than warpdem:domainMin = "
-                   f"{lo} on every axis")
+            r.fail(
+                world,
+                NS + "domainMax",
+                f"= {hi} is not allowed; expected greater than warpdem:domainMin = {lo} on every axis",
+            )
         domain = (lo, hi)
 
     kind = r.get(world, NS + "measure:kind", "token", required=False, default="none")
@@ -541,8 +606,12 @@ def read_stage(path_or_stage) -> SceneSpec:
     if kind == "impacts":
         measure.walls = [_prim_name(p) for p in r.target(world, NS + "measure:walls", many=True)]
         if len(measure.phase_names) != len(measure.phase_ends):
-            r.fail(world, NS + "measure:phaseEnds", f"has {len(measure.phase_ends)} values for "
-                   f"{len(measure.phase_names)} phase names; expected one end time per phase")
+            r.fail(
+                world,
+                NS + "measure:phaseEnds",
+                f"has {len(measure.phase_ends)} values for "
+                f"{len(measure.phase_names)} phase names; expected one end time per phase",
+            )
 
     gravity = (0.0, 0.0, -9.81)
     for prim in stage.Traverse():
@@ -564,10 +633,13 @@ def read_stage(path_or_stage) -> SceneSpec:
         if not prim.HasAPI(UsdPhysics.MaterialAPI):
             raise StageError(f"{where}: prim {prim.GetPath()}: needs UsdPhysics.MaterialAPI (physics:density)")
         density = r.get(prim, "physics:density")
-        kw = dict(name=prim.GetName(), density=density,
-                  poisson_ratio=r.get(prim, NS + "poissonRatio"),
-                  youngs_modulus=r.get(prim, NS + "youngsModulus", required=False),
-                  shear_modulus=r.get(prim, NS + "shearModulus", required=False))
+        kw = dict(
+            name=prim.GetName(),
+            density=density,
+            poisson_ratio=r.get(prim, NS + "poissonRatio"),
+            youngs_modulus=r.get(prim, NS + "youngsModulus", required=False),
+            shear_modulus=r.get(prim, NS + "shearModulus", required=False),
+        )
         if kw["youngs_modulus"] is None and kw["shear_modulus"] is None:
             r.fail(prim, NS + "shearModulus", "is missing (and so is warpdem:youngsModulus); expected one of them [Pa]")
         try:
@@ -578,14 +650,17 @@ def read_stage(path_or_stage) -> SceneSpec:
 
     pairs = []
     proot = stage.GetPrimAtPath("/World/Materials/Pairs")
-    for prim in (proot.GetChildren() if proot else []):
+    for prim in proot.GetChildren() if proot else []:
         r.check_names(prim, "pair")
         mats = r.target(prim, NS + "pair:materials", many=True)
         if len(mats) == 1:
             mats = mats * 2  # USD keeps a target once: one target is the material against itself
         if len(mats) != 2:
-            r.fail(prim, NS + "pair:materials", f"has {len(mats)} targets; expected two materials (one for a "
-                   "material against itself)")
+            r.fail(
+                prim,
+                NS + "pair:materials",
+                f"has {len(mats)} targets; expected two materials (one for a material against itself)",
+            )
         kw = {}
         for f in PAIR_FIELDS:
             name = NS + "pair:" + _camel(f)
@@ -602,8 +677,11 @@ def read_stage(path_or_stage) -> SceneSpec:
                     try:
                         kw[f] = RollingModel[v.upper()]
                     except KeyError:
-                        r.fail(prim, name, f"= {v!r} is not allowed; expected "
-                               + ", ".join(m.name.lower() for m in RollingModel))
+                        r.fail(
+                            prim,
+                            name,
+                            f"= {v!r} is not allowed; expected " + ", ".join(m.name.lower() for m in RollingModel),
+                        )
             else:
                 v = r.get(prim, name, required=False)
                 if v is not None:
@@ -616,7 +694,7 @@ def read_stage(path_or_stage) -> SceneSpec:
 
     shapes = []
     sroot = stage.GetPrimAtPath("/World/Shapes")
-    for prim in (sroot.GetChildren() if sroot else []):
+    for prim in sroot.GetChildren() if sroot else []:
         r.check_names(prim, "shape")
         kind = r.get(prim, NS + "shape:kind", "token")
         if kind == "sphere":
@@ -637,18 +715,29 @@ def read_stage(path_or_stage) -> SceneSpec:
 
     walls = []
     wroot = stage.GetPrimAtPath("/World/Walls")
-    for prim in (wroot.GetChildren() if wroot else []):
+    for prim in wroot.GetChildren() if wroot else []:
         if not prim.IsA(UsdGeom.Mesh):
             continue
         walls.append(_read_wall(r, prim, names))
 
     factories = []
     froot = stage.GetPrimAtPath("/World/Factories")
-    for prim in (froot.GetChildren() if froot else []):
+    for prim in froot.GetChildren() if froot else []:
         factories.append(_read_factory(r, prim))
 
-    spec = SceneSpec(rig=rig, materials=materials, pairs=pairs, shapes=shapes, walls=walls, factories=factories,
-                     run=run, measure=measure, gravity=gravity, authoring=authoring, domain=domain)
+    spec = SceneSpec(
+        rig=rig,
+        materials=materials,
+        pairs=pairs,
+        shapes=shapes,
+        walls=walls,
+        factories=factories,
+        run=run,
+        measure=measure,
+        gravity=gravity,
+        authoring=authoring,
+        domain=domain,
+    )
     for w in walls:
         spec.material(w.material)
     if kind == "press":
@@ -684,13 +773,18 @@ def _read_wall(r: _Reader, prim, names) -> WallSpec:
         if op.GetOpType() == UsdGeom.XformOp.TypeScale:
             r.fail(prim, op.GetOpName(), "scales the wall; bake the scale into the points (walls move rigidly)")
         times.update(op.GetTimeSamples())
-    spec = WallSpec(prim.GetName(), np.asarray(pts, dtype=np.float64), np.asarray(tris, dtype=np.int64),
-                    names[mat_path])
+    spec = WallSpec(
+        prim.GetName(), np.asarray(pts, dtype=np.float64), np.asarray(tris, dtype=np.int64), names[mat_path]
+    )
     samples = sorted(times) or [Usd.TimeCode.Default()]
     poses = []
     for code in samples:
         m = xf.ComputeLocalToWorldTransform(code)
-        q = m.ExtractRotationQuat().GetNormalized() if hasattr(m, "ExtractRotationQuat") else m.ExtractRotation().GetQuat()
+        q = (
+            m.ExtractRotationQuat().GetNormalized()
+            if hasattr(m, "ExtractRotationQuat")
+            else m.ExtractRotation().GetQuat()
+        )
         im = q.GetImaginary()
         poses.append((tuple(m.ExtractTranslation()), (im[0], im[1], im[2], q.GetReal())))
     if len(samples) > 1 or poses[0] != ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)):
@@ -700,10 +794,13 @@ def _read_wall(r: _Reader, prim, names) -> WallSpec:
         spec.rotations = np.asarray([q for _, q in poses], dtype=np.float64)
     if prim.GetAttribute(NS + "coat:radius"):
         coat_mat = r.target(prim, NS + "coat:material")
-        spec.coat = {"radius": r.get(prim, NS + "coat:radius"), "material": coat_mat.GetName(),
-                     "side": r.get(prim, NS + "coat:side", "int", required=False, default=1),
-                     "seed": r.get(prim, NS + "coat:seed", "int", required=False, default=0),
-                     "spacing": r.get(prim, NS + "coat:spacing", required=False)}
+        spec.coat = {
+            "radius": r.get(prim, NS + "coat:radius"),
+            "material": coat_mat.GetName(),
+            "side": r.get(prim, NS + "coat:side", "int", required=False, default=1),
+            "seed": r.get(prim, NS + "coat:seed", "int", required=False, default=0),
+            "spacing": r.get(prim, NS + "coat:spacing", required=False),
+        }
         if spec.coat["radius"] <= 0:
             r.fail(prim, NS + "coat:radius", f"= {spec.coat['radius']} is not allowed; expected a radius > 0 m")
         if spec.coat["side"] not in (1, -1):
@@ -730,8 +827,10 @@ def _read_factory(r: _Reader, prim) -> FactorySpec:
         top = r.get(prim, P + "topRadius", required=False)
         region = ("cylinder", tuple(center - (0, 0, height / 2)), radius, height, top)
     else:
-        raise StageError(f"{r.where}: prim {prim.GetPath()}: a factory must be a UsdGeom.Cube or UsdGeom.Cylinder, "
-                         f"not {prim.GetTypeName()}")
+        raise StageError(
+            f"{r.where}: prim {prim.GetPath()}: a factory must be a UsdGeom.Cube or UsdGeom.Cylinder, "
+            f"not {prim.GetTypeName()}"
+        )
     mode = r.get(prim, P + "mode", "token")
     if mode not in ("fill", "dynamic"):
         r.fail(prim, P + "mode", f"= {mode!r} is not allowed; expected fill or dynamic")
@@ -745,8 +844,11 @@ def _read_factory(r: _Reader, prim) -> FactorySpec:
         if v is not None:
             sizes[k] = v
     fac = FactorySpec(
-        name=prim.GetName(), mode=mode, region=region,
-        material=r.target(prim, P + "material").GetName(), shape=r.target(prim, P + "shape").GetName(),
+        name=prim.GetName(),
+        mode=mode,
+        region=region,
+        material=r.target(prim, P + "material").GetName(),
+        shape=r.target(prim, P + "shape").GetName(),
         sizes=sizes,
         count=r.get(prim, P + "count", "int", required=False),
         mass=r.get(prim, P + "mass", required=False),
@@ -777,8 +879,10 @@ def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
         if parts[0] == "material" and len(parts) == 3:
             m = spec.material(parts[1])
             if parts[2] not in ("density", "youngs_modulus", "shear_modulus", "poisson_ratio"):
-                raise StageError(f"--set {key}: field {parts[2]!r} is not a material scalar; expected density, "
-                                 "youngs_modulus, shear_modulus or poisson_ratio")
+                raise StageError(
+                    f"--set {key}: field {parts[2]!r} is not a material scalar; expected density, "
+                    "youngs_modulus, shear_modulus or poisson_ratio"
+                )
             changes = {parts[2]: float(value)}
             # E and G are tied through nu: a new E or nu re-derives G, a new G re-derives E
             if parts[2] in ("youngs_modulus",):
@@ -790,8 +894,9 @@ def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
             a, b, f = parts[1:]
             spec.material(a), spec.material(b)
             if f not in PAIR_FIELDS:
-                raise StageError(f"--set {key}: field {f!r} is not an interaction field; expected one of "
-                                 + ", ".join(PAIR_FIELDS))
+                raise StageError(
+                    f"--set {key}: field {f!r} is not an interaction field; expected one of " + ", ".join(PAIR_FIELDS)
+                )
             if f == "law":
                 value = ContactLaw[str(value).upper()]
             elif f == "rolling_model":
@@ -804,30 +909,37 @@ def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
                 spec.pairs.append((a, b, Interaction(**{f: value})))
         elif parts[0] == "run" and len(parts) == 2:
             if parts[1] not in RUN_FIELDS:
-                raise StageError(f"--set {key}: {parts[1]!r} is not a run setting; expected one of {', '.join(RUN_FIELDS)}")
+                raise StageError(
+                    f"--set {key}: {parts[1]!r} is not a run setting; expected one of {', '.join(RUN_FIELDS)}"
+                )
             if parts[1] in RUN_TOKENS:
                 if value not in RUN_TOKENS[parts[1]]:
-                    raise StageError(f"--set {key}: {value!r} is not allowed; expected "
-                                     + " or ".join(RUN_TOKENS[parts[1]]))
+                    raise StageError(
+                        f"--set {key}: {value!r} is not allowed; expected " + " or ".join(RUN_TOKENS[parts[1]])
+                    )
                 setattr(spec.run, parts[1], value)
             else:
                 setattr(spec.run, parts[1], float(value))
         elif parts[0] == "measure" and len(parts) == 2:
             if parts[1] not in ("base_height", "force_limit", "backstop_height"):
-                raise StageError(f"--set {key}: expected measure.base_height, measure.force_limit or "
-                                 "measure.backstop_height")
+                raise StageError(
+                    f"--set {key}: expected measure.base_height, measure.force_limit or measure.backstop_height"
+                )
             setattr(spec.measure, parts[1], float(value))
         elif parts[0] == "factory" and len(parts) == 3:
             fac = next((f for f in spec.factories if f.name == parts[1]), None)
             if fac is None:
-                raise StageError(f"--set {key}: no factory {parts[1]!r}; factories: "
-                                 + ", ".join(f.name for f in spec.factories))
+                raise StageError(
+                    f"--set {key}: no factory {parts[1]!r}; factories: " + ", ".join(f.name for f in spec.factories)
+                )
             if parts[2] not in ("count", "mass", "rate", "mass_rate", "start_time", "seed", "interval"):
                 raise StageError(f"--set {key}: expected count, mass, rate, mass_rate, start_time, seed or interval")
             setattr(fac, parts[2], int(value) if parts[2] in ("count", "seed") else float(value))
         else:
-            raise StageError(f"--set {key}: unknown setting; expected material.NAME.FIELD, interaction.A.B.FIELD, "
-                             "run.FIELD, measure.FIELD, factory.NAME.FIELD or a rig parameter")
+            raise StageError(
+                f"--set {key}: unknown setting; expected material.NAME.FIELD, interaction.A.B.FIELD, "
+                "run.FIELD, measure.FIELD, factory.NAME.FIELD or a rig parameter"
+            )
     return spec
 
 
@@ -885,8 +997,9 @@ def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None,
         k = b.add_wall_mesh(w.vertices, w.triangles, w.material, name=w.name, motion=motion)
         if w.coat:
             c = w.coat
-            b.coat_wall(k, c["radius"], c["material"], spacing=c.get("spacing"), side=c.get("side", 1),
-                        seed=c.get("seed", 0))
+            b.coat_wall(
+                k, c["radius"], c["material"], spacing=c.get("spacing"), side=c.get("side", 1), seed=c.get("seed", 0)
+            )
     for fac in spec.factories:
         shape = spec.shape(fac.shape)
         template = shape.template()
@@ -894,14 +1007,33 @@ def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None,
         region = _region(fac.region)
         density = spec.material(fac.material).density
         if fac.mode == "fill":
-            b.fill(region, sizes, fac.material, count=fac.count, mass=fac.mass, seed=fac.seed, template=template,
-                   velocity=fac.initial_velocity)
+            b.fill(
+                region,
+                sizes,
+                fac.material,
+                count=fac.count,
+                mass=fac.mass,
+                seed=fac.seed,
+                template=template,
+                velocity=fac.initial_velocity,
+            )
         else:
             ratio = 1.0 if template is None else template.bounding_radius / template.equivalent_radius
-            df = DynamicFactory(region, sizes, rate=fac.rate, mass_rate=fac.mass_rate, count=fac.count,
-                                mass=fac.mass, start_time=fac.start_time, density=density, seed=fac.seed,
-                                initial_velocity=fac.initial_velocity, interval=fac.interval, bounding_ratio=ratio,
-                                random_orientation=template is not None)
+            df = DynamicFactory(
+                region,
+                sizes,
+                rate=fac.rate,
+                mass_rate=fac.mass_rate,
+                count=fac.count,
+                mass=fac.mass,
+                start_time=fac.start_time,
+                density=density,
+                seed=fac.seed,
+                initial_velocity=fac.initial_velocity,
+                interval=fac.interval,
+                bounding_ratio=ratio,
+                random_orientation=template is not None,
+            )
             b.add_factory(df, fac.material, template)
     if world_count > 1 or variations or world_seeds is not None:
         b.replicate(world_count)

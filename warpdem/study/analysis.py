@@ -98,7 +98,7 @@ def parse_term(spec: str | Sequence[str], factors: Sequence[str]) -> Term:
                 j = i + 1
                 while j < len(part) and part[j].isdigit():
                     j += 1
-                power, i = int(part[i + 1:j]), j
+                power, i = int(part[i + 1 : j]), j
             elif i < len(part) and part[i] in _SUPERSCRIPT:
                 power, i = _SUPERSCRIPT[part[i]], i + 1
             elif single and i < len(part) and part[i].isdigit():
@@ -294,13 +294,14 @@ class ModelFit:
         """ANOVA table, fit statistics and the coded equation as plain text."""
         a = self.anova.copy()
         with pd.option_context("display.float_format", lambda v: f"{v:.6g}", "display.width", 120):
-            lines = [f"Response {self.response}: model {', '.join(self.labels) or 'mean'}",
-                     a.to_string(), ""]
+            lines = [f"Response {self.response}: model {', '.join(self.labels) or 'mean'}", a.to_string(), ""]
         s = self.stats
-        lines += [f"Std. Dev. {s['std_dev']:.6g}   Mean {s['mean']:.6g}   C.V.% {s['cv_pct']:.4g}",
-                  f"R^2 {s['r2']:.4f}   Adj R^2 {s['adj_r2']:.4f}   Pred R^2 {s['pred_r2']:.4f}   "
-                  f"Adeq Precision {s['adeq_precision']:.3f}   PRESS {s['press']:.6g}",
-                  self.equation_string("coded")]
+        lines += [
+            f"Std. Dev. {s['std_dev']:.6g}   Mean {s['mean']:.6g}   C.V.% {s['cv_pct']:.4g}",
+            f"R^2 {s['r2']:.4f}   Adj R^2 {s['adj_r2']:.4f}   Pred R^2 {s['pred_r2']:.4f}   "
+            f"Adeq Precision {s['adeq_precision']:.3f}   PRESS {s['press']:.6g}",
+            self.equation_string("coded"),
+        ]
         if self.levels:
             lines.append(self.equation_string("actual"))
         return "\n".join(lines)
@@ -319,9 +320,13 @@ def _f_p(ms: float, ms_err: float, df1: float, df2: float) -> tuple[float, float
     return f, float(stats.f.sf(f, df1, df2))
 
 
-def fit_model(data: pd.DataFrame, response: str, factors: Sequence[str],
-              model: str | Sequence = "quadratic",
-              levels: Iterable[Factor] | Mapping[str, Factor] | None = None) -> ModelFit:
+def fit_model(
+    data: pd.DataFrame,
+    response: str,
+    factors: Sequence[str],
+    model: str | Sequence = "quadratic",
+    levels: Iterable[Factor] | Mapping[str, Factor] | None = None,
+) -> ModelFit:
     """Fit ``model`` to the coded ``data`` by OLS and build the Design-Expert ANOVA.
 
     Args:
@@ -341,8 +346,10 @@ def fit_model(data: pd.DataFrame, response: str, factors: Sequence[str],
     X = _columns(xk, terms, factors)
     n, p = X.shape
     if np.linalg.matrix_rank(X) < p:
-        raise ValueError("the model is not estimable from this design (aliased terms); "
-                         f"rank {np.linalg.matrix_rank(X)} < {p} parameters")
+        raise ValueError(
+            "the model is not estimable from this design (aliased terms); "
+            f"rank {np.linalg.matrix_rank(X)} < {p} parameters"
+        )
     labels = [term_label(t, factors) for t in terms]
     res = sm.OLS(y, pd.DataFrame(X, columns=["Intercept"] + labels)).fit()
     fitted = np.asarray(res.fittedvalues)
@@ -398,24 +405,32 @@ def fit_model(data: pd.DataFrame, response: str, factors: Sequence[str],
         "press": press,
         "pred_r2": 1.0 - press / sst if sst > 0 else math.nan,
         "adeq_precision": (fitted.max() - fitted.min()) / math.sqrt(p * ms_res / n)
-        if df_res > 0 and ms_res > 0 else math.nan,
+        if df_res > 0 and ms_res > 0
+        else math.nan,
     }
     se = np.asarray(res.bse) if df_res > 0 else np.full(p, math.nan)
     with np.errstate(divide="ignore", invalid="ignore"):
         tval = np.asarray(res.params) / se
     pcoef = 2 * stats.t.sf(np.abs(tval), df_res) if df_res > 0 else np.full(p, math.nan)
-    coefs = pd.DataFrame({"coef": np.asarray(res.params), "std_err": se, "t": tval, "p": pcoef},
-                         index=pd.Index(["Intercept"] + labels, name="term"))
+    coefs = pd.DataFrame(
+        {"coef": np.asarray(res.params), "std_err": se, "t": tval, "p": pcoef},
+        index=pd.Index(["Intercept"] + labels, name="term"),
+    )
     lv = None
     if levels is not None:
         lv = dict(levels) if isinstance(levels, Mapping) else {f.name: f for f in levels}
     return ModelFit(response, factors, terms, df, coefs, anova, st, fitted, resid, h, lv, [], res)
 
 
-def backward_eliminate(data: pd.DataFrame, response: str, factors: Sequence[str],
-                       model: str | Sequence = "quadratic", alpha: float = 0.05,
-                       hierarchical: bool = True,
-                       levels: Iterable[Factor] | Mapping[str, Factor] | None = None) -> ModelFit:
+def backward_eliminate(
+    data: pd.DataFrame,
+    response: str,
+    factors: Sequence[str],
+    model: str | Sequence = "quadratic",
+    alpha: float = 0.05,
+    hierarchical: bool = True,
+    levels: Iterable[Factor] | Mapping[str, Factor] | None = None,
+) -> ModelFit:
     """Backward elimination of non-significant terms, one at a time, largest p first.
 
     A term is removed when its p-value exceeds ``alpha`` (0.05 or 0.1 are usual). With
@@ -455,8 +470,9 @@ def lenth_pse(effects: Sequence[float]) -> float:
     return float(1.5 * np.median(small)) if len(small) else float(s0)
 
 
-def effects_table(data: pd.DataFrame, response: str, factors: Sequence[str],
-                  model: str | Sequence = "linear") -> pd.DataFrame:
+def effects_table(
+    data: pd.DataFrame, response: str, factors: Sequence[str], model: str | Sequence = "linear"
+) -> pd.DataFrame:
     """Effects and standardized effects of a two-level design (the data of a Pareto chart).
 
     effect = 2 x coded coefficient (high minus low mean for an orthogonal +-1 design).
@@ -485,8 +501,17 @@ def effects_table(data: pd.DataFrame, response: str, factors: Sequence[str],
         p = 2 * stats.t.sf(np.abs(std), d)
         tcrit = float(stats.t.ppf(0.975, d))
         method = f"Lenth PSE = {pse:.6g}, {d:.3g} df"
-    out = pd.DataFrame({"term": labels, "coefficient": coef, "effect": eff, "sum_sq": ss,
-                        "pct_contribution": 100.0 * ss / sst, "standardized": std, "p": p})
+    out = pd.DataFrame(
+        {
+            "term": labels,
+            "coefficient": coef,
+            "effect": eff,
+            "sum_sq": ss,
+            "pct_contribution": 100.0 * ss / sst,
+            "standardized": std,
+            "p": p,
+        }
+    )
     out = out.reindex(out["standardized"].abs().sort_values(ascending=False).index)
     out["rank"] = np.arange(1, len(out) + 1)
     out = out.set_index("term")
@@ -588,8 +613,9 @@ def _region(fit: ModelFit, bounds, fixed):
     return b, free, lo, hi, _Surface(fit, free, fixed)
 
 
-def response_range(fit: ModelFit, bounds="cube", fixed: Mapping[str, float] | None = None,
-                   n_starts: int = 16, seed: int = 0) -> tuple[tuple[float, np.ndarray], tuple[float, np.ndarray]]:
+def response_range(
+    fit: ModelFit, bounds="cube", fixed: Mapping[str, float] | None = None, n_starts: int = 16, seed: int = 0
+) -> tuple[tuple[float, np.ndarray], tuple[float, np.ndarray]]:
     """((min, argmin), (max, argmax)) of the prediction over the coded region (multi-start)."""
     _, free, lo, hi, surf = _region(fit, bounds, fixed)
     rng = np.random.default_rng(seed)
@@ -598,17 +624,28 @@ def response_range(fit: ModelFit, bounds="cube", fixed: Mapping[str, float] | No
     for sign in (1.0, -1.0):
         best_v, best_z = math.inf, None
         for x0 in starts:
-            r = optimize.minimize(lambda z: sign * surf(z), x0, jac=lambda z: sign * surf.grad(z),
-                                  method="L-BFGS-B", bounds=list(zip(lo, hi)))
+            r = optimize.minimize(
+                lambda z: sign * surf(z),
+                x0,
+                jac=lambda z: sign * surf.grad(z),
+                method="L-BFGS-B",
+                bounds=list(zip(lo, hi)),
+            )
             if r.fun < best_v:
                 best_v, best_z = float(r.fun), np.clip(r.x, lo, hi)
         out.append((sign * best_v, surf.full(best_z)))
     return out[0], out[1]
 
 
-def solve_target(fit: ModelFit, target: float, bounds="cube",
-                 fixed: Mapping[str, float] | None = None, n_samples: int = 100,
-                 seed: int = 0, tol: float | None = None) -> TargetSolution:
+def solve_target(
+    fit: ModelFit,
+    target: float,
+    bounds="cube",
+    fixed: Mapping[str, float] | None = None,
+    n_samples: int = 100,
+    seed: int = 0,
+    tol: float | None = None,
+) -> TargetSolution:
     """Settings in the coded region whose prediction equals ``target``.
 
     The target contour {x : yhat(x) = target} is a set, not a point. It is sampled by projecting
@@ -643,9 +680,15 @@ def solve_target(fit: ModelFit, target: float, bounds="cube",
         opts = {"ftol": 1e-12, "maxiter": 300}
 
         def project(anchor, x0):
-            r = optimize.minimize(lambda z: float(np.sum((z - anchor) ** 2)), x0,
-                                  jac=lambda z: 2.0 * (z - anchor), method="SLSQP", bounds=bnds,
-                                  constraints=cons, options=opts)
+            r = optimize.minimize(
+                lambda z: float(np.sum((z - anchor) ** 2)),
+                x0,
+                jac=lambda z: 2.0 * (z - anchor),
+                method="SLSQP",
+                bounds=bnds,
+                constraints=cons,
+                options=opts,
+            )
             z = np.clip(r.x, lo, hi)
             return z if abs(surf(z) - target) <= tol else None
 
@@ -682,8 +725,11 @@ def solve_target(fit: ModelFit, target: float, bounds="cube",
             family[f"{f}_actual"] = fit.levels[f].to_actual(family[f].to_numpy())
         chosen_actual = pd.Series({f: float(fit.levels[f].to_actual(chosen[f])) for f in fit.factors})
         chosen_actual["predicted"] = chosen["predicted"]
-    rule = ("contour point nearest the design centre (smallest Euclidean distance in coded units "
-            "over the free factors)" if reachable else
-            "target outside the predicted range: the region's extreme nearest the target")
-    return TargetSolution(float(target), bool(reachable), chosen, chosen_actual, family, rule,
-                          b, (float(vmin), float(vmax)))
+    rule = (
+        "contour point nearest the design centre (smallest Euclidean distance in coded units over the free factors)"
+        if reachable
+        else "target outside the predicted range: the region's extreme nearest the target"
+    )
+    return TargetSolution(
+        float(target), bool(reachable), chosen, chosen_actual, family, rule, b, (float(vmin), float(vmax))
+    )

@@ -89,8 +89,9 @@ def parse_devices(device: str) -> list[str]:
 
             n = wp.get_cuda_device_count()
             if n == 0:
-                raise sp.StudyError(f"device = {device!r}: 'cuda:all' names no device, this machine has no CUDA "
-                                    f"device; use 'cpu'")
+                raise sp.StudyError(
+                    f"device = {device!r}: 'cuda:all' names no device, this machine has no CUDA device; use 'cpu'"
+                )
             out += [f"cuda:{i}" for i in range(n)]
         elif d in ("cpu", "cuda") or (d.startswith("cuda:") and d[5:].isdigit()):
             out.append(d)
@@ -110,12 +111,12 @@ def _batches(study: sp.StudySpec, rows: list[dict], parts: int = 1) -> list[list
     for g in groups.values():
         if parts <= 1:
             size = study.batch or len(g)
-            out += [g[i:i + size] for i in range(0, len(g), size)]
+            out += [g[i : i + size] for i in range(0, len(g), size)]
             continue
         n = max(-(-len(g) // study.batch) if study.batch else 1, min(parts, len(g)))
         q, r = divmod(len(g), n)
         starts = [k * q + min(k, r) for k in range(n + 1)]
-        out += [g[starts[k]:starts[k + 1]] for k in range(n)]
+        out += [g[starts[k] : starts[k + 1]] for k in range(n)]
     return out
 
 
@@ -135,8 +136,15 @@ def _launch_id(rows: list[dict]) -> str:
     return hashlib.sha1(",".join(r["point_id"] for r in rows).encode()).hexdigest()[:12]
 
 
-def run_batch(study: sp.StudySpec, rows: list[dict], device: str, progress=None, out_dir=None,
-              checkpoint_every: float = 0.0, stop_after: float = 0.0) -> list[dict]:
+def run_batch(
+    study: sp.StudySpec,
+    rows: list[dict],
+    device: str,
+    progress=None,
+    out_dir=None,
+    checkpoint_every: float = 0.0,
+    stop_after: float = 0.0,
+) -> list[dict]:
     """Run ``rows`` (dicts with ``overrides`` and ``world_seed``) as the worlds of one launch; returns one
     record per row: responses, the world's metrics, run info. With ``out_dir`` the launch checkpoints every
     ``checkpoint_every`` wall seconds there and resumes from its checkpoint (see ``run_scene``); with
@@ -147,9 +155,18 @@ def run_batch(study: sp.StudySpec, rows: list[dict], device: str, progress=None,
     varying = sorted({k for r in rows for k in r["overrides"] if sp.varies_per_world(k)})
     variations = {k: [float(r["overrides"][k]) for r in rows] for k in varying}
     seeds = [int(r["world_seed"]) for r in rows]
-    res = run_scene(scene, device=device, out_dir=out_dir, world_count=len(rows), variations=variations or None,
-                    frames=False, progress=progress, world_seeds=seeds if any(seeds) else None,
-                    checkpoint_every=checkpoint_every, stop_after=stop_after)
+    res = run_scene(
+        scene,
+        device=device,
+        out_dir=out_dir,
+        world_count=len(rows),
+        variations=variations or None,
+        frames=False,
+        progress=progress,
+        world_seeds=seeds if any(seeds) else None,
+        checkpoint_every=checkpoint_every,
+        stop_after=stop_after,
+    )
     info = dict(res.info)
     out = []
     for row, m in zip(rows, res.metrics):
@@ -186,15 +203,34 @@ def _check_folder(out: Path, study: sp.StudySpec) -> None:
 
 def _save_batch(study, runs_dir: Path, batch: list[dict], records: list[dict], wall: float, device: str) -> None:
     for row, rec in zip(batch, records):
-        _write_json(runs_dir / f"{row['point_id']}.json", {
-            "study": study.name, "run": row["run"], "point_id": row["point_id"], "world_seed": row["world_seed"],
-            "design": row["row"], "overrides": row["overrides"], "responses": rec["responses"],
-            "metrics": rec["metrics"], "info": rec["info"] | {"batch_worlds": len(batch), "batch_wall_s": wall},
-            "device": device})
+        _write_json(
+            runs_dir / f"{row['point_id']}.json",
+            {
+                "study": study.name,
+                "run": row["run"],
+                "point_id": row["point_id"],
+                "world_seed": row["world_seed"],
+                "design": row["row"],
+                "overrides": row["overrides"],
+                "responses": rec["responses"],
+                "metrics": rec["metrics"],
+                "info": rec["info"] | {"batch_worlds": len(batch), "batch_wall_s": wall},
+                "device": device,
+            },
+        )
 
 
-def _device_worker(study, out: str, batches: list[list[dict]], device: str, deadline: float,
-                   checkpoint_every: float, queue, slot: int, quiet: tuple) -> dict:
+def _device_worker(
+    study,
+    out: str,
+    batches: list[list[dict]],
+    device: str,
+    deadline: float,
+    checkpoint_every: float,
+    queue,
+    slot: int,
+    quiet: tuple,
+) -> dict:
     """One device's launches, in order, in a process of its own (see :func:`run_study`). ``deadline`` is a
     ``time.time()`` (0: none): no launch starts after it, and the running one stops at it with a checkpoint.
     Reports (slot, launch, fraction, message) on ``queue``; ``quiet`` is the parent's Warp (quiet, log_level).
@@ -210,17 +246,26 @@ def _device_worker(study, out: str, batches: list[list[dict]], device: str, dead
     ran, walls = 0, []
     for k, batch in enumerate(batches):
         if deadline and k > 0 and time.time() >= deadline:
-            return {"ran": ran, "walls": walls,
-                    "stopped": f"{device}: the wall-time limit came before its launch {k + 1} of {len(batches)}"}
+            return {
+                "ran": ran,
+                "walls": walls,
+                "stopped": f"{device}: the wall-time limit came before its launch {k + 1} of {len(batches)}",
+            }
 
         def tick(frac, msg, k=k):
             queue.put((slot, k, frac, msg))
 
         tb = time.perf_counter()
         try:
-            records = run_batch(study, batch, device, progress=tick, out_dir=Path(out) / "launches" / _launch_id(batch),
-                                checkpoint_every=checkpoint_every,
-                                stop_after=max(deadline - time.time(), 1e-9) if deadline else 0.0)
+            records = run_batch(
+                study,
+                batch,
+                device,
+                progress=tick,
+                out_dir=Path(out) / "launches" / _launch_id(batch),
+                checkpoint_every=checkpoint_every,
+                stop_after=max(deadline - time.time(), 1e-9) if deadline else 0.0,
+            )
         except RunStopped as e:
             return {"ran": ran, "walls": walls, "stopped": f"{device}, launch {k + 1} of {len(batches)}: {e}"}
         walls.append(time.perf_counter() - tb)
@@ -230,8 +275,17 @@ def _device_worker(study, out: str, batches: list[list[dict]], device: str, dead
     return {"ran": ran, "walls": walls, "stopped": None}
 
 
-def _run_parallel(study, out: Path, batches: list[list[dict]], devices: list[str], bar, t0: float,
-                  checkpoint_every: float, stop_after: float, log) -> str | None:
+def _run_parallel(
+    study,
+    out: Path,
+    batches: list[list[dict]],
+    devices: list[str],
+    bar,
+    t0: float,
+    checkpoint_every: float,
+    stop_after: float,
+    log,
+) -> str | None:
     """Run ``batches`` over ``devices`` at once, one spawned process per device that has work; every finished
     launch is saved by its process as it ends. A failing device does not stop the others: its error is
     raised once they are done. Returns the stop message(s), or None."""
@@ -251,9 +305,21 @@ def _run_parallel(study, out: Path, batches: list[list[dict]], devices: list[str
     results, errors = [None] * len(plan), []
     with ctx.Manager() as manager, ProcessPoolExecutor(len(plan), mp_context=ctx) as pool:
         q = manager.Queue()
-        futures = [pool.submit(_device_worker, study, str(out), bs, d, deadline, checkpoint_every, q, i,
-                               (bool(wp.config.quiet), getattr(wp.config, "log_level", None)))
-                   for i, (d, bs) in enumerate(plan)]
+        futures = [
+            pool.submit(
+                _device_worker,
+                study,
+                str(out),
+                bs,
+                d,
+                deadline,
+                checkpoint_every,
+                q,
+                i,
+                (bool(wp.config.quiet), getattr(wp.config, "log_level", None)),
+            )
+            for i, (d, bs) in enumerate(plan)
+        ]
         while True:
             try:
                 slot, k, frac, msg = q.get(timeout=0.5)
@@ -281,8 +347,17 @@ def _run_parallel(study, out: Path, batches: list[list[dict]], devices: list[str
     return "; ".join(stops) or None
 
 
-def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, analyze_after: bool = True,
-              verify: bool = True, log=print, checkpoint_every: float = 60.0, stop_after: float = 0.0) -> dict:
+def run_study(
+    study,
+    out_dir=None,
+    device: str = "cpu",
+    progress: bool = True,
+    analyze_after: bool = True,
+    verify: bool = True,
+    log=print,
+    checkpoint_every: float = 60.0,
+    stop_after: float = 0.0,
+) -> dict:
     """Run (or resume) ``study`` (a path or a StudySpec) into ``out_dir`` (default ``runs/<name>``).
 
     Finished points are skipped; the rest run batch by batch (a batch = runs that share a scene, as
@@ -310,8 +385,15 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
     runs_dir.mkdir(exist_ok=True)
     rows = []
     for _, r in table.iterrows():
-        rows.append({"run": int(r["run"]), "point_id": r["point_id"], "world_seed": int(r["world_seed"]),
-                     "overrides": sp.run_overrides(study, r), "row": r.to_dict()})
+        rows.append(
+            {
+                "run": int(r["run"]),
+                "point_id": r["point_id"],
+                "world_seed": int(r["world_seed"]),
+                "overrides": sp.run_overrides(study, r),
+                "row": r.to_dict(),
+            }
+        )
     devices = parse_devices(device)
     pending = [r for r in rows if not (runs_dir / f"{r['point_id']}.json").exists()]
     done0 = len(rows) - len(pending)
@@ -339,8 +421,15 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
             stopped = f"the wall-time limit ({stop_after:.0f} s) came before launch {k + 1} of {len(batches)}"
             break
         try:
-            records = run_batch(study, batch, devices[0], progress=tick, out_dir=launch,
-                                checkpoint_every=checkpoint_every, stop_after=_time_left(stop_after, t0))
+            records = run_batch(
+                study,
+                batch,
+                devices[0],
+                progress=tick,
+                out_dir=launch,
+                checkpoint_every=checkpoint_every,
+                stop_after=_time_left(stop_after, t0),
+            )
         except RunStopped as e:
             stopped = f"launch {k + 1} of {len(batches)}: {e}"
             break
@@ -353,8 +442,17 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
         bar.close()
     wall = time.perf_counter() - t0
     finished = sum((runs_dir / f"{r['point_id']}.json").exists() for r in rows)
-    result = {"out": str(out), "runs": len(rows), "ran": finished - done0, "skipped": done0, "wall_s": wall,
-              "batches": len(batches), "analysis": None, "verification": None, "stopped": stopped}
+    result = {
+        "out": str(out),
+        "runs": len(rows),
+        "ran": finished - done0,
+        "skipped": done0,
+        "wall_s": wall,
+        "batches": len(batches),
+        "analysis": None,
+        "verification": None,
+        "stopped": stopped,
+    }
     if not batches or stopped:
         _results_csv(study, out)
     if stopped:
@@ -364,9 +462,16 @@ def run_study(study, out_dir=None, device: str = "cpu", progress: bool = True, a
         result["analysis"] = analyze(out, study)
         if verify and study.verification.replicates > 0:
             try:
-                result["verification"] = run_verification(study, out, result["analysis"], devices[0], progress, log,
-                                                           checkpoint_every=checkpoint_every,
-                                                           stop_after=_time_left(stop_after, t0))
+                result["verification"] = run_verification(
+                    study,
+                    out,
+                    result["analysis"],
+                    devices[0],
+                    progress,
+                    log,
+                    checkpoint_every=checkpoint_every,
+                    stop_after=_time_left(stop_after, t0),
+                )
             except RunStopped as e:
                 result["stopped"] = f"verification: {e}"
                 log(f"{study.name}: stopped in the verification runs; {e}")
@@ -410,11 +515,19 @@ def analyze(out, study: sp.StudySpec | None = None) -> dict:
     if not finished.all():
         notes.append(f"{int((~finished).sum())} of {len(data)} runs have not finished; they are left out.")
     model = study.analysis.model
-    summary = write_report(out / "analysis", data[finished].reset_index(drop=True), title=study.title or study.name,
-                           factors=study.levels, labels={f.name: f.label for f in study.factors},
-                           responses=[{"name": r.name, "unit": r.unit, "target": r.target} for r in study.responses],
-                           model=list(model) if isinstance(model, tuple) else model, alpha=study.analysis.alpha,
-                           eliminate=study.analysis.eliminate, design_kind=study.design.kind, notes=notes)
+    summary = write_report(
+        out / "analysis",
+        data[finished].reset_index(drop=True),
+        title=study.title or study.name,
+        factors=study.levels,
+        labels={f.name: f.label for f in study.factors},
+        responses=[{"name": r.name, "unit": r.unit, "target": r.target} for r in study.responses],
+        model=list(model) if isinstance(model, tuple) else model,
+        alpha=study.analysis.alpha,
+        eliminate=study.analysis.eliminate,
+        design_kind=study.design.kind,
+        notes=notes,
+    )
     with open(out / "analysis" / "summary.json", "w") as fh:
         json.dump(summary, fh, indent=1, default=_json_default)
     vfile = out / "verification" / "verification.json"
@@ -427,19 +540,38 @@ def analyze(out, study: sp.StudySpec | None = None) -> dict:
 def _append_verification(out: Path, v: dict) -> None:
     """Add the verification section to the report (report.md is rewritten by every analysis)."""
     n = len(v["values"])
-    lines = ["", "## Verification", "",
-             f"{n} replicate runs (world seeds 1..{n}) at the chosen settings "
-             + ", ".join(f"{k} = {val:.6g}" for k, val in v["settings"].items()) + ":", "",
-             "| replicate | " + v["response"] + " |", "|---|---|"]
+    lines = [
+        "",
+        "## Verification",
+        "",
+        f"{n} replicate runs (world seeds 1..{n}) at the chosen settings "
+        + ", ".join(f"{k} = {val:.6g}" for k, val in v["settings"].items())
+        + ":",
+        "",
+        "| replicate | " + v["response"] + " |",
+        "|---|---|",
+    ]
     lines += [f"| {k + 1} | {val:.4g} |" for k, val in enumerate(v["values"])]
-    lines += ["", f"Mean {v['mean']:.4g}, SD {v['sd']:.3g}, predicted {v['predicted']}, target {v['target']}, "
-                  f"relative error of the mean {v['relative_error_pct']:.3g} %.", ""]
+    lines += [
+        "",
+        f"Mean {v['mean']:.4g}, SD {v['sd']:.3g}, predicted {v['predicted']}, target {v['target']}, "
+        f"relative error of the mean {v['relative_error_pct']:.3g} %.",
+        "",
+    ]
     with open(out / "analysis" / "report.md", "a") as fh:
         fh.write("\n".join(lines))
 
 
-def run_verification(study: sp.StudySpec, out, summary: dict, device: str = "cpu", progress: bool = True,
-                     log=print, checkpoint_every: float = 60.0, stop_after: float = 0.0) -> dict | None:
+def run_verification(
+    study: sp.StudySpec,
+    out,
+    summary: dict,
+    device: str = "cpu",
+    progress: bool = True,
+    log=print,
+    checkpoint_every: float = 60.0,
+    stop_after: float = 0.0,
+) -> dict | None:
     """Verification replicates at the chosen optimum of the first response with a target: ``replicates``
     runs (world seeds 1..n, so they differ from each other) as one batch; writes
     ``out/verification/verification.json`` with each value, the mean, SD and relative error against the
@@ -473,24 +605,45 @@ def run_verification(study: sp.StudySpec, out, summary: dict, device: str = "cpu
                 bar.refresh()
 
         try:
-            records = run_batch(study, pending, device, progress=tick, out_dir=vdir / "launch",
-                                checkpoint_every=checkpoint_every, stop_after=stop_after)
+            records = run_batch(
+                study,
+                pending,
+                device,
+                progress=tick,
+                out_dir=vdir / "launch",
+                checkpoint_every=checkpoint_every,
+                stop_after=stop_after,
+            )
         finally:
             if bar is not None:
                 bar.close()
         for row, rec in zip(pending, records):
-            _write_json(row["file"], {"world_seed": row["world_seed"], "overrides": row["overrides"],
-                                      "responses": rec["responses"], "metrics": rec["metrics"], "info": rec["info"]})
+            _write_json(
+                row["file"],
+                {
+                    "world_seed": row["world_seed"],
+                    "overrides": row["overrides"],
+                    "responses": rec["responses"],
+                    "metrics": rec["metrics"],
+                    "info": rec["info"],
+                },
+            )
     values = []
     for r in rows:
         with open(r["file"]) as fh:
             values.append(json.load(fh)["responses"][resp.name])
     v = np.asarray(values, dtype=float)
     mean = float(np.nanmean(v)) if np.isfinite(v).any() else math.nan
-    result = {"response": resp.name, "target": resp.target, "settings": chosen,
-              "predicted": s.get("predicted"), "values": values, "mean": mean,
-              "sd": float(np.nanstd(v, ddof=1)) if np.isfinite(v).sum() > 1 else math.nan,
-              "relative_error_pct": 100.0 * abs(mean - resp.target) / abs(resp.target) if resp.target else math.nan}
+    result = {
+        "response": resp.name,
+        "target": resp.target,
+        "settings": chosen,
+        "predicted": s.get("predicted"),
+        "values": values,
+        "mean": mean,
+        "sd": float(np.nanstd(v, ddof=1)) if np.isfinite(v).sum() > 1 else math.nan,
+        "relative_error_pct": 100.0 * abs(mean - resp.target) / abs(resp.target) if resp.target else math.nan,
+    }
     _write_json(vdir / "verification.json", result)
     _append_verification(out, result)
     return result

@@ -117,8 +117,10 @@ def _md_cell(v) -> str:
 
 def _md_table(header: Sequence[str], rows: Sequence[Sequence], right: Sequence[bool] | None = None) -> str:
     right = right if right is not None else [False] * len(header)
-    lines = ["| " + " | ".join(_md_cell(h) for h in header) + " |",
-             "|" + "|".join("---:" if r else ":---" for r in right) + "|"]
+    lines = [
+        "| " + " | ".join(_md_cell(h) for h in header) + " |",
+        "|" + "|".join("---:" if r else ":---" for r in right) + "|",
+    ]
     lines += ["| " + " | ".join(_md_cell(c) for c in row) + " |" for row in rows]
     return "\n".join(lines)
 
@@ -158,15 +160,25 @@ def anova_frame(fit: ModelFit, alpha: float = 0.05) -> pd.DataFrame:
         remark = ""
         if src in ("Model", "Lack of Fit") and np.isfinite(r["p"]):
             remark = "significant" if r["p"] < alpha else "not significant"
-        rows.append([src, float(r["sum_sq"]), int(r["df"]), float(r["mean_sq"]), float(r["F"]),
-                     format_p(r["p"]), remark])
+        rows.append(
+            [src, float(r["sum_sq"]), int(r["df"]), float(r["mean_sq"]), float(r["F"]), format_p(r["p"]), remark]
+        )
     return pd.DataFrame(rows, columns=ANOVA_COLUMNS)
 
 
 def _anova_text_rows(fit: ModelFit, alpha: float) -> list[list[str]]:
-    return [[r["Source"], _fmt(r["Sum of Squares"]), str(r["df"]), _fmt(r["Mean Square"]),
-             _fmt(r["F-value"]), r["p-value"], r["Significance"]]
-            for _, r in anova_frame(fit, alpha).iterrows()]
+    return [
+        [
+            r["Source"],
+            _fmt(r["Sum of Squares"]),
+            str(r["df"]),
+            _fmt(r["Mean Square"]),
+            _fmt(r["F-value"]),
+            r["p-value"],
+            r["Significance"],
+        ]
+        for _, r in anova_frame(fit, alpha).iterrows()
+    ]
 
 
 def format_anova(fit: ModelFit, alpha: float = 0.05) -> str:
@@ -177,8 +189,7 @@ def format_anova(fit: ModelFit, alpha: float = 0.05) -> str:
     left = {0, 6}
 
     def line(cells):
-        return "  ".join(c.ljust(w) if i in left else c.rjust(w)
-                         for i, (c, w) in enumerate(zip(cells, width))).rstrip()
+        return "  ".join(c.ljust(w) if i in left else c.rjust(w) for i, (c, w) in enumerate(zip(cells, width))).rstrip()
 
     title = f"ANOVA for {_model_name(fit)} model, response {fit.response} (Type III partial sums of squares)"
     rule = "-" * len(line(head))
@@ -217,12 +228,20 @@ def _coefficients_frame(fit: ModelFit, alpha: float) -> pd.DataFrame:
         actual = {_monomial_label(m, fit.factors): v for m, v in fit.equation("actual").items()}
     rows = []
     for lab, r in c.iterrows():
-        rows.append({"Term": lab, "Coefficient Estimate": r["coef"], "df": 1,
-                     "Standard Error": r["std_err"],
-                     f"{ci} CI Low": r["coef"] - tq * r["std_err"],
-                     f"{ci} CI High": r["coef"] + tq * r["std_err"],
-                     "t-value": r["t"], "p-value": r["p"], "VIF": vif.get(lab, math.nan),
-                     "Actual Coefficient": actual.pop(lab, math.nan)})
+        rows.append(
+            {
+                "Term": lab,
+                "Coefficient Estimate": r["coef"],
+                "df": 1,
+                "Standard Error": r["std_err"],
+                f"{ci} CI Low": r["coef"] - tq * r["std_err"],
+                f"{ci} CI High": r["coef"] + tq * r["std_err"],
+                "t-value": r["t"],
+                "p-value": r["p"],
+                "VIF": vif.get(lab, math.nan),
+                "Actual Coefficient": actual.pop(lab, math.nan),
+            }
+        )
     for lab, v in actual.items():
         rows.append({"Term": lab, "Actual Coefficient": v})
     return pd.DataFrame(rows)
@@ -258,19 +277,23 @@ def _choose_terms(data: pd.DataFrame, factors: list[str], model) -> tuple[list[T
         if not named:
             cand = [t for t in cand if t in wanted]
         if cand and set(cand) != set(wanted) and _estimable(data, factors, cand):
-            return cand, (f"the {_describe_model(model)} model is not estimable from these "
-                          f"{len(data)} runs (aliased terms); fitted the {_MODEL_TITLE[name]} "
-                          f"model instead")
+            return cand, (
+                f"the {_describe_model(model)} model is not estimable from these "
+                f"{len(data)} runs (aliased terms); fitted the {_MODEL_TITLE[name]} "
+                f"model instead"
+            )
     # not even all main effects (e.g. failed runs left a factor constant): keep those that fit
     terms: list[Term] = []
     for f in factors:
         if _estimable(data, factors, terms + [(f,)]):
             terms.append((f,))
     kept = ", ".join(t[0] for t in terms) or "none (mean only)"
-    which = ("the Linear model is" if named and model.lower() == "linear" else
-             f"neither the {_describe_model(model)} model nor the Linear model is")
+    which = (
+        "the Linear model is"
+        if named and model.lower() == "linear"
+        else f"neither the {_describe_model(model)} model nor the Linear model is"
+    )
     return terms, f"{which} not estimable from these {len(data)} runs; main effects kept: {kept}"
-
 
 
 # --------------------------------------------------------------------------------------------
@@ -332,8 +355,17 @@ def _grid(fit: ModelFit, a: str, b: str, region: Mapping[str, tuple[float, float
     return A, B, fit.predict(pts).reshape(A.shape)
 
 
-def _plot_contour(path: Path, fit: ModelFit, a: Factor, b: Factor, region, labels, resp: Mapping,
-                  runs: pd.DataFrame, chosen: pd.Series | None):
+def _plot_contour(
+    path: Path,
+    fit: ModelFit,
+    a: Factor,
+    b: Factor,
+    region,
+    labels,
+    resp: Mapping,
+    runs: pd.DataFrame,
+    chosen: pd.Series | None,
+):
     fig, ax = _figure()
     A, B, Z = _grid(fit, a.name, b.name, region)
     XA, XB = a.to_actual(A), b.to_actual(B)
@@ -345,14 +377,24 @@ def _plot_contour(path: Path, fit: ModelFit, a: Factor, b: Factor, region, label
     if target is not None and Z.min() <= target <= Z.max():
         ax.contour(XA, XB, Z, levels=[target], colors="red", linewidths=2)
         from matplotlib.lines import Line2D
+
         handles.append(Line2D([], [], color="red", lw=2, label=f"target {target:g}"))
     # runs are projected onto the plane: a reader sees where the data lie, not only the slice
-    ax.scatter(a.to_actual(runs[a.name]), b.to_actual(runs[b.name]), s=14, c="black", zorder=3,
-               clip_on=False)
+    ax.scatter(a.to_actual(runs[a.name]), b.to_actual(runs[b.name]), s=14, c="black", zorder=3, clip_on=False)
     others = [f for f in fit.factors if f not in (a.name, b.name)]
     if chosen is not None and all(abs(chosen[f]) < 1e-6 for f in others):
-        handles.append(ax.scatter([a.to_actual(chosen[a.name])], [b.to_actual(chosen[b.name])],
-                                  marker="*", s=120, c="red", edgecolors="white", zorder=4, label="chosen"))
+        handles.append(
+            ax.scatter(
+                [a.to_actual(chosen[a.name])],
+                [b.to_actual(chosen[b.name])],
+                marker="*",
+                s=120,
+                c="red",
+                edgecolors="white",
+                zorder=4,
+                label="chosen",
+            )
+        )
     if handles:
         ax.legend(handles=handles, fontsize=7, loc="best")
     ax.set_xlabel(_axis_label(a, labels), fontsize=8)
@@ -406,8 +448,9 @@ def _point_type(row: np.ndarray) -> str:
     return "factorial"
 
 
-def _fit_response(data: pd.DataFrame, name: str, fnames: list[str], model, alpha: float,
-                  eliminate: bool, levels: dict[str, Factor]) -> tuple[ModelFit, str | None]:
+def _fit_response(
+    data: pd.DataFrame, name: str, fnames: list[str], model, alpha: float, eliminate: bool, levels: dict[str, Factor]
+) -> tuple[ModelFit, str | None]:
     terms, fallback = _choose_terms(data, fnames, model)
     if eliminate:
         fit = backward_eliminate(data, name, fnames, terms, alpha, hierarchical=True, levels=levels)
@@ -416,9 +459,20 @@ def _fit_response(data: pd.DataFrame, name: str, fnames: list[str], model, alpha
     return fit, fallback
 
 
-def write_report(out_dir, data: pd.DataFrame, *, title: str, factors: list[Factor],
-                 labels: dict[str, str], responses: list[dict], model="linear", alpha=0.05,
-                 eliminate=False, design_kind: str = "", notes: list[str] | None = None) -> dict:
+def write_report(
+    out_dir,
+    data: pd.DataFrame,
+    *,
+    title: str,
+    factors: list[Factor],
+    labels: dict[str, str],
+    responses: list[dict],
+    model="linear",
+    alpha=0.05,
+    eliminate=False,
+    design_kind: str = "",
+    notes: list[str] | None = None,
+) -> dict:
     """Analyse every response of a finished design and write the report into ``out_dir``.
 
     Args:
@@ -461,8 +515,7 @@ def write_report(out_dir, data: pd.DataFrame, *, title: str, factors: list[Facto
     n_runs = len(data)
     run_id = (data["run"] if "run" in data.columns else pd.Series(np.arange(1, n_runs + 1))).tolist()
     coded = data[fnames].to_numpy(float)
-    ptype = (data["point_type"].astype(str).tolist() if "point_type" in data.columns
-             else [_point_type(r) for r in coded])
+    ptype = data["point_type"].astype(str).tolist() if "point_type" in data.columns else [_point_type(r) for r in coded]
     rnames = [r["name"] for r in responses]
     ok = {r: np.isfinite(pd.to_numeric(data[r], errors="coerce").to_numpy(float)) for r in rnames}
     failed_any = ~np.logical_and.reduce([ok[r] for r in rnames]) if rnames else np.zeros(n_runs, bool)
@@ -473,38 +526,76 @@ def write_report(out_dir, data: pd.DataFrame, *, title: str, factors: list[Facto
     auto_notes: list[str] = []
 
     md: list[str] = [f"# {title}", ""]
-    md.append(f"**Design:** {design_kind or 'not stated'}; **runs:** {n_runs} "
-              f"({int(failed_any.sum())} failed); **factors:** {len(fnames)}; "
-              f"**requested model:** {_describe_model(model)}"
-              + (f", hierarchical backward elimination at alpha = {alpha:g}" if eliminate else "")
-              + ".")
+    md.append(
+        f"**Design:** {design_kind or 'not stated'}; **runs:** {n_runs} "
+        f"({int(failed_any.sum())} failed); **factors:** {len(fnames)}; "
+        f"**requested model:** {_describe_model(model)}"
+        + (f", hierarchical backward elimination at alpha = {alpha:g}" if eliminate else "")
+        + "."
+    )
     md += ["", "## Factors", ""]
-    md.append(_md_table(["Factor", "Name", "Unit", "Coded -1", "Coded 0", "Coded +1", "Design range (coded)"],
-                        [[f.name, labels.get(f.name, ""), f.unit, _fmt_g(f.low), _fmt_g(f.centre),
-                          _fmt_g(f.high), f"{_fmt_g(region[f.name][0])} .. {_fmt_g(region[f.name][1])}"]
-                         for f in factors], [False, False, False, True, True, True, False]))
+    md.append(
+        _md_table(
+            ["Factor", "Name", "Unit", "Coded -1", "Coded 0", "Coded +1", "Design range (coded)"],
+            [
+                [
+                    f.name,
+                    labels.get(f.name, ""),
+                    f.unit,
+                    _fmt_g(f.low),
+                    _fmt_g(f.centre),
+                    _fmt_g(f.high),
+                    f"{_fmt_g(region[f.name][0])} .. {_fmt_g(region[f.name][1])}",
+                ]
+                for f in factors
+            ],
+            [False, False, False, True, True, True, False],
+        )
+    )
     if any(f.low > f.high for f in factors):
-        md += ["", "Reversed coding (coded -1 is the higher value) for: "
-               + ", ".join(f.name for f in factors if f.low > f.high) + "."]
+        md += [
+            "",
+            "Reversed coding (coded -1 is the higher value) for: "
+            + ", ".join(f.name for f in factors if f.low > f.high)
+            + ".",
+        ]
 
     # ---- run table
     extras = [c for c in _RUN_EXTRAS if c in data.columns]
-    head = (["Run", "Type"] + [f"{f} (coded)" for f in fnames]
-            + [f"{f} (actual" + (f", {fmap[f].unit})" if fmap[f].unit else ")") for f in fnames]
-            + [_response_label(r) for r in responses] + extras)
+    head = (
+        ["Run", "Type"]
+        + [f"{f} (coded)" for f in fnames]
+        + [f"{f} (actual" + (f", {fmap[f].unit})" if fmap[f].unit else ")") for f in fnames]
+        + [_response_label(r) for r in responses]
+        + extras
+    )
     rows = []
     for i in range(n_runs):
-        rows.append([run_id[i], ptype[i]] + [_fmt_g(v) for v in coded[i]]
-                    + [_fmt_g(fmap[f].to_actual(coded[i, j])) for j, f in enumerate(fnames)]
-                    + [_fmt_g(data.at[i, r], 6) if ok[r][i] else "failed" for r in rnames]
-                    + [_extra_cell(data.at[i, c]) for c in extras])
+        rows.append(
+            [run_id[i], ptype[i]]
+            + [_fmt_g(v) for v in coded[i]]
+            + [_fmt_g(fmap[f].to_actual(coded[i, j])) for j, f in enumerate(fnames)]
+            + [_fmt_g(data.at[i, r], 6) if ok[r][i] else "failed" for r in rnames]
+            + [_extra_cell(data.at[i, c]) for c in extras]
+        )
     md += ["", "## Runs", "", _md_table(head, rows, [True, False] + [True] * (len(head) - 2))]
     if failed_any.any():
-        md += ["", "### Failed runs", "", "Left out of the fit of the response(s) named; the design "
-               "region and the run table still include them.", ""]
-        md.append(_md_table(["Run", "Type", "Missing response(s)"],
-                            [[run_id[i], ptype[i], ", ".join(r for r in rnames if not ok[r][i])]
-                             for i in np.flatnonzero(failed_any)]))
+        md += [
+            "",
+            "### Failed runs",
+            "",
+            "Left out of the fit of the response(s) named; the design region and the run table still include them.",
+            "",
+        ]
+        md.append(
+            _md_table(
+                ["Run", "Type", "Missing response(s)"],
+                [
+                    [run_id[i], ptype[i], ", ".join(r for r in rnames if not ok[r][i])]
+                    for i in np.flatnonzero(failed_any)
+                ],
+            )
+        )
 
     for resp in responses:
         name = resp["name"]
@@ -512,15 +603,30 @@ def write_report(out_dir, data: pd.DataFrame, *, title: str, factors: list[Facto
         used = data.loc[ok[name], fnames + [name]].astype(float).reset_index(drop=True)
         failed_runs = [run_id[i] for i in np.flatnonzero(~ok[name])]
         md += ["", f"## Response {_response_label(resp)}", ""]
-        md.append(f"{len(used)} of {n_runs} runs used"
-                  + (f"; failed runs left out: {', '.join(map(str, failed_runs))}" if failed_runs else "") + ".")
+        md.append(
+            f"{len(used)} of {n_runs} runs used"
+            + (f"; failed runs left out: {', '.join(map(str, failed_runs))}" if failed_runs else "")
+            + "."
+        )
         if len(used) < 2:
             auto_notes.append(f"{name}: fewer than two finished runs; not analysed.")
             md += ["", "Not analysed: fewer than two finished runs."]
-            result[name] = _json({"r2": None, "adj_r2": None, "pred_r2": None, "adeq_precision": None,
-                                  "model_p": None, "terms": [], "equation_actual": None, "chosen": None,
-                                  "predicted": None, "reachable": None, "n_used": len(used),
-                                  "failed_runs": failed_runs})
+            result[name] = _json(
+                {
+                    "r2": None,
+                    "adj_r2": None,
+                    "pred_r2": None,
+                    "adeq_precision": None,
+                    "model_p": None,
+                    "terms": [],
+                    "equation_actual": None,
+                    "chosen": None,
+                    "predicted": None,
+                    "reachable": None,
+                    "n_used": len(used),
+                    "failed_runs": failed_runs,
+                }
+            )
             continue
         fit, fallback = _fit_response(used, name, fnames, model, alpha, eliminate, fmap)
         if fallback:
@@ -531,31 +637,51 @@ def write_report(out_dir, data: pd.DataFrame, *, title: str, factors: list[Facto
         anova = anova_frame(fit, alpha)
         anova.to_csv(out / f"anova_{tag}.csv", index=False)
         files.append(f"anova_{tag}.csv")
-        md += ["", f"### ANOVA for {_model_name(fit)} model", "",
-               "Type III (partial) sums of squares; pure error from replicated settings.", ""]
-        md.append(_md_table(ANOVA_COLUMNS, _anova_text_rows(fit, alpha),
-                            [False, True, True, True, True, True, False]))
+        md += [
+            "",
+            f"### ANOVA for {_model_name(fit)} model",
+            "",
+            "Type III (partial) sums of squares; pure error from replicated settings.",
+            "",
+        ]
+        md.append(_md_table(ANOVA_COLUMNS, _anova_text_rows(fit, alpha), [False, True, True, True, True, True, False]))
 
         # ---- fit statistics
         s = fit.stats
         md += ["", "### Fit statistics", ""]
-        md.append(_md_table(["Statistic", "Value"], [
-            ["Std. Dev.", _fmt_g(s["std_dev"], 4, "n/a")], ["Mean", _fmt_g(s["mean"], 6)],
-            ["C.V. %", _fmt_g(s["cv_pct"], 4, "n/a")], ["R²", _fmt_g(s["r2"], 4, "n/a")],
-            ["Adjusted R²", _fmt_g(s["adj_r2"], 4, "n/a")], ["Predicted R²", _fmt_g(s["pred_r2"], 4, "n/a")],
-            ["Adeq Precision", _fmt_g(s["adeq_precision"], 4, "n/a")], ["PRESS", _fmt_g(s["press"], 4, "n/a")],
-        ], [False, True]))
+        md.append(
+            _md_table(
+                ["Statistic", "Value"],
+                [
+                    ["Std. Dev.", _fmt_g(s["std_dev"], 4, "n/a")],
+                    ["Mean", _fmt_g(s["mean"], 6)],
+                    ["C.V. %", _fmt_g(s["cv_pct"], 4, "n/a")],
+                    ["R²", _fmt_g(s["r2"], 4, "n/a")],
+                    ["Adjusted R²", _fmt_g(s["adj_r2"], 4, "n/a")],
+                    ["Predicted R²", _fmt_g(s["pred_r2"], 4, "n/a")],
+                    ["Adeq Precision", _fmt_g(s["adeq_precision"], 4, "n/a")],
+                    ["PRESS", _fmt_g(s["press"], 4, "n/a")],
+                ],
+                [False, True],
+            )
+        )
         if np.isfinite(s["adj_r2"]) and np.isfinite(s["pred_r2"]) and abs(s["adj_r2"] - s["pred_r2"]) > 0.2:
-            auto_notes.append(f"{name}: predicted R² {s['pred_r2']:.4f} is not within 0.2 of adjusted R² "
-                              f"{s['adj_r2']:.4f} (Design-Expert's rule of thumb): the model may not "
-                              f"predict new runs as well as it fits these.")
+            auto_notes.append(
+                f"{name}: predicted R² {s['pred_r2']:.4f} is not within 0.2 of adjusted R² "
+                f"{s['adj_r2']:.4f} (Design-Expert's rule of thumb): the model may not "
+                f"predict new runs as well as it fits these."
+            )
         if np.isfinite(s["adeq_precision"]) and s["adeq_precision"] < 4:
-            auto_notes.append(f"{name}: adequate precision {s['adeq_precision']:.3g} < 4: weak signal "
-                              f"against noise; do not navigate the design space with this model.")
+            auto_notes.append(
+                f"{name}: adequate precision {s['adeq_precision']:.3g} < 4: weak signal "
+                f"against noise; do not navigate the design space with this model."
+            )
         if "Lack of Fit" in fit.anova.index and fit.anova.loc["Lack of Fit", "p"] < alpha:
             p_lof = format_p(fit.anova.loc["Lack of Fit", "p"])
-            auto_notes.append(f"{name}: lack of fit is significant (p {p_lof}): "
-                              f"the model misses systematic variation that the pure error does not explain.")
+            auto_notes.append(
+                f"{name}: lack of fit is significant (p {p_lof}): "
+                f"the model misses systematic variation that the pure error does not explain."
+            )
 
         # ---- coefficients and equations
         coefs = _coefficients_frame(fit, alpha)
@@ -563,25 +689,61 @@ def write_report(out_dir, data: pd.DataFrame, *, title: str, factors: list[Facto
         files.append(f"coefficients_{tag}.csv")
         ci = f"{100 * (1 - alpha):g}%"
         md += ["", "### Coefficients in coded units", ""]
-        md.append(_md_table(["Term", "Estimate", "Std. Error", f"{ci} CI Low", f"{ci} CI High", "p-value", "VIF"],
-                            [[r["Term"], _fmt_g(r["Coefficient Estimate"], 5), _fmt_g(r["Standard Error"], 4),
-                              _fmt_g(r[f"{ci} CI Low"], 5), _fmt_g(r[f"{ci} CI High"], 5), format_p(r["p-value"]),
-                              _fmt_g(r["VIF"], 4)]
-                             for _, r in coefs.iterrows() if np.isfinite(r["Coefficient Estimate"])],
-                            [False] + [True] * 6))
+        md.append(
+            _md_table(
+                ["Term", "Estimate", "Std. Error", f"{ci} CI Low", f"{ci} CI High", "p-value", "VIF"],
+                [
+                    [
+                        r["Term"],
+                        _fmt_g(r["Coefficient Estimate"], 5),
+                        _fmt_g(r["Standard Error"], 4),
+                        _fmt_g(r[f"{ci} CI Low"], 5),
+                        _fmt_g(r[f"{ci} CI High"], 5),
+                        format_p(r["p-value"]),
+                        _fmt_g(r["VIF"], 4),
+                    ]
+                    for _, r in coefs.iterrows()
+                    if np.isfinite(r["Coefficient Estimate"])
+                ],
+                [False] + [True] * 6,
+            )
+        )
         eq_coded = fit.equation_string("coded", 6)
         eq_actual = fit.equation_string("actual", 6)
-        md += ["", "### Final equation", "", "In coded factors (-1 low, +1 high; compare coefficients "
-               "to rank effects):", "", "```", eq_coded, "```", "",
-               "In actual factors (do not compare coefficients: they depend on the units):", "",
-               "```", eq_actual, "```", ""]
-        md.append("where " + "; ".join(f"{f.name} = " + (labels.get(f.name) or f.name)
-                                       + (f" [{f.unit}]" if f.unit else "") for f in factors) + ".")
+        md += [
+            "",
+            "### Final equation",
+            "",
+            "In coded factors (-1 low, +1 high; compare coefficients to rank effects):",
+            "",
+            "```",
+            eq_coded,
+            "```",
+            "",
+            "In actual factors (do not compare coefficients: they depend on the units):",
+            "",
+            "```",
+            eq_actual,
+            "```",
+            "",
+        ]
+        md.append(
+            "where "
+            + "; ".join(
+                f"{f.name} = " + (labels.get(f.name) or f.name) + (f" [{f.unit}]" if f.unit else "") for f in factors
+            )
+            + "."
+        )
         if eliminate:
             if fit.elimination:
                 md += ["", f"Eliminated (backward, hierarchical, alpha = {alpha:g}), in order:", ""]
-                md.append(_md_table(["Term", "p-value when removed"],
-                                    [[e["removed"], format_p(e["p"])] for e in fit.elimination], [False, True]))
+                md.append(
+                    _md_table(
+                        ["Term", "p-value when removed"],
+                        [[e["removed"], format_p(e["p"])] for e in fit.elimination],
+                        [False, True],
+                    )
+                )
             else:
                 md += ["", f"No term eliminated (every removable term has p <= {alpha:g})."]
 
@@ -590,13 +752,12 @@ def write_report(out_dir, data: pd.DataFrame, *, title: str, factors: list[Facto
         if fit.terms:
             eff = effects_table(used, name, fnames, fit.terms)
             df_res = int(fit.anova.loc["Residual", "df"])
-            _plot_pareto(out / f"pareto_{tag}.png", eff, alpha, df_res,
-                         f"Pareto chart, {name} ({eff.attrs['method']})")
+            _plot_pareto(out / f"pareto_{tag}.png", eff, alpha, df_res, f"Pareto chart, {name} ({eff.attrs['method']})")
             pics.append(f"pareto_{tag}.png")
             ranked = _factor_ranking(fit, eff)
             if len(ranked) < 2:  # one active factor: pair it with the next design factor
                 spread = [f for f in fnames if f not in ranked and region[f][1] > region[f][0]]
-                ranked += spread[:2 - len(ranked)]
+                ranked += spread[: 2 - len(ranked)]
             top = ranked[:3] if len(ranked) >= 3 else ranked[:2]
             # design order on the axes and in file names, whatever the ranking
             pair0 = sorted(top[:2], key=fnames.index)
@@ -610,7 +771,7 @@ def write_report(out_dir, data: pd.DataFrame, *, title: str, factors: list[Facto
         chosen_coded = sol.chosen if (sol is not None and sol.reachable) else None
         if len(top) >= 2:
             for i, a in enumerate(top):
-                for b in top[i + 1:]:
+                for b in top[i + 1 :]:
                     fn = f"contour_{tag}_{_safe(a)}_{_safe(b)}.png"
                     _plot_contour(out / fn, fit, fmap[a], fmap[b], region, labels, resp, used, chosen_coded)
                     pics.append(fn)
@@ -621,20 +782,32 @@ def write_report(out_dir, data: pd.DataFrame, *, title: str, factors: list[Facto
         if pics:
             md += ["", "### Pictures", ""]
             if fit.terms:
-                md.append(f"Pareto chart of standardized effects ({eff.attrs['method']}; limits at "
-                          f"alpha = {alpha:g}, two-sided, and Bonferroni); orange positive, blue negative:")
+                md.append(
+                    f"Pareto chart of standardized effects ({eff.attrs['method']}; limits at "
+                    f"alpha = {alpha:g}, two-sided, and Bonferroni); orange positive, blue negative:"
+                )
                 md += ["", f"![Pareto chart of {name}]({pics[0]})", ""]
             if len(pics) > 1:
-                md.append("Fitted model over the design region in actual units; factors off the plot "
-                          "at their centre; black dots: runs projected onto the plane"
-                          + ("; red line: the target" if target is not None else "") + ".")
+                md.append(
+                    "Fitted model over the design region in actual units; factors off the plot "
+                    "at their centre; black dots: runs projected onto the plane"
+                    + ("; red line: the target" if target is not None else "")
+                    + "."
+                )
                 md.append("")
                 md += [f"![{p[:-4]}]({p})" for p in pics[1:]]
 
         # ---- target
-        entry = {"model": _model_name(fit), "model_fallback": fallback, "n_used": len(used),
-                 "failed_runs": failed_runs, "eliminated": [e["removed"] for e in fit.elimination],
-                 "chosen": None, "predicted": None, "reachable": None}
+        entry = {
+            "model": _model_name(fit),
+            "model_fallback": fallback,
+            "n_used": len(used),
+            "failed_runs": failed_runs,
+            "eliminated": [e["removed"] for e in fit.elimination],
+            "chosen": None,
+            "predicted": None,
+            "reachable": None,
+        }
         if target is not None and sol is None:
             md += ["", "### Target", "", f"Target {target:g}: no model terms left, nothing to solve."]
         if sol is not None:
@@ -646,42 +819,71 @@ def write_report(out_dir, data: pd.DataFrame, *, title: str, factors: list[Facto
             opt["distance_coded"] = fam["distance"]
             opt["on_target"] = sol.reachable
             key = [round(float(sol.chosen[f]), 12) for f in fnames]
-            opt["chosen"] = [sol.reachable and [round(float(r[f]), 12) for f in fnames] == key
-                             for _, r in fam.iterrows()]
+            opt["chosen"] = [
+                sol.reachable and [round(float(r[f]), 12) for f in fnames] == key for _, r in fam.iterrows()
+            ]
             opt.to_csv(out / f"optimum_{tag}.csv", index=False)
             files.append(f"optimum_{tag}.csv")
             settings = {f: float(sol.chosen_actual[f]) for f in fnames}
             pred = float(sol.chosen["predicted"])
             lo, hi = sol.predicted_range
             unit = f" {resp['unit']}" if resp.get("unit") else ""
-            md += ["", "### Target", "",
-                   f"Target {target:g}{unit}; over the design region the model predicts "
-                   f"{lo:.4g} .. {hi:.4g}{unit}."]
-            table = _md_table(["Factor", "Coded", "Actual"],
-                              [[_axis_label(fmap[f], labels), f"{sol.chosen[f]:.4f}", f"{settings[f]:.6g}"]
-                               for f in fnames], [False, True, True])
+            md += [
+                "",
+                "### Target",
+                "",
+                f"Target {target:g}{unit}; over the design region the model predicts {lo:.4g} .. {hi:.4g}{unit}.",
+            ]
+            table = _md_table(
+                ["Factor", "Coded", "Actual"],
+                [[_axis_label(fmap[f], labels), f"{sol.chosen[f]:.4f}", f"{settings[f]:.6g}"] for f in fnames],
+                [False, True, True],
+            )
             if sol.reachable:
-                md += ["", f"**Reachable** in the design region. {len(fam)} solutions found on the "
-                           f"target contour (`optimum_{tag}.csv`): the target is met on a set of "
-                           f"settings, not at one point.",
-                       "", f"Chosen by rule: {sol.rule}; distance {sol.chosen['distance']:.4f} coded "
-                           f"units from the centre.", "", table, "",
-                       f"Predicted {name} at the chosen settings: {pred:.6g}{unit}."]
+                md += [
+                    "",
+                    f"**Reachable** in the design region. {len(fam)} solutions found on the "
+                    f"target contour (`optimum_{tag}.csv`): the target is met on a set of "
+                    f"settings, not at one point.",
+                    "",
+                    f"Chosen by rule: {sol.rule}; distance {sol.chosen['distance']:.4f} coded units from the centre.",
+                    "",
+                    table,
+                    "",
+                    f"Predicted {name} at the chosen settings: {pred:.6g}{unit}.",
+                ]
                 entry.update(chosen=settings, predicted=pred, reachable=True)
             else:
-                md += ["", "**Not reachable** in the design region: the target lies outside the "
-                           "predicted range. No settings are chosen; the closest ones (the region's "
-                           "extreme nearest the target) are:", "", table, "",
-                       f"Predicted {name} there: {pred:.6g}{unit}."]
-                auto_notes.append(f"{name}: target {target:g} is outside the predicted range "
-                                  f"{lo:.4g} .. {hi:.4g} of the design region: no settings in it reach "
-                                  f"the target; widen the factor ranges to look further.")
+                md += [
+                    "",
+                    "**Not reachable** in the design region: the target lies outside the "
+                    "predicted range. No settings are chosen; the closest ones (the region's "
+                    "extreme nearest the target) are:",
+                    "",
+                    table,
+                    "",
+                    f"Predicted {name} there: {pred:.6g}{unit}.",
+                ]
+                auto_notes.append(
+                    f"{name}: target {target:g} is outside the predicted range "
+                    f"{lo:.4g} .. {hi:.4g} of the design region: no settings in it reach "
+                    f"the target; widen the factor ranges to look further."
+                )
                 entry.update(reachable=False, closest={**settings, "predicted": pred})
             entry["n_solutions"] = len(fam) if sol.reachable else 0
             entry["predicted_range"] = [lo, hi]
-        entry.update({"r2": s["r2"], "adj_r2": s["adj_r2"], "pred_r2": s["pred_r2"],
-                      "adeq_precision": s["adeq_precision"], "model_p": fit.anova.loc["Model", "p"],
-                      "terms": fit.labels, "equation_coded": eq_coded, "equation_actual": eq_actual})
+        entry.update(
+            {
+                "r2": s["r2"],
+                "adj_r2": s["adj_r2"],
+                "pred_r2": s["pred_r2"],
+                "adeq_precision": s["adeq_precision"],
+                "model_p": fit.anova.loc["Model", "p"],
+                "terms": fit.labels,
+                "equation_coded": eq_coded,
+                "equation_actual": eq_actual,
+            }
+        )
         result[name] = _json(entry)
 
     all_notes = auto_notes + list(notes or [])

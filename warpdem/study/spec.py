@@ -146,13 +146,33 @@ class StudyError(ValueError):
     allowed."""
 
 
-DESIGN_KINDS = ("plackett_burman", "full_factorial", "fractional_factorial", "box_behnken",
-                "central_composite", "steepest_ascent", "explicit")
+DESIGN_KINDS = (
+    "plackett_burman",
+    "full_factorial",
+    "fractional_factorial",
+    "box_behnken",
+    "central_composite",
+    "steepest_ascent",
+    "explicit",
+)
 """Design kinds of ``[design] kind``."""
 
-MEASURES = ("angle_fit_deg", "angle_fit_sd_deg", "angle_image_deg", "angle_image_sd_deg", "angle_cone_deg",
-            "pile_height_m", "particles", "max_displacement_m", "compression_ratio", "max_force_n",
-            "final_height_m", "fill_height_m", "inertial_number_max", "time_s")
+MEASURES = (
+    "angle_fit_deg",
+    "angle_fit_sd_deg",
+    "angle_image_deg",
+    "angle_image_sd_deg",
+    "angle_cone_deg",
+    "pile_height_m",
+    "particles",
+    "max_displacement_m",
+    "compression_ratio",
+    "max_force_n",
+    "final_height_m",
+    "fill_height_m",
+    "inertial_number_max",
+    "time_s",
+)
 """Scalar metric keys that :func:`warpdem.scene.runner.run_scene` writes per world (``metrics.json``)."""
 
 MATERIAL_SCALARS = ("density", "youngs_modulus", "shear_modulus", "poisson_ratio")
@@ -170,6 +190,7 @@ _DIGITS = 12  # significant digits of actual values in the table and in point id
 # --------------------------------------------------------------------------------------------------
 # helpers
 # --------------------------------------------------------------------------------------------------
+
 
 def _interaction_fields():
     from warpdem.scene.stage import PAIR_FIELDS
@@ -261,13 +282,17 @@ def _mapping(where: str, key: str, v, names: Sequence[str], need_all: bool) -> F
         raise _bad(where, key, v, "a table {factor = number, ...}")
     unknown = [k for k in v if k not in names]
     if unknown:
-        raise StudyError(f"{where}: {key} names factor {unknown[0]!r}, which is not a factor"
-                         f"{_suggest(unknown[0], names)}; factors: {', '.join(names)}")
+        raise StudyError(
+            f"{where}: {key} names factor {unknown[0]!r}, which is not a factor"
+            f"{_suggest(unknown[0], names)}; factors: {', '.join(names)}"
+        )
     if need_all:
         missing = [n for n in names if n not in v]
         if missing:
-            raise StudyError(f"{where}: {key} = {dict(v)!r} lacks factor(s) {', '.join(missing)}; expected a "
-                             f"value for every factor ({', '.join(names)})")
+            raise StudyError(
+                f"{where}: {key} = {dict(v)!r} lacks factor(s) {', '.join(missing)}; expected a "
+                f"value for every factor ({', '.join(names)})"
+            )
     return FrozenMap({k: _number(where, f"{key}.{k}", v[k]) for k in names if k in v})
 
 
@@ -285,7 +310,8 @@ def _key_problem(key: str, rig: str | None, factor: bool) -> str | None:
     head = parts[0]
     scalars = _interaction_scalars() if factor else _interaction_fields()
     keyed = "material.NAME.FIELD, interaction.A.B.FIELD, run.FIELD" + (
-        "" if factor else ", measure.FIELD, factory.NAME.FIELD")
+        "" if factor else ", measure.FIELD, factory.NAME.FIELD"
+    )
     forms = keyed + " or a rig parameter"
     if len(parts) == 1:
         if rig is not None:
@@ -301,7 +327,7 @@ def _key_problem(key: str, rig: str | None, factor: bool) -> str | None:
         if len(parts) != 3 or not all(parts):
             return f"material.NAME.FIELD (one of {forms})"
         if parts[2] not in MATERIAL_SCALARS:
-            return (f"a material field: {', '.join(MATERIAL_SCALARS)}{_suggest(parts[2], MATERIAL_SCALARS)}")
+            return f"a material field: {', '.join(MATERIAL_SCALARS)}{_suggest(parts[2], MATERIAL_SCALARS)}"
         return None
     if head == "interaction":
         if len(parts) != 4 or not all(parts):
@@ -314,7 +340,8 @@ def _key_problem(key: str, rig: str | None, factor: bool) -> str | None:
         fields_ = _run_fields()
         if len(parts) != 2 or parts[1] not in fields_:
             return f"run.FIELD with FIELD one of {', '.join(fields_)}" + (
-                _suggest(parts[1], fields_) if len(parts) == 2 else "")
+                _suggest(parts[1], fields_) if len(parts) == 2 else ""
+            )
         return None
     if head in ("measure", "factory"):
         if factor:
@@ -347,6 +374,7 @@ def varies_per_world(key: str) -> bool:
 # the parts of a study
 # --------------------------------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class FactorSpec:
     """One factor: the override ``parameter`` it sets, its actual value at coded -1 (``low``) and +1
@@ -364,16 +392,22 @@ class FactorSpec:
         if not isinstance(self.name, str) or not _FACTOR_RE.match(self.name):
             raise _bad("[[factors]]", "name", self.name, "letters, digits and _ starting with a letter (e.g. A, X1)")
         if self.name in _RESERVED or self.name.endswith("_actual"):
-            raise _bad(where, "name", self.name, "a name that is not a design-table column "
-                       f"({', '.join(sorted(_RESERVED))}, *_actual)")
+            raise _bad(
+                where,
+                "name",
+                self.name,
+                f"a name that is not a design-table column ({', '.join(sorted(_RESERVED))}, *_actual)",
+            )
         problem = _key_problem(self.parameter, None, factor=True)
         if problem:
             raise _bad(where, "parameter", self.parameter, problem)
         low = _number(where, "low", self.low)
         high = _number(where, "high", self.high)
         if low == high:
-            raise StudyError(f"{where}: low = {low!r} and high = {high!r} are not allowed; expected two "
-                             "different values (low > high is a reversed coding)")
+            raise StudyError(
+                f"{where}: low = {low!r} and high = {high!r} are not allowed; expected two "
+                "different values (low > high is a reversed coding)"
+            )
         object.__setattr__(self, "low", low)
         object.__setattr__(self, "high", high)
         _string(where, "label", self.label)
@@ -394,8 +428,20 @@ _KIND_OPTIONS = {
     "steepest_ascent": {"base", "base_step", "steps", "coefficients", "start", "step", "descent"},
     "explicit": {"points"},
 }
-_OPTIONS = ("runs", "generators", "alpha", "center_points", "base", "base_step", "steps", "coefficients", "start",
-            "step", "descent", "points")
+_OPTIONS = (
+    "runs",
+    "generators",
+    "alpha",
+    "center_points",
+    "base",
+    "base_step",
+    "steps",
+    "coefficients",
+    "start",
+    "step",
+    "descent",
+    "points",
+)
 
 
 @dataclass(frozen=True)
@@ -429,8 +475,10 @@ class DesignSpec:
         for opt in _OPTIONS:
             if getattr(self, opt) is not None and opt not in _KIND_OPTIONS[self.kind]:
                 kinds = [k for k, o in _KIND_OPTIONS.items() if opt in o]
-                raise StudyError(f"{w}: {opt} = {getattr(self, opt)!r} is not allowed with kind = {self.kind!r}; "
-                                 f"it applies to {', '.join(kinds)}")
+                raise StudyError(
+                    f"{w}: {opt} = {getattr(self, opt)!r} is not allowed with kind = {self.kind!r}; "
+                    f"it applies to {', '.join(kinds)}"
+                )
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
         set_("replicates", _integer(w, "replicates", self.replicates, 1))
         set_("randomize", _boolean(w, "randomize", self.randomize))
@@ -441,13 +489,19 @@ class DesignSpec:
         if self.center_points is not None:
             set_("center_points", _integer(w, "center_points", self.center_points, 0))
             if self.kind == "box_behnken" and self.center_points < 1:
-                raise _bad(w, "center_points", self.center_points,
-                           "an integer >= 1 (a Box-Behnken design without a centre run cannot fit a quadratic)")
+                raise _bad(
+                    w,
+                    "center_points",
+                    self.center_points,
+                    "an integer >= 1 (a Box-Behnken design without a centre run cannot fit a quadratic)",
+                )
         if self.kind == "fractional_factorial":
             gens = self.generators
             if gens is None:
-                raise StudyError(f'{w}: generators is missing; kind = "fractional_factorial" needs a list of '
-                                 'generator strings, e.g. ["E = ABCD"]')
+                raise StudyError(
+                    f'{w}: generators is missing; kind = "fractional_factorial" needs a list of '
+                    'generator strings, e.g. ["E = ABCD"]'
+                )
             if isinstance(gens, str):
                 gens = [gens]
             if not gens or not isinstance(gens, (list, tuple)) or not all(isinstance(g, str) for g in gens):
@@ -469,13 +523,14 @@ class DesignSpec:
             by_step = self.step is not None
             by_gradient = any(getattr(self, k) is not None for k in ("coefficients", "base", "base_step"))
             if by_step == by_gradient:
-                raise StudyError(f"{w}: a steepest_ascent path needs either step = {{factor = actual step, ...}} "
-                                 "or coefficients, base and base_step (not both, not neither)")
+                raise StudyError(
+                    f"{w}: a steepest_ascent path needs either step = {{factor = actual step, ...}} "
+                    "or coefficients, base and base_step (not both, not neither)"
+                )
             if by_gradient:
                 for k in ("coefficients", "base", "base_step"):
                     if getattr(self, k) is None:
-                        raise StudyError(f"{w}: {k} is missing; a gradient path needs coefficients, base and "
-                                         "base_step")
+                        raise StudyError(f"{w}: {k} is missing; a gradient path needs coefficients, base and base_step")
                 _string(w, "base", self.base)
                 bs = _number(w, "base_step", self.base_step)
                 if bs <= 0:
@@ -483,8 +538,10 @@ class DesignSpec:
                 set_("base_step", bs)
                 set_("descent", _boolean(w, "descent", self.descent if self.descent is not None else False))
             elif self.descent is not None:
-                raise StudyError(f"{w}: descent = {self.descent!r} is not allowed with step = {{...}}; the sign of "
-                                 "each step gives the direction")
+                raise StudyError(
+                    f"{w}: descent = {self.descent!r} is not allowed with step = {{...}}; the sign of "
+                    "each step gives the direction"
+                )
             for k in ("coefficients", "start", "step"):
                 v = getattr(self, k)
                 if v is not None:
@@ -512,8 +569,12 @@ class ResponseSpec:
         where = f"[[responses]] {self.name!r}"
         m = self.measure
         if not isinstance(m, str) or not m or ("." not in m and m not in MEASURES):
-            raise _bad(where, "measure", m, f"a metric key: {', '.join(MEASURES)}{_suggest(m, MEASURES)}, "
-                       "or a dotted path into the metrics")
+            raise _bad(
+                where,
+                "measure",
+                m,
+                f"a metric key: {', '.join(MEASURES)}{_suggest(m, MEASURES)}, or a dotted path into the metrics",
+            )
         _string(where, "unit", self.unit)
         if self.target is not None:
             object.__setattr__(self, "target", _number(where, "target", self.target))
@@ -534,8 +595,13 @@ class AnalysisSpec:
         m = self.model
         if isinstance(m, str):
             if m.lower() not in ("linear", "2fi", "quadratic", "none"):
-                raise _bad(w, "model", m, 'linear, 2fi, quadratic, none or a list of terms such as ["A", "A*B", "A^2"]'
-                           + _suggest(m.lower(), ("linear", "2fi", "quadratic", "none")))
+                raise _bad(
+                    w,
+                    "model",
+                    m,
+                    'linear, 2fi, quadratic, none or a list of terms such as ["A", "A*B", "A^2"]'
+                    + _suggest(m.lower(), ("linear", "2fi", "quadratic", "none")),
+                )
             object.__setattr__(self, "model", m.lower())
         elif m is not None:
             if not isinstance(m, (list, tuple)) or not m or not all(isinstance(t, str) for t in m):
@@ -558,9 +624,15 @@ class VerificationSpec:
         object.__setattr__(self, "replicates", _integer("[verification]", "replicates", self.replicates, 0))
 
 
-_DEFAULT_MODEL = {"plackett_burman": "linear", "full_factorial": "linear", "fractional_factorial": "linear",
-                  "box_behnken": "quadratic", "central_composite": "quadratic", "steepest_ascent": "none",
-                  "explicit": "none"}
+_DEFAULT_MODEL = {
+    "plackett_burman": "linear",
+    "full_factorial": "linear",
+    "fractional_factorial": "linear",
+    "box_behnken": "quadratic",
+    "central_composite": "quadratic",
+    "steepest_ascent": "none",
+    "explicit": "none",
+}
 
 
 @dataclass(frozen=True)
@@ -593,8 +665,10 @@ class StudySpec:
         _string(w, "source", self.source)
         rigs = _rigs()
         if (self.rig is None) == (self.scene is None):
-            raise StudyError(f"{w}: rig = {self.rig!r}, scene = {self.scene!r}: expected exactly one of rig "
-                             f"({', '.join(rigs.RIGS)}) and scene (a stage path relative to the study file)")
+            raise StudyError(
+                f"{w}: rig = {self.rig!r}, scene = {self.scene!r}: expected exactly one of rig "
+                f"({', '.join(rigs.RIGS)}) and scene (a stage path relative to the study file)"
+            )
         if self.rig is not None and self.rig not in rigs.RIGS:
             raise _bad(w, "rig", self.rig, f"one of {', '.join(rigs.RIGS)}{_suggest(self.rig, rigs.RIGS)}")
         set_("smoke", _boolean(w, "smoke", self.smoke))
@@ -603,11 +677,15 @@ class StudySpec:
         if self.scene is not None:
             _string(w, "scene", self.scene)
             if self.smoke:
-                raise StudyError(f"{w}: smoke = true is not allowed with scene = {self.scene!r}; the smoke "
-                                 "overrides belong to a rig (use rig = ...)")
+                raise StudyError(
+                    f"{w}: smoke = true is not allowed with scene = {self.scene!r}; the smoke "
+                    "overrides belong to a rig (use rig = ...)"
+                )
             if not self.scene_path.is_file():
-                raise StudyError(f"{w}: scene = {self.scene!r} is not allowed: {self.scene_path} does not exist; "
-                                 "expected a stage path relative to the study file")
+                raise StudyError(
+                    f"{w}: scene = {self.scene!r} is not allowed: {self.scene_path} does not exist; "
+                    "expected a stage path relative to the study file"
+                )
         set_("seed", _integer(w, "seed", self.seed, 0))
         set_("batch", _integer(w, "batch", self.batch, 0))
 
@@ -630,18 +708,24 @@ class StudySpec:
         params = [f.parameter for f in factors]
         for i, f in enumerate(factors):
             if f.name in names[:i]:
-                raise StudyError(f"[[factors]] {f.name!r}: name = {f.name!r} is not allowed; the name is used "
-                                 "twice, expected unique factor names")
+                raise StudyError(
+                    f"[[factors]] {f.name!r}: name = {f.name!r} is not allowed; the name is used "
+                    "twice, expected unique factor names"
+                )
             if f.parameter in params[:i]:
                 other = names[params.index(f.parameter)]
-                raise StudyError(f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; factor "
-                                 f"{other!r} already sets it, expected one factor per parameter")
+                raise StudyError(
+                    f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; factor "
+                    f"{other!r} already sets it, expected one factor per parameter"
+                )
             problem = _key_problem(f.parameter, self.rig, factor=True)
             if problem:
                 raise _bad(f"[[factors]] {f.name!r}", "parameter", f.parameter, problem)
             if f.parameter in self.fixed:
-                raise StudyError(f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; [fixed] sets "
-                                 "it too, expected a parameter that is either fixed or a factor")
+                raise StudyError(
+                    f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; [fixed] sets "
+                    "it too, expected a parameter that is either fixed or a factor"
+                )
         set_("factors", factors)
 
         # responses, analysis, verification
@@ -665,8 +749,13 @@ class StudySpec:
         d, names, w = self.design, self.factor_names, "[design]"
         k = len(names)
         if d.kind == "plackett_burman" and d.runs is not None and k > d.runs - 1:
-            raise _bad(w, "runs", d.runs, f"more runs than factors: a {d.runs}-run Plackett-Burman design holds at "
-                       f"most {d.runs - 1} factors, this study has {k}")
+            raise _bad(
+                w,
+                "runs",
+                d.runs,
+                f"more runs than factors: a {d.runs}-run Plackett-Burman design holds at "
+                f"most {d.runs - 1} factors, this study has {k}",
+            )
         if d.kind == "box_behnken" and k not in (3, 4, 5):
             raise StudyError(f"{w}: kind = 'box_behnken' is not allowed with {k} factors; expected 3, 4 or 5")
         if d.kind == "central_composite" and k < 2:
@@ -702,17 +791,26 @@ class StudySpec:
         try:
             terms = model_terms(m if isinstance(m, str) else list(m), self.factor_names)
         except ValueError as e:
-            raise _bad("[analysis]", "model", m if isinstance(m, str) else list(m),
-                       f"terms of the factors {', '.join(self.factor_names)}: {e}") from None
+            raise _bad(
+                "[analysis]",
+                "model",
+                m if isinstance(m, str) else list(m),
+                f"terms of the factors {', '.join(self.factor_names)}: {e}",
+            ) from None
         coded = _base_design(self)[0][self.factor_names].to_numpy(dtype=float)
-        cols = [np.ones(len(coded))] + [np.prod([coded[:, self.factor_names.index(f)] for f in t], axis=0)
-                                        for t in terms]
+        cols = [np.ones(len(coded))] + [
+            np.prod([coded[:, self.factor_names.index(f)] for f in t], axis=0) for t in terms
+        ]
         X = np.column_stack(cols)
         rank = np.linalg.matrix_rank(X)
         if rank < X.shape[1]:
-            raise _bad("[analysis]", "model", m if isinstance(m, str) else list(m),
-                       f"a model the {self.design.kind} design can estimate ({X.shape[1]} parameters, but the "
-                       f"design's distinct points give rank {rank}; aliased terms)")
+            raise _bad(
+                "[analysis]",
+                "model",
+                m if isinstance(m, str) else list(m),
+                f"a model the {self.design.kind} design can estimate ({X.shape[1]} parameters, but the "
+                f"design's distinct points give rank {rank}; aliased terms)",
+            )
 
     # -- properties ----------------------------------------------------------------------------------
     @property
@@ -761,8 +859,12 @@ _TABLES = {
     "analysis": ("model", "alpha", "eliminate"),
     "verification": ("replicates",),
 }
-_REQUIRED = {"study": ("name",), "factors": ("name", "parameter", "low", "high"), "design": ("kind",),
-             "responses": ("name", "measure")}
+_REQUIRED = {
+    "study": ("name",),
+    "factors": ("name", "parameter", "low", "high"),
+    "design": ("kind",),
+    "responses": ("name", "measure"),
+}
 
 
 def _check_keys(table: str, data, label: str) -> dict:
@@ -772,8 +874,9 @@ def _check_keys(table: str, data, label: str) -> dict:
     allowed = _TABLES[table]
     for k in data:
         if k not in allowed:
-            raise StudyError(f"{label}: key {k!r} is not allowed{_suggest(k, allowed)}; expected one of "
-                             f"{', '.join(allowed)}")
+            raise StudyError(
+                f"{label}: key {k!r} is not allowed{_suggest(k, allowed)}; expected one of {', '.join(allowed)}"
+            )
     for k in _REQUIRED.get(table, ()):
         if k not in data:
             raise StudyError(f"{label}: {k} is missing; required: {', '.join(_REQUIRED[table])}")
@@ -797,8 +900,9 @@ def _from_dict(data: Mapping, path) -> StudySpec:
         raise StudyError(f"expected a TOML document with tables, got {data!r}")
     for t in data:
         if t not in _TABLES:
-            raise StudyError(f"table [{t}] is not allowed{_suggest(t, _TABLES)}; expected "
-                             + ", ".join(f"[{x}]" for x in _TABLES))
+            raise StudyError(
+                f"table [{t}] is not allowed{_suggest(t, _TABLES)}; expected " + ", ".join(f"[{x}]" for x in _TABLES)
+            )
     for t in ("study", "factors", "design", "responses"):
         if t not in data:
             raise StudyError(f"table [{t}] is missing; a study needs [study], [[factors]], [design] and [[responses]]")
@@ -821,9 +925,16 @@ def _from_dict(data: Mapping, path) -> StudySpec:
     design = DesignSpec(**_check_keys("design", data["design"], "[design]"))
     analysis = AnalysisSpec(**_check_keys("analysis", data.get("analysis", {}), "[analysis]"))
     verification = VerificationSpec(**_check_keys("verification", data.get("verification", {}), "[verification]"))
-    return StudySpec(factors=tuple(factors), design=design, responses=tuple(responses), fixed=fixed,
-                     analysis=analysis, verification=verification,
-                     path=Path(path) if path is not None else None, **study)
+    return StudySpec(
+        factors=tuple(factors),
+        design=design,
+        responses=tuple(responses),
+        fixed=fixed,
+        analysis=analysis,
+        verification=verification,
+        path=Path(path) if path is not None else None,
+        **study,
+    )
 
 
 def load_study(path: str | Path, check_scene: bool = True) -> StudySpec:
@@ -882,13 +993,16 @@ def check_scene_overrides(spec: StudySpec) -> None:
                 else:
                     apply_overrides(copy.deepcopy(base), {f.parameter: v})
             except (StageError, ValueError, KeyError, TypeError) as e:
-                raise StudyError(f"[[factors]] {f.name!r}: parameter {f.parameter} = {v!r} (the design's {which} "
-                                 f"value) is not allowed: {e}") from None
+                raise StudyError(
+                    f"[[factors]] {f.name!r}: parameter {f.parameter} = {v!r} (the design's {which} "
+                    f"value) is not allowed: {e}"
+                ) from None
 
 
 # --------------------------------------------------------------------------------------------------
 # the design table
 # --------------------------------------------------------------------------------------------------
+
 
 def _base_design(spec: StudySpec) -> tuple[pd.DataFrame, pd.DataFrame | None]:
     """(coded design in standard order with a ``point_type`` column, actual values or None).
@@ -908,8 +1022,11 @@ def _base_design(spec: StudySpec) -> tuple[pd.DataFrame, pd.DataFrame | None]:
     elif d.kind == "box_behnken":
         df = designs.box_behnken(names, d.center_points)
     elif d.kind == "central_composite":
-        df = designs.central_composite(names, alpha=d.alpha if d.alpha is not None else "rotatable",
-                                       center_points=6 if d.center_points is None else d.center_points)
+        df = designs.central_composite(
+            names,
+            alpha=d.alpha if d.alpha is not None else "rotatable",
+            center_points=6 if d.center_points is None else d.center_points,
+        )
     elif d.kind == "steepest_ascent":
         start = dict(d.start) if d.start is not None else None
         if d.step is not None:
@@ -918,8 +1035,9 @@ def _base_design(spec: StudySpec) -> tuple[pd.DataFrame, pd.DataFrame | None]:
             x0 = {n: float(levels[n].to_coded(start[n])) for n in names} if start else None
             path = designs.steepest_path(dx, base, abs(dx[base]), d.steps - 1, levels, x0, "coded")
         else:
-            path = designs.steepest_path(dict(d.coefficients), d.base, d.base_step, d.steps - 1, levels, start,
-                                         "actual", descent=bool(d.descent))
+            path = designs.steepest_path(
+                dict(d.coefficients), d.base, d.base_step, d.steps - 1, levels, start, "actual", descent=bool(d.descent)
+            )
         df = path[names].copy()
         df["kind"] = "path"
     else:  # explicit
@@ -943,9 +1061,13 @@ def design_table(spec: StudySpec) -> pd.DataFrame:
         actual = np.column_stack([f.factor.to_actual(coded[:, j]) for j, f in enumerate(spec.factors)])
     actual = np.vectorize(_round, otypes=[float])(actual)
     coded = np.round(coded, 12) + 0.0
-    tab = pd.DataFrame({"std_order": np.arange(1, n * reps + 1),
-                        "point_type": list(base["point_type"]) * reps,
-                        "replicate": np.repeat(np.arange(reps), n)})
+    tab = pd.DataFrame(
+        {
+            "std_order": np.arange(1, n * reps + 1),
+            "point_type": list(base["point_type"]) * reps,
+            "replicate": np.repeat(np.arange(reps), n),
+        }
+    )
     seen: dict[tuple, int] = {}
     seeds = []
     for row in actual:

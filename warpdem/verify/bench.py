@@ -35,8 +35,11 @@ def _box_mesh(side: float, height: float, cells: int):
     """Floor and four side walls of the bed's box as one mesh, each face split into cells x cells quads."""
     g = np.linspace(0.0, 1.0, cells + 1)
     u, v = np.meshgrid(g, g, indexing="ij")
-    quads = [(i * (cells + 1) + j, (i + 1) * (cells + 1) + j, (i + 1) * (cells + 1) + j + 1, i * (cells + 1) + j + 1)
-             for i in range(cells) for j in range(cells)]
+    quads = [
+        (i * (cells + 1) + j, (i + 1) * (cells + 1) + j, (i + 1) * (cells + 1) + j + 1, i * (cells + 1) + j + 1)
+        for i in range(cells)
+        for j in range(cells)
+    ]
     faces = [
         np.stack([u * side, v * side, 0 * u], -1),
         np.stack([0 * u, u * side, v * height], -1),
@@ -48,13 +51,22 @@ def _box_mesh(side: float, height: float, cells: int):
     for f in faces:
         base = sum(len(x) for x in verts)
         verts.append(f.reshape(-1, 3))
-        tris.extend([(base + a, base + b, base + c) for a, b, c, d in quads] +
-                    [(base + a, base + c, base + d) for a, b, c, d in quads])
+        tris.extend(
+            [(base + a, base + b, base + c) for a, b, c, d in quads]
+            + [(base + a, base + c, base + d) for a, b, c, d in quads]
+        )
     return np.concatenate(verts), np.array(tris)
 
 
-def build_bed(count: int, device: str, seed: int = 1, clumps: int = 0, walls: str = "planes", law: str = "HM",
-              mesh_cells: int = 40):
+def build_bed(
+    count: int,
+    device: str,
+    seed: int = 1,
+    clumps: int = 0,
+    walls: str = "planes",
+    law: str = "HM",
+    mesh_cells: int = 40,
+):
     """Model of ``count`` bodies (rounded to full 5-layer lattices) in a square box; returns (model, side [m]).
 
     ``clumps`` = 8 makes each body an 8-sphere clump (random orientation) instead of a sphere; ``walls`` =
@@ -66,13 +78,17 @@ def build_bed(count: int, device: str, seed: int = 1, clumps: int = 0, walls: st
     side = per_side * DIAMETER
     rng = np.random.default_rng(seed)
     i, j, k = np.meshgrid(np.arange(per_side), np.arange(per_side), np.arange(layers), indexing="ij")
-    pts = np.stack([(i + 0.5) * DIAMETER, (j + 0.5) * DIAMETER, 0.5 * DIAMETER + k * 1.1 * DIAMETER + 0.0005],
-                   axis=-1).reshape(-1, 3)
+    pts = np.stack(
+        [(i + 0.5) * DIAMETER, (j + 0.5) * DIAMETER, 0.5 * DIAMETER + k * 1.1 * DIAMETER + 0.0005], axis=-1
+    ).reshape(-1, 3)
     pts[:, :2] += rng.uniform(-2e-4, 2e-4, (len(pts), 2))
     b = ModelBuilder()
     b.add_material(Material("bed", density=2500.0, youngs_modulus=1e8, poisson_ratio=0.3))
-    cohesion = {"HM": {}, "JKR": {"law": "JKR", "surface_energy": 0.5},
-                "EEPA": {"law": "EEPA", "surface_energy": 0.5, "pull_off_force": -1e-4, "plasticity_ratio": 0.3}}
+    cohesion = {
+        "HM": {},
+        "JKR": {"law": "JKR", "surface_energy": 0.5},
+        "EEPA": {"law": "EEPA", "surface_energy": 0.5, "pull_off_force": -1e-4, "plasticity_ratio": 0.3},
+    }
     if law not in cohesion:
         raise ValueError(f"bench: law = {law!r} is not allowed; expected HM, JKR or EEPA")
     b.set_default_interaction(restitution=0.5, static_friction=0.5, rolling_friction=0.0, **cohesion[law])
@@ -144,8 +160,15 @@ def device_bytes(obj) -> int:
     return total
 
 
-def run_bench(device: str = "cpu", count: int | None = None, steps: int | None = None,
-              settle_steps: int = 20000, clumps: int = 0, walls: str = "planes", law: str = "HM") -> dict:
+def run_bench(
+    device: str = "cpu",
+    count: int | None = None,
+    steps: int | None = None,
+    settle_steps: int = 20000,
+    clumps: int = 0,
+    walls: str = "planes",
+    law: str = "HM",
+) -> dict:
     """Settle the bed, then time ``steps`` steps; returns the figures (``count`` bodies: spheres or clumps)."""
     is_cuda = wp.get_device(device).is_cuda
     count = count or (1_000_000 if is_cuda else 2000)

@@ -28,8 +28,10 @@ def _box_mesh(half: float):
 
 
 def _square(half: float, z: float = 0.0):
-    return (np.array([(-half, -half, z), (half, -half, z), (half, half, z), (-half, half, z)]),
-            np.array([(0, 1, 2), (0, 2, 3)]))
+    return (
+        np.array([(-half, -half, z), (half, -half, z), (half, half, z), (-half, half, z)]),
+        np.array([(0, 1, 2), (0, 2, 3)]),
+    )
 
 
 def _material(name="ball", e=1e8, density=2500.0):
@@ -64,11 +66,27 @@ def case_box_bounce(device: str = "cpu") -> list[Record]:
     dv = float(np.linalg.norm(finals["mesh"][1] - finals["planes"][1]))
     beyond = max(float(np.max(np.abs(finals["mesh"][0])) - (half - 0.5 * r)), 0.0)
     return [
-        Record("box bounce (mesh vs planes)", "position difference after 0.1 s", dx, 0.0, "m", 1e-3 * half, absolute=True),
-        Record("box bounce (mesh vs planes)", "velocity difference after 0.1 s", dv, 0.0, "m/s",
-               1e-3 * float(np.linalg.norm(finals["planes"][1])), absolute=True),
-        Record("box bounce (mesh vs planes)", "centre beyond half a radius from the walls", beyond, 0.0, "m", 0.0,
-               absolute=True),
+        Record(
+            "box bounce (mesh vs planes)", "position difference after 0.1 s", dx, 0.0, "m", 1e-3 * half, absolute=True
+        ),
+        Record(
+            "box bounce (mesh vs planes)",
+            "velocity difference after 0.1 s",
+            dv,
+            0.0,
+            "m/s",
+            1e-3 * float(np.linalg.norm(finals["planes"][1])),
+            absolute=True,
+        ),
+        Record(
+            "box bounce (mesh vs planes)",
+            "centre beyond half a radius from the walls",
+            beyond,
+            0.0,
+            "m",
+            0.0,
+            absolute=True,
+        ),
     ]
 
 
@@ -81,8 +99,11 @@ def case_wall_motion(device: str = "cpu") -> list[Record]:
     b.add_material(_material(e=1e4))  # soft: a long automatic step, the kinematics do not depend on it
     v, t = _square(0.05)
     hinge = WallMotion.rotation((0.0, 0.5, 0.0), pivot=(0.05, 0.0, 0.0), start=0.1)
-    keys = WallMotion.keyframes([0.0, 0.2, 0.4], [(0, 0, 0), (0.01, 0, 0.02), (0.01, 0.03, 0.02)],
-                                [(0, 0, 0, 1), (0, 0, math.sin(0.25), math.cos(0.25)), (0, 0, 0, 1)])
+    keys = WallMotion.keyframes(
+        [0.0, 0.2, 0.4],
+        [(0, 0, 0), (0.01, 0, 0.02), (0.01, 0.03, 0.02)],
+        [(0, 0, 0, 1), (0, 0, math.sin(0.25), math.cos(0.25)), (0, 0, 0, 1)],
+    )
     b.add_wall_mesh(v, t, "ball", name="hinged", motion=hinge)
     b.add_wall_mesh(v, t, "ball", name="keyed", motion=keys)
     b.add_sphere((0, 0, 1.0), 0.001, "ball")
@@ -95,15 +116,33 @@ def case_wall_motion(device: str = "cpu") -> list[Record]:
         corner = np.array([0.05, 0.05, 0.0])
         host = pos + quat_rotate(quat, corner)
         dev = poses[k, :3] + quat_rotate(poses[k, 3:], corner)
-        out.append(Record(f"wall motion ({name})", "corner position at ~0.3 s vs host pose",
-                          float(np.linalg.norm(dev - host)), 0.0, "m", 1e-6, absolute=True))
+        out.append(
+            Record(
+                f"wall motion ({name})",
+                "corner position at ~0.3 s vs host pose",
+                float(np.linalg.norm(dev - host)),
+                0.0,
+                "m",
+                1e-6,
+                absolute=True,
+            )
+        )
     # analytic hinge: rotated by 0.5 rad/s x (t - 0.1 s) about y through (0.05, 0, 0)
     angle = 0.5 * (state.time - 0.1)
     corner = np.array([-0.05, 0.0, 0.0]) - np.array([0.05, 0, 0])
     expected = np.array([0.05, 0, 0]) + np.array([corner[0] * math.cos(angle), 0.0, -corner[0] * math.sin(angle)])
     dev = poses[0, :3] + quat_rotate(poses[0, 3:], np.array([-0.05, 0.0, 0.0]))
-    out.append(Record("wall motion (hinge)", "edge position vs rotation formula", float(np.linalg.norm(dev - expected)),
-                      0.0, "m", 1e-6, absolute=True))
+    out.append(
+        Record(
+            "wall motion (hinge)",
+            "edge position vs rotation formula",
+            float(np.linalg.norm(dev - expected)),
+            0.0,
+            "m",
+            1e-6,
+            absolute=True,
+        )
+    )
 
     # a resting sphere on a plate lifted at 0.05 m/s from t = 0.02 s
     b = ModelBuilder()
@@ -136,8 +175,12 @@ def case_piston(device: str = "cpu") -> list[Record]:
         b.add_wall_mesh(v, t, "ball", name="piston", motion=WallMotion.linear((0, 0, -0.5)))
         if filled:
             r = 0.003
-            pts = [(i * 2.05 * r, j * 2.05 * r, -r - 0.001 - k * 2.05 * r)
-                   for i in range(-2, 3) for j in range(-2, 3) for k in range(2)]
+            pts = [
+                (i * 2.05 * r, j * 2.05 * r, -r - 0.001 - k * 2.05 * r)
+                for i in range(-2, 3)
+                for j in range(-2, 3)
+                for k in range(2)
+            ]
             b.add_spheres(pts, r, "ball")
         else:
             b.add_sphere((0.0, 0.0, 1.0), 0.003, "ball")
@@ -152,13 +195,40 @@ def case_piston(device: str = "cpu") -> list[Record]:
         impulse_half = impulse - 0.5 * solver.dt * state.wall_f.numpy()[0].astype(np.float64)
         if filled:
             scale = float(np.linalg.norm(momentum))
-            out.append(Record("piston", "particle momentum + wall impulse (relative)",
-                              float(np.linalg.norm(momentum + impulse_half)) / scale, 0.0, "-", 1e-3, absolute=True))
-            out.append(Record("piston", "momentum gained along the stroke", float(-momentum[2]), 0.0, "N s",
-                              math.inf, absolute=True))
+            out.append(
+                Record(
+                    "piston",
+                    "particle momentum + wall impulse (relative)",
+                    float(np.linalg.norm(momentum + impulse_half)) / scale,
+                    0.0,
+                    "-",
+                    1e-3,
+                    absolute=True,
+                )
+            )
+            out.append(
+                Record(
+                    "piston",
+                    "momentum gained along the stroke",
+                    float(-momentum[2]),
+                    0.0,
+                    "N s",
+                    math.inf,
+                    absolute=True,
+                )
+            )
         else:
-            out.append(Record("piston (no particles)", "impulse magnitude", float(np.linalg.norm(impulse)), 0.0,
-                              "N s", 0.0, absolute=True))
+            out.append(
+                Record(
+                    "piston (no particles)",
+                    "impulse magnitude",
+                    float(np.linalg.norm(impulse)),
+                    0.0,
+                    "N s",
+                    0.0,
+                    absolute=True,
+                )
+            )
     return out
 
 
@@ -184,10 +254,22 @@ def case_thin_shell(device: str = "cpu") -> list[Record]:
             state = solver.run(state, contacts, max(1, int(2e-4 / solver.dt)), use_graph=False)
             gap = float(state.sphere_x.numpy()[0, 2] - state.wall_pose.numpy()[0, 2])
             lowest = min(lowest, gap)
-        out.append(Record(f"thin shell ({label})", "closest centre-to-shell distance / radius", lowest / r, 0.0, "-",
-                          math.inf, absolute=True))
-        out.append(Record(f"thin shell ({label})", "centre stayed on its side", float(lowest > 0.0), 1.0, "-", 0.0,
-                          absolute=True))
+        out.append(
+            Record(
+                f"thin shell ({label})",
+                "closest centre-to-shell distance / radius",
+                lowest / r,
+                0.0,
+                "-",
+                math.inf,
+                absolute=True,
+            )
+        )
+        out.append(
+            Record(
+                f"thin shell ({label})", "centre stayed on its side", float(lowest > 0.0), 1.0, "-", 0.0, absolute=True
+            )
+        )
     return out
 
 
@@ -203,24 +285,54 @@ def case_clump_box(device: str = "cpu") -> list[Record]:
     solid = np.sort(m / 12.0 * np.array([b_**2 + c**2, a**2 + c**2, a**2 + b_**2]))
     out = [Record("clump box fill", "mass", t.mass(rho), m, "kg", 0.01)]
     for k, name in enumerate(("I1", "I2", "I3")):
-        out.append(Record("clump box fill", f"principal inertia {name}", float(np.sort(t.inertia(rho))[k]),
-                          float(solid[k]), "kg m^2", 0.01))
+        out.append(
+            Record(
+                "clump box fill",
+                f"principal inertia {name}",
+                float(np.sort(t.inertia(rho))[k]),
+                float(solid[k]),
+                "kg m^2",
+                0.01,
+            )
+        )
     pair = ClumpTemplate.from_spheres("pair", [(-0.5e-3, 0, 0), (0.5e-3, 0, 0)], [1e-3, 1e-3])
     naive = sum_of_spheres_properties(np.array([(-0.5e-3, 0, 0), (0.5e-3, 0, 0)]), np.array([1e-3, 1e-3]))[0]
     h = 1e-3 - 0.5e-3  # lens: two caps of height r - d/2
     lens = 2.0 * math.pi * h * h * (3e-3 - h) / 3.0
-    out.append(Record("clump union", "two overlapping spheres: union volume", pair.volume,
-                      2 * 4.0 / 3.0 * math.pi * 1e-9 - lens, "m^3", 0.005))
-    out.append(Record("clump union", "sum of spheres exceeds the union by the lens", naive - pair.volume, lens, "m^3",
-                      0.02))
+    out.append(
+        Record(
+            "clump union",
+            "two overlapping spheres: union volume",
+            pair.volume,
+            2 * 4.0 / 3.0 * math.pi * 1e-9 - lens,
+            "m^3",
+            0.005,
+        )
+    )
+    out.append(
+        Record("clump union", "sum of spheres exceeds the union by the lens", naive - pair.volume, lens, "m^3", 0.02)
+    )
     return out
 
 
 def _irregular_template():
     from warpdem.engine.clumps import ClumpTemplate
 
-    offsets = np.array([(0, 0, 0), (2.0, 0.3, 0), (-1.6, 0.5, 0.4), (0.4, 1.7, -0.2), (0.2, -1.2, 0.9),
-                        (1.1, 0.9, 1.0), (-0.8, -0.9, -0.8), (0.6, 0.2, -1.4)]) * 1e-3
+    offsets = (
+        np.array(
+            [
+                (0, 0, 0),
+                (2.0, 0.3, 0),
+                (-1.6, 0.5, 0.4),
+                (0.4, 1.7, -0.2),
+                (0.2, -1.2, 0.9),
+                (1.1, 0.9, 1.0),
+                (-0.8, -0.9, -0.8),
+                (0.6, 0.2, -1.4),
+            ]
+        )
+        * 1e-3
+    )
     radii = np.array([1.6, 1.2, 1.1, 1.0, 0.9, 0.8, 1.0, 0.9]) * 1e-3
     return ClumpTemplate.from_spheres("irregular", offsets, radii)
 
@@ -256,12 +368,33 @@ def case_clump_free_flight(device: str = "cpu") -> list[Record]:
     # the state's L is the half-step value and its orientation the full step: compare at the step's time
     ref = solve_ivp(euler, (0, state.time), w0, rtol=1e-10, atol=1e-12).y[:, -1]
     return [
-        Record("clump free flight", "|L| change (relative)", abs(np.linalg.norm(L) - np.linalg.norm(L0)) /
-               np.linalg.norm(L0), 0.0, "-", 1e-5, absolute=True),
-        Record("clump free flight", "kinetic energy change (relative)", abs(0.5 * float(lb @ wb) - e0) / e0, 0.0, "-",
-               1e-4, absolute=True),
-        Record("clump free flight", "body angular velocity vs Euler's equations (relative)",
-               float(np.linalg.norm(wb - ref) / np.linalg.norm(ref)), 0.0, "-", 1e-2, absolute=True),
+        Record(
+            "clump free flight",
+            "|L| change (relative)",
+            abs(np.linalg.norm(L) - np.linalg.norm(L0)) / np.linalg.norm(L0),
+            0.0,
+            "-",
+            1e-5,
+            absolute=True,
+        ),
+        Record(
+            "clump free flight",
+            "kinetic energy change (relative)",
+            abs(0.5 * float(lb @ wb) - e0) / e0,
+            0.0,
+            "-",
+            1e-4,
+            absolute=True,
+        ),
+        Record(
+            "clump free flight",
+            "body angular velocity vs Euler's equations (relative)",
+            float(np.linalg.norm(wb - ref) / np.linalg.norm(ref)),
+            0.0,
+            "-",
+            1e-2,
+            absolute=True,
+        ),
     ]
 
 
@@ -280,8 +413,9 @@ def case_clump_incline(device: str = "cpu") -> list[Record]:
     for mu in (0.5, 0.2):
         b = ModelBuilder(gravity=(g * math.sin(theta), 0.0, -g * math.cos(theta)))
         b.add_material(_material(e=1e7, density=2000.0))
-        b.set_interaction("ball", "ball", restitution=0.3, static_friction=mu, rolling_friction=0.5,
-                          rolling_model="EPSD")
+        b.set_interaction(
+            "ball", "ball", restitution=0.3, static_friction=mu, rolling_friction=0.5, rolling_model="EPSD"
+        )
         b.add_plane((0, 0, 0), (0, 0, 1), "ball")
         b.add_clump(tpl, (0, 0, r - 2e-6), "ball")
         model = b.finalize(device)
@@ -294,11 +428,22 @@ def case_clump_incline(device: str = "cpu") -> list[Record]:
         x2, t2 = float(state.clump_x.numpy()[0, 0]), state.time
         v2 = float(state.clump_v.numpy()[0, 0])
         if mu > math.tan(theta):
-            out.append(Record("clump incline (stays)", "displacement over 0.05 s", abs(x2 - x1), 0.0, "m", 1e-3 * r,
-                              absolute=True))
+            out.append(
+                Record(
+                    "clump incline (stays)", "displacement over 0.05 s", abs(x2 - x1), 0.0, "m", 1e-3 * r, absolute=True
+                )
+            )
         else:
-            out.append(Record("clump incline (slides)", "acceleration", (v2 - v1) / (t2 - t1),
-                              g * (math.sin(theta) - mu * math.cos(theta)), "m/s^2", 0.02))
+            out.append(
+                Record(
+                    "clump incline (slides)",
+                    "acceleration",
+                    (v2 - v1) / (t2 - t1),
+                    g * (math.sin(theta) - mu * math.cos(theta)),
+                    "m/s^2",
+                    0.02,
+                )
+            )
     return out
 
 
@@ -326,8 +471,7 @@ def case_clump_flat_drop(device: str = "cpu") -> list[Record]:
     solver = Solver(model, SolverOptions(dt_fraction=0.02))
     state = solver.run(model.state(), solver.contacts(), int(0.005 / solver.dt))
     vz = state.clump_v.numpy()[:, 2]
-    return [Record("clump flat drop", f"raft rebound e={e}", float(vz[k] / v0), e, "-", 0.01)
-            for k, e in enumerate(es)]
+    return [Record("clump flat drop", f"raft rebound e={e}", float(vz[k] / v0), e, "-", 0.01) for k, e in enumerate(es)]
 
 
 def case_factory(device: str = "cpu") -> list[Record]:
@@ -342,12 +486,20 @@ def case_factory(device: str = "cpu") -> list[Record]:
     b.fill(Box((-0.02, -0.02, 0.0), (0.02, 0.02, 0.02)), FixedSize(0.002), "ball", count=60, seed=1)
     sizes = TruncatedNormal(0.002, 0.0003, 0.0015, 0.0025)
     rate, count = 2000.0, 120
-    fac = DynamicFactory(Box((-0.02, -0.02, 0.05), (0.02, 0.02, 0.07)), sizes, rate=rate, count=count, seed=3,
-                         interval=0.005)
+    fac = DynamicFactory(
+        Box((-0.02, -0.02, 0.05), (0.02, 0.02, 0.07)), sizes, rate=rate, count=count, seed=3, interval=0.005
+    )
     b.add_factory(fac, "ball")
     target = 2e-3
-    fac_mass = DynamicFactory(Box((-0.02, -0.02, 0.09), (0.02, 0.02, 0.11)), sizes, mass_rate=0.05, mass=target,
-                              density=2000.0, seed=5, interval=0.005)
+    fac_mass = DynamicFactory(
+        Box((-0.02, -0.02, 0.09), (0.02, 0.02, 0.11)),
+        sizes,
+        mass_rate=0.05,
+        mass=target,
+        density=2000.0,
+        seed=5,
+        interval=0.005,
+    )
     b.add_factory(fac_mass, "ball")
     model = b.finalize(device)
     solver = Solver(model)
@@ -355,30 +507,67 @@ def case_factory(device: str = "cpu") -> list[Record]:
     x0 = state.sphere_x.numpy()[:60]
     gaps = np.linalg.norm(x0[:, None] - x0[None], axis=2) - 0.004 + np.eye(60)
     out.append(Record("static fill", "count", 60.0, 60.0, "-", 0.0, absolute=True))
-    out.append(Record("static fill", "smallest gap between spheres", min(float(gaps.min()), 0.0), 0.0, "m", 0.0,
-                      absolute=True))
+    out.append(
+        Record("static fill", "smallest gap between spheres", min(float(gaps.min()), 0.0), 0.0, "m", 0.0, absolute=True)
+    )
     # half-way through the schedule: released = floor(rate * t) within one batch
     state = solver.advance(state, contacts, 0.0275)
     before = state.released[0]["count"]
     state = solver.advance(state, contacts, 0.0025)  # ends on a release time: the batch was just placed
     released = state.released[0]["count"]
-    out.append(Record("dynamic factory", "released by t = 0.03 s vs rate x t", float(released),
-                      rate * state.time, "particles", rate * fac.interval + 1, absolute=True))
+    out.append(
+        Record(
+            "dynamic factory",
+            "released by t = 0.03 s vs rate x t",
+            float(released),
+            rate * state.time,
+            "particles",
+            rate * fac.interval + 1,
+            absolute=True,
+        )
+    )
     act = state.sphere_active.numpy().astype(bool)
     x = state.sphere_x.numpy().astype(np.float64)
     r = model.sphere_radius.numpy().astype(np.float64)
     new = model.factories[0]["first"] + np.arange(before, released)
     d = np.linalg.norm(x[new][:, None] - x[act][None], axis=2) - (r[new][:, None] + r[act][None])
     d[d < -0.999 * (r[new][:, None] + r[act][None])] = np.inf  # a sphere and itself
-    out.append(Record("dynamic factory", f"overlap of the {len(new)} particles just released", max(-float(d.min()), 0.0),
-                      0.0, "m", 0.0, absolute=True))
+    out.append(
+        Record(
+            "dynamic factory",
+            f"overlap of the {len(new)} particles just released",
+            max(-float(d.min()), 0.0),
+            0.0,
+            "m",
+            0.0,
+            absolute=True,
+        )
+    )
     state = solver.advance(state, contacts, 0.1)
-    out.append(Record("dynamic factory", "total released (count target)", float(state.released[0]["count"]),
-                      float(count), "particles", 0.0, absolute=True))
+    out.append(
+        Record(
+            "dynamic factory",
+            "total released (count target)",
+            float(state.released[0]["count"]),
+            float(count),
+            "particles",
+            0.0,
+            absolute=True,
+        )
+    )
     masses = 2000.0 * 4.0 / 3.0 * np.pi * np.asarray(fac_mass.radii) ** 3
     n_mass = state.released[1]["count"]
-    out.append(Record("dynamic factory", "released mass - target (mass target)", float(masses[:n_mass].sum()) - target,
-                      0.0, "kg", float(masses.max()), absolute=True))
+    out.append(
+        Record(
+            "dynamic factory",
+            "released mass - target (mass target)",
+            float(masses[:n_mass].sum()) - target,
+            0.0,
+            "kg",
+            float(masses.max()),
+            absolute=True,
+        )
+    )
     return out
 
 

@@ -26,8 +26,9 @@ def _two_body_scene(mat: Material, wall: bool, gravity=(0.0, 0.0, 0.0)):
     b = ModelBuilder(gravity=gravity)
     b.add_material(mat)
     if wall:
-        b.add_material(Material("rigid", density=mat.density, poisson_ratio=mat.poisson_ratio,
-                                youngs_modulus=mat.E * RIGID))
+        b.add_material(
+            Material("rigid", density=mat.density, poisson_ratio=mat.poisson_ratio, youngs_modulus=mat.E * RIGID)
+        )
     return b
 
 
@@ -84,14 +85,18 @@ def case_chung_ooi_1(device: str = "cpu") -> list[Record]:
         b.add_sphere((R + 1e-5, 0, 0), R, label, velocity=(-v, 0, 0))
         model = b.finalize(device)
         solver = Solver(model, SolverOptions(dt_fraction=0.02))
-        f, d, tc, _ = _run_contact(solver, model.state(), solver.contacts(),
-                                   lambda x: 2 * R - (x[1, 0] - x[0, 0]), 20000)
+        f, d, tc, _ = _run_contact(
+            solver, model.state(), solver.contacts(), lambda x: 2 * R - (x[1, 0] - x[0, 0]), 20000
+        )
         e_star = effective_moduli(mat, mat)[0]
         m = mat.density * 4 / 3 * math.pi * R**3
         fe, de, te = hertz_expected(e_star, R / 2, m / 2, 2 * v)
         case = f"Chung-Ooi 1 {label}"
-        out += [Record(case, "peak force", f, fe, "N", 0.01), Record(case, "peak overlap", d, de, "m", 0.01),
-                Record(case, "contact time", tc, te, "s", 0.01)]
+        out += [
+            Record(case, "peak force", f, fe, "N", 0.01),
+            Record(case, "peak overlap", d, de, "m", 0.01),
+            Record(case, "contact time", tc, te, "s", 0.01),
+        ]
     return out
 
 
@@ -111,8 +116,11 @@ def case_chung_ooi_2(device: str = "cpu") -> list[Record]:
         e_star = E / (1 - nu * nu)
         fe, de, te = hertz_expected(e_star, R, rho * 4 / 3 * math.pi * R**3, v)
         case = f"Chung-Ooi 2 {label}"
-        out += [Record(case, "peak force", f, fe, "N", 0.01), Record(case, "peak overlap", d, de, "m", 0.01),
-                Record(case, "contact time", tc, te, "s", 0.01)]
+        out += [
+            Record(case, "peak force", f, fe, "N", 0.01),
+            Record(case, "peak overlap", d, de, "m", 0.01),
+            Record(case, "contact time", tc, te, "s", 0.01),
+        ]
     return out
 
 
@@ -176,9 +184,11 @@ def case_chung_ooi_4(device: str = "cpu") -> list[Record]:
         vcp = float(vel[k, 0]) - float(om[k, 1]) * R
         reb_sim = math.degrees(math.atan2(vcp, float(vel[k, 2])))
         case = f"Chung-Ooi 4 theta={theta:g}"
-        out += [Record(case, "spin |w'|", w_sim, w_exp, "rad/s", 0.03),
-                Record(case, "tangential restitution", et_sim, et_exp, "-", 0.03),
-                Record(case, "rebound angle", reb_sim, reb_exp, "deg", 0.03)]
+        out += [
+            Record(case, "spin |w'|", w_sim, w_exp, "rad/s", 0.03),
+            Record(case, "tangential restitution", et_sim, et_exp, "-", 0.03),
+            Record(case, "rebound angle", reb_sim, reb_exp, "deg", 0.03),
+        ]
     return out
 
 
@@ -195,8 +205,9 @@ def _rolling_scene(device, model_name: str, mu_r: float, tilt_deg: float = 0.0, 
     b = ModelBuilder()
     b.add_material(mat)
     b.add_material(Material("floor", density=rho, youngs_modulus=E * RIGID, poisson_ratio=nu))
-    b.set_interaction("ball", "floor", restitution=0.5, static_friction=1.0, rolling_friction=mu_r,
-                      rolling_model=model_name)
+    b.set_interaction(
+        "ball", "floor", restitution=0.5, static_friction=1.0, rolling_friction=mu_r, rolling_model=model_name
+    )
     b.add_plane((0, 0, 0), (0, 0, 1), "floor")
     m = rho * 4 / 3 * math.pi * R**3
     e_star = E / (1 - nu * nu)
@@ -233,8 +244,17 @@ def case_rolling_plane(device: str = "cpu") -> list[Record]:
             w_end = float(np.linalg.norm(state.sphere_w.numpy()[0]))
             v_end = float(np.linalg.norm(state.sphere_v.numpy()[0]))
             # at rest: the residual speed is below 0.1 % of the initial speed
-            out.append(Record(f"rolling on plane {label}", "speed after stop", v_end + w_end * 0.005, 0.0, "m/s",
-                              1e-3 * v0, absolute=True))
+            out.append(
+                Record(
+                    f"rolling on plane {label}",
+                    "speed after stop",
+                    v_end + w_end * 0.005,
+                    0.0,
+                    "m/s",
+                    1e-3 * v0,
+                    absolute=True,
+                )
+            )
     return out
 
 
@@ -251,12 +271,16 @@ def case_rolling_incline(device: str = "cpu") -> list[Record]:
         label = "type A" if name == "constant_torque" else "type C (EPSD)"
         # below the limit: creep under 1 % of the radius in 0.3 s; above: rolls (net torque >= 0.25 of
         # the driving torque gives a travel of > 2 mm in 0.3 s)
-        out.append(Record(f"incline {label} tan={0.8 * mu_r:.2f}", "displacement", abs(float(x[0])), 0.0, "m",
-                          5e-5, absolute=True))
+        out.append(
+            Record(
+                f"incline {label} tan={0.8 * mu_r:.2f}", "displacement", abs(float(x[0])), 0.0, "m", 5e-5, absolute=True
+            )
+        )
         moved = float(x[1])
         a_exp = 5.0 / 7.0 * 9.81 * (math.sin(math.radians(tilts[1])) - mu_r * math.cos(math.radians(tilts[1])))
-        out.append(Record(f"incline {label} tan={1.25 * mu_r:.2f}", "displacement", moved, 0.5 * a_exp * 0.3**2,
-                          "m", 0.05))
+        out.append(
+            Record(f"incline {label} tan={1.25 * mu_r:.2f}", "displacement", moved, 0.5 * a_exp * 0.3**2, "m", 0.05)
+        )
     return out
 
 
@@ -279,10 +303,13 @@ def case_free_fall(device: str = "cpu") -> list[Record]:
     # leapfrog stores v(t - dt/2)
     vz = float(state.sphere_v.numpy()[0, 2])
     # float32 round-off: a random walk of ~1 ulp of 1 m per step, i.e. ~1e-7 sqrt(steps); 10x margin
-    return [Record("free fall", "height", z, 1.0 - 0.5 * 9.81 * t * t, "m", 1e-6 * 4000 ** 0.5, absolute=True),
-            # float32 velocity sum: each of the 4000 kicks rounds by at most half an ulp of |v| (2^-23 * 4)
-            Record("free fall", "velocity at t - dt/2", vz, -9.81 * (t - 0.5e-4), "m/s", 4000 * 2.0**-23 * 4.0,
-                   absolute=True)]
+    return [
+        Record("free fall", "height", z, 1.0 - 0.5 * 9.81 * t * t, "m", 1e-6 * 4000**0.5, absolute=True),
+        # float32 velocity sum: each of the 4000 kicks rounds by at most half an ulp of |v| (2^-23 * 4)
+        Record(
+            "free fall", "velocity at t - dt/2", vz, -9.81 * (t - 0.5e-4), "m/s", 4000 * 2.0**-23 * 4.0, absolute=True
+        ),
+    ]
 
 
 def _bounce_energy_error(device: str, dt_fraction: float) -> float:
@@ -311,9 +338,10 @@ def case_elastic_bounce(device: str = "cpu") -> list[Record]:
     """e = 1, mu = 0 bouncing sphere: energy error after 0.5 s shrinks with dt (second order: ~4x per halving)."""
     e1 = _bounce_energy_error(device, 0.2)
     e2 = _bounce_energy_error(device, 0.05)
-    return [Record("elastic bounce", "energy error at 0.2 T_R", e1, 0.0, "-", 2e-2, absolute=True),
-            Record("elastic bounce", "energy error ratio 0.05/0.2 T_R", e2 / max(e1, 1e-30), 0.0, "-", 0.5,
-                   absolute=True)]
+    return [
+        Record("elastic bounce", "energy error at 0.2 T_R", e1, 0.0, "-", 2e-2, absolute=True),
+        Record("elastic bounce", "energy error ratio 0.05/0.2 T_R", e2 / max(e1, 1e-30), 0.0, "-", 0.5, absolute=True),
+    ]
 
 
 # ------------------------------------------------------------------------------------------------
@@ -344,10 +372,28 @@ def case_mesh_vs_plane(device: str = "cpu") -> list[Record]:
         vp, wp_ = results["plane", x0]
         vm, wm = results["mesh", x0]
         where = "diagonal" if x0 == 0.0 else "face"
-        out.append(Record(f"mesh vs plane ({where})", "rebound velocity difference", float(np.linalg.norm(vm - vp)),
-                          0.0, "m/s", 1e-3 * float(np.linalg.norm(vp)), absolute=True))
-        out.append(Record(f"mesh vs plane ({where})", "spin difference", float(np.linalg.norm(wm - wp_)), 0.0,
-                          "rad/s", 1e-3 * max(float(np.linalg.norm(wp_)), 1.0), absolute=True))
+        out.append(
+            Record(
+                f"mesh vs plane ({where})",
+                "rebound velocity difference",
+                float(np.linalg.norm(vm - vp)),
+                0.0,
+                "m/s",
+                1e-3 * float(np.linalg.norm(vp)),
+                absolute=True,
+            )
+        )
+        out.append(
+            Record(
+                f"mesh vs plane ({where})",
+                "spin difference",
+                float(np.linalg.norm(wm - wp_)),
+                0.0,
+                "rad/s",
+                1e-3 * max(float(np.linalg.norm(wp_)), 1.0),
+                absolute=True,
+            )
+        )
     return out
 
 
@@ -381,8 +427,17 @@ def case_batch_invariance(device: str = "cpu") -> list[Record]:
         solo_solver = Solver(solo_model, SolverOptions(dt=solver.dt))
         solo = solo_solver.run(solo_model.state(), solo_solver.contacts(), steps).sphere_x.numpy()
         scale = float(np.max(np.abs(solo)))
-        out.append(Record("batch invariance", f"world {k} of {len(worlds)} vs solo", float(np.max(np.abs(batch[k] - solo))) / scale,
-                          0.0, "-", 1e-6, absolute=True))
+        out.append(
+            Record(
+                "batch invariance",
+                f"world {k} of {len(worlds)} vs solo",
+                float(np.max(np.abs(batch[k] - solo))) / scale,
+                0.0,
+                "-",
+                1e-6,
+                absolute=True,
+            )
+        )
     return out
 
 

@@ -74,8 +74,9 @@ def case_jkr_quasi_static(device: str = "cpu") -> list[Record]:
     gamma = 0.1
     dc = analytic.jkr_break_overlap(R, PRESS_E_STAR, gamma)
     # slow and finely sampled near the break, where the force turns steeply
-    overlap, force, _, e_star = _press(device, "JKR", [(2e-6, 2e-3, 100), (0.9 * dc, 2e-3, 100),
-                                                       (1.2 * dc, 2e-4, 6)], surface_energy=gamma)
+    overlap, force, _, e_star = _press(
+        device, "JKR", [(2e-6, 2e-3, 100), (0.9 * dc, 2e-3, 100), (1.2 * dc, 2e-4, 6)], surface_energy=gamma
+    )
     out = []
     unloading = np.arange(len(overlap)) > np.argmax(overlap)
     live = unloading & (np.abs(force) > 0)
@@ -84,12 +85,29 @@ def case_jkr_quasi_static(device: str = "cpu") -> list[Record]:
     expected = analytic.jkr_force(overlap[pick], R, e_star, gamma)
     scale = 3.0 * math.pi * gamma * R
     worst = float(np.max(np.abs(force[pick] - expected)) / scale)
-    out.append(Record("JKR quasi-static", "worst |F - F_JKR| / (3 pi gamma R*) over 20 points", worst, 0.0, "-", 0.01,
-                      absolute=True))
+    out.append(
+        Record(
+            "JKR quasi-static",
+            "worst |F - F_JKR| / (3 pi gamma R*) over 20 points",
+            worst,
+            0.0,
+            "-",
+            0.01,
+            absolute=True,
+        )
+    )
     out.append(Record("JKR quasi-static", "peak attraction", float(force.min()), -scale, "N", 0.01))
     last = np.flatnonzero(live)[-1]
-    out.append(Record("JKR quasi-static", "force at break", float(force[last]),
-                      analytic.jkr_break_force(R, e_star, gamma), "N", 0.02))
+    out.append(
+        Record(
+            "JKR quasi-static",
+            "force at break",
+            float(force[last]),
+            analytic.jkr_break_force(R, e_star, gamma),
+            "N",
+            0.02,
+        )
+    )
     # the contact ends between the last sample that carries a force and the next one
     broke_at = 0.5 * (overlap[last] + overlap[last + 1])
     out.append(Record("JKR quasi-static", "break overlap delta_c", broke_at, dc, "m", 0.02))
@@ -108,16 +126,22 @@ def case_eepa_loop(device: str = "cpu") -> list[Record]:
     speed, every = 2e-3, 50
     cycle = [(d1, speed, every), (-1e-6, speed, every)]
     reload = [(d1, speed, every), (0.5 * d_p, speed, every), (d2, speed, every), (-1e-6, speed, every)]
-    runs = {"cycle": _press(device, "EEPA", cycle, **params),
-            "cycle f0": _press(device, "EEPA", cycle, pull_off_force=-2e-4, **params),
-            "reload": _press(device, "EEPA", reload, **params)}
+    runs = {
+        "cycle": _press(device, "EEPA", cycle, **params),
+        "cycle f0": _press(device, "EEPA", cycle, pull_off_force=-2e-4, **params),
+        "reload": _press(device, "EEPA", reload, **params),
+    }
     out = []
 
     def expected(overlap):
         # the law's history: the running maximum of the overlap while the contact lasts
         d_max = np.maximum.accumulate(np.maximum(overlap, 0.0))
-        return np.array([analytic.eepa_force(d, m, e_star, R, 0.0, n, lam, chi, gamma) if d > 0 else 0.0
-                         for d, m in zip(overlap, d_max)])
+        return np.array(
+            [
+                analytic.eepa_force(d, m, e_star, R, 0.0, n, lam, chi, gamma) if d > 0 else 0.0
+                for d, m in zip(overlap, d_max)
+            ]
+        )
 
     overlap, force, segment, e_star = runs["cycle"]
     ref = expected(overlap)
@@ -130,19 +154,31 @@ def case_eepa_loop(device: str = "cpu") -> list[Record]:
     measured = float(np.interp(0.0, [force[cross], force[cross - 1]], [overlap[cross], overlap[cross - 1]]))
     out.append(Record("EEPA loop", "residual plastic overlap", measured, d_p, "m", 0.01))
     work = float(np.trapezoid(force, overlap))
-    out.append(Record("EEPA loop", "energy dissipated by the cycle", work,
-                      analytic.eepa_loop_energy(d1, e_star, R, n, lam, chi, gamma), "J", 0.02))
+    out.append(
+        Record(
+            "EEPA loop",
+            "energy dissipated by the cycle",
+            work,
+            analytic.eepa_loop_energy(d1, e_star, R, n, lam, chi, gamma),
+            "J",
+            0.02,
+        )
+    )
     f_shift = runs["cycle f0"][1]
     both = (overlap > 0.05 * d1) & (runs["cycle f0"][0] > 0.05 * d1)
-    out.append(Record("EEPA loop", "loop shift with f0 = -2e-4 N", float(np.median(f_shift[both] - force[both])),
-                      -2e-4, "N", 0.01))
+    out.append(
+        Record(
+            "EEPA loop", "loop shift with f0 = -2e-4 N", float(np.median(f_shift[both] - force[both])), -2e-4, "N", 0.01
+        )
+    )
 
     overlap, force, segment, _ = runs["reload"]
     ref = expected(overlap)
     mask = (segment == 2) & (overlap > 0)
     err = float(np.max(np.abs(force[mask] - ref[mask]))) / peak
-    out.append(Record("EEPA loop", "reloading past d_max: worst |F - F_EEPA| / F_peak", err, 0.0, "-", 0.01,
-                      absolute=True))
+    out.append(
+        Record("EEPA loop", "reloading past d_max: worst |F - F_EEPA| / F_peak", err, 0.0, "-", 0.01, absolute=True)
+    )
     return out
 
 
@@ -185,14 +221,32 @@ def case_jkr_sticking(device: str = "cpu") -> list[Record]:
         return math.sqrt(lo * hi), v_c
 
     v_e1, v_c = critical(1.0)
-    out = [Record("JKR sticking (e = 1)", "stays at 0.5 v_c", float(not rebounds(0.5 * v_c, 1.0)), 1.0, "-", 0.0,
-                  absolute=True),
-           Record("JKR sticking (e = 1)", "escapes at 2 v_c", float(rebounds(2.0 * v_c, 1.0)), 1.0, "-", 0.0,
-                  absolute=True),
-           Record("JKR sticking (e = 1)", "critical speed (bisection)", v_e1, v_c, "m/s", 0.10)]
+    out = [
+        Record(
+            "JKR sticking (e = 1)",
+            "stays at 0.5 v_c",
+            float(not rebounds(0.5 * v_c, 1.0)),
+            1.0,
+            "-",
+            0.0,
+            absolute=True,
+        ),
+        Record(
+            "JKR sticking (e = 1)", "escapes at 2 v_c", float(rebounds(2.0 * v_c, 1.0)), 1.0, "-", 0.0, absolute=True
+        ),
+        Record("JKR sticking (e = 1)", "critical speed (bisection)", v_e1, v_c, "m/s", 0.10),
+    ]
     v_e7, v_c7 = critical(0.7)
-    out.append(Record("JKR sticking (e = 0.7)", "critical speed vs the Hertz-damping estimate (information)", v_e7,
-                      v_c7, "m/s", math.inf))
+    out.append(
+        Record(
+            "JKR sticking (e = 0.7)",
+            "critical speed vs the Hertz-damping estimate (information)",
+            v_e7,
+            v_c7,
+            "m/s",
+            math.inf,
+        )
+    )
     return out
 
 
@@ -203,10 +257,28 @@ def case_cohesive_stress(device: str = "cpu", steps: int = 100_000) -> list[Reco
     b = ModelBuilder()
     b.add_material(Material("ore", density=2000.0, youngs_modulus=5e6, poisson_ratio=0.3))
     b.add_material(Material("steel", density=7800.0, youngs_modulus=2e11, poisson_ratio=0.3))
-    b.set_interaction("ore", "ore", restitution=0.1, static_friction=0.6, rolling_friction=0.1, rolling_model="EPSD",
-                      law="EEPA", surface_energy=5.0, pull_off_force=-1e-4, plasticity_ratio=0.6)
-    b.set_interaction("ore", "steel", restitution=0.1, static_friction=0.5, rolling_friction=0.1,
-                      rolling_model="EPSD", law="JKR", surface_energy=5.0)
+    b.set_interaction(
+        "ore",
+        "ore",
+        restitution=0.1,
+        static_friction=0.6,
+        rolling_friction=0.1,
+        rolling_model="EPSD",
+        law="EEPA",
+        surface_energy=5.0,
+        pull_off_force=-1e-4,
+        plasticity_ratio=0.6,
+    )
+    b.set_interaction(
+        "ore",
+        "steel",
+        restitution=0.1,
+        static_friction=0.5,
+        rolling_friction=0.1,
+        rolling_model="EPSD",
+        law="JKR",
+        surface_energy=5.0,
+    )
     b.add_plane((0, 0, 0), (0, 0, 1), "steel")
     for axis in (0, 1):
         for side in (-1.0, 1.0):
@@ -216,8 +288,7 @@ def case_cohesive_stress(device: str = "cpu", steps: int = 100_000) -> list[Reco
     r = 0.001
     pts = np.array([(i, j, k) for i in range(-2, 3) for j in range(-2, 3) for k in range(4)], dtype=float)
     pts = pts * 2.0 * r + np.array([0.0, 0.0, r]) + rng.uniform(-1e-4, 1e-4, pts.shape)
-    b.add_spheres(pts, r * rng.uniform(0.9, 1.0, len(pts)), "ore",
-                  velocities=rng.normal(0.0, 0.3, pts.shape))
+    b.add_spheres(pts, r * rng.uniform(0.9, 1.0, len(pts)), "ore", velocities=rng.normal(0.0, 0.3, pts.shape))
     # cohesive clumps mixed with the spheres, dropped on top
     from warpdem.engine.clumps import phosphate_template
 
@@ -239,10 +310,18 @@ def case_cohesive_stress(device: str = "cpu", steps: int = 100_000) -> list[Reco
         ke = 0.5 * float(np.sum(mass * np.sum(v**2, axis=1)))
     except SimulationError:
         finite = 0.0
-    return [Record("cohesive stress test", f"finite after {steps} steps at 0.5 T_R", finite, 1.0, "-", 0.0,
-                   absolute=True),
-            Record("cohesive stress test", "final / initial kinetic energy (dissipative: below 1)", ke / ke0, 0.0,
-                   "-", 1.0, absolute=True)]
+    return [
+        Record("cohesive stress test", f"finite after {steps} steps at 0.5 T_R", finite, 1.0, "-", 0.0, absolute=True),
+        Record(
+            "cohesive stress test",
+            "final / initial kinetic energy (dissipative: below 1)",
+            ke / ke0,
+            0.0,
+            "-",
+            1.0,
+            absolute=True,
+        ),
+    ]
 
 
 COHESION_CASES = {

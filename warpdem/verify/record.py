@@ -34,6 +34,12 @@ class Record:
 
     def as_json(self) -> dict:
         d = {k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in asdict(self).items()}
-        d.update({"name": f"{self.case}: {self.name}", "quantity": self.name, "error": float(self.error),
-                  "pass": self.passed})
+        d.update(
+            {
+                "name": f"{self.case}: {self.name}",
+                "quantity": self.name,
+                "error": float(self.error),
+                "pass": self.passed,
+            }
+        )
         return d
