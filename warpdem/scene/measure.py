@@ -872,31 +872,42 @@ class SettleMonitor:
         window: consecutive updates that must all be below the threshold, >= 1.
 
     Attributes:
-        history: list of (time [s], kinetic energy per particle [J]), one per update.
+        history: list of (time [s], kinetic energy per particle [J]), one per update, the energy as given
+            (a float, or an array of one per world).
         settled_time: time [s] of the update at which the monitor first reported settled, or None.
+        streak: consecutive updates below the threshold so far (a resumed run restores it).
     """
 
     def __init__(self, threshold: float, window: int = 3):
         self.threshold = _positive("threshold", threshold, "J")
         self.window = _int_at_least("window", window, 1)
-        self.history: list[tuple[float, float]] = []
+        self.history: list[tuple[float, float | np.ndarray]] = []
         self.settled_time: float | None = None
-        self._streak = 0
+        self.streak = 0
 
-    def update(self, time: float, kinetic_energy_per_particle: float) -> bool:
-        """Record one sample (time [s], kinetic energy per particle [J]).
+    def update(self, time: float, kinetic_energy_per_particle) -> bool:
+        """Record one sample: time [s] and kinetic energy per particle [J], a number or an array of one per
+        world (shape (W,)); with an array the sample is below the threshold only when every world is.
 
-        Returns True when the last ``window`` samples were all below the threshold; a sample at or
-        above it starts the count again.
+        A NaN energy (a world that blew up) is not below the threshold. Returns True when the last
+        ``window`` samples were all below the threshold; a sample at or above it starts the count again.
         """
         t = _finite("time", time, "s")
-        ke = _finite("kinetic_energy_per_particle", kinetic_energy_per_particle, "J")
-        if ke < 0:
-            _bad("kinetic_energy_per_particle", kinetic_energy_per_particle, "an energy >= 0 J")
+        ke = kinetic_energy_per_particle
+        if np.ndim(ke) == 0:
+            if isinstance(ke, bool) or not isinstance(ke, numbers.Real):
+                _bad("kinetic_energy_per_particle", ke, "a number [J] or one per world, shape (W,)")
+            ke = float(ke)
+        else:
+            ke = np.array(ke, dtype=float)
+            if ke.ndim != 1 or ke.size == 0:
+                _bad("kinetic_energy_per_particle", _short(ke), "a number [J] or one per world, shape (W,)")
+        if np.any(ke < 0):
+            _bad("kinetic_energy_per_particle", ke if np.ndim(ke) == 0 else _short(ke), "energies >= 0 J")
         if self.history and t < self.history[-1][0]:
             _bad("time", time, f"a time >= the previous update's {self.history[-1][0]!r} s")
         self.history.append((t, ke))
-        self._streak = self._streak + 1 if ke < self.threshold else 0
+        self.streak = self.streak + 1 if np.all(ke < self.threshold) else 0
         if self.settled and self.settled_time is None:
             self.settled_time = t
         return self.settled
@@ -904,7 +915,7 @@ class SettleMonitor:
     @property
     def settled(self) -> bool:
         """Whether the last ``window`` updates were all below the threshold."""
-        return self._streak >= self.window
+        return self.streak >= self.window
 
 
 # --------------------------------------------------------------------------------------------------
