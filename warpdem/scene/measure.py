@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -33,7 +33,6 @@ __all__ = [
     "angle_cone",
     "angle_image",
     "angle_surface_fit",
-    "impact_phases",
     "impact_summary",
     "plot_angles",
     "plot_press",
@@ -810,52 +809,6 @@ def impact_summary(face_count, face_energy, face_max_speed, face_area=None, hot:
     if area is not None:
         out["energy_per_area_j_m2"] = energy / float(area.sum())
         out["face_energy_per_area_j_m2"] = e / area
-    return out
-
-
-def impact_phases(snapshots: Mapping[str, Sequence], face_area=None) -> dict:
-    """Per-phase impact summaries from cumulative snapshots taken at the end of each phase.
-
-    Counts and energies are cumulative over the run, so a phase's own values are the differences of
-    consecutive snapshots (the first phase is its snapshot). The per-face maximum speed is reset at
-    each phase start by the caller, so it is taken as given.
-
-    Args:
-        snapshots: phase name -> (face_count (F,), face_energy [J] (F,), face_max_speed [m/s] (F,)),
-            in phase order (dict insertion order), at least one phase.
-        face_area: face areas [m^2], shape (F,), or None.
-
-    Returns:
-        dict phase name -> :func:`impact_summary` of that phase.
-    """
-    if not isinstance(snapshots, Mapping) or len(snapshots) == 0:
-        _bad(
-            "snapshots",
-            type(snapshots).__name__ if not isinstance(snapshots, Mapping) else snapshots,
-            "a non-empty dict phase name -> (face_count, face_energy, face_max_speed)",
-        )
-    out = {}
-    prev_c = prev_e = None
-    for name, snap in snapshots.items():
-        try:
-            count, energy, speed = snap
-        except (TypeError, ValueError):
-            _bad(f"snapshots[{name!r}]", type(snap).__name__, "a tuple (face_count, face_energy, face_max_speed)")
-        c, e, v, _ = _impact_arrays(count, energy, speed, None)
-        if prev_c is None:
-            dc, de = c, e
-        else:
-            if c.shape != prev_c.shape:
-                _bad(f"snapshots[{name!r}]", _short(c), f"the same face count {prev_c.shape} as the previous phase")
-            dc, de = c - prev_c, e - prev_e
-            if np.any(dc < 0):
-                _bad(f"snapshots[{name!r}]", _short(c), "cumulative face counts (not below the previous snapshot)")
-            # float sums accumulate rounding; only a real decrease is an error
-            if np.any(de < -1e-9 * max(float(prev_e.max()), 1e-300)):
-                _bad(f"snapshots[{name!r}]", _short(e), "cumulative face energies (not below the previous snapshot)")
-            de = np.maximum(de, 0.0)
-        out[name] = impact_summary(dc, de, v, face_area)
-        prev_c, prev_e = c, e
     return out
 
 
