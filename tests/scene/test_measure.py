@@ -289,6 +289,20 @@ def test_settle_monitor():
     assert SettleMonitor(1.0).update(0.0, 1.0) is False  # "below" is strict
 
 
+def test_settle_monitor_per_world():
+    """SettleMonitor with one energy per world: a sample is below the threshold only when every world is,
+    a NaN world (blown up) is not below, and the streak can be restored (a resumed run)."""
+    m = SettleMonitor(1e-6, window=2)
+    assert m.update(0.0, np.array([5e-7, 2e-6])) is False and m.streak == 0
+    assert m.update(0.1, np.array([5e-7, 5e-7])) is False and m.streak == 1
+    assert m.update(0.2, np.array([5e-7, np.nan])) is False and m.streak == 0
+    resumed = SettleMonitor(1e-6, window=2)
+    resumed.streak = 1
+    assert resumed.update(0.3, np.array([1e-7, 1e-7])) is True
+    with pytest.raises(ValueError, match="kinetic_energy_per_particle = "):
+        m.update(0.3, np.array([1e-7, -1e-7]))
+
+
 # --------------------------------------------------------------------------------------------------
 # plots
 # --------------------------------------------------------------------------------------------------
