@@ -997,7 +997,6 @@ def _wetfeed(a: _Audit, ref: Path, pub: dict):
             "seed 001 text / published.toml optimum_coded",
             "info",
         )
-    vals = [f"{v:.2f}" for v in W["verification_aor_deg"]]
     mean = float(np.mean(W["verification_aor_deg"]))
     a.number(
         "wetfeed.verification.mean_aor_deg",
