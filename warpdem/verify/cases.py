@@ -16,6 +16,8 @@ from warpdem.engine.builder import ModelBuilder
 from warpdem.engine.materials import Material, effective_moduli
 from warpdem.engine.solver import Solver, SolverOptions
 
+from .bodies import BODY_CASES
+from .cohesion import COHESION_CASES
 from .record import RIGID, Record
 
 # ------------------------------------------------------------------------------------------------
@@ -452,6 +454,9 @@ CASES = {
     "elastic_bounce": case_elastic_bounce,
     "mesh_vs_plane": case_mesh_vs_plane,
     "batch_invariance": case_batch_invariance,
+    # the cases of the other capabilities live beside this module
+    **BODY_CASES,
+    **COHESION_CASES,
 }
 
 
@@ -463,12 +468,3 @@ def run_all(device: str = "cpu", only: list[str] | None = None) -> list[Record]:
             continue
         records += fn(device)
     return records
-
-
-# cases of the other capabilities live beside this module; they import Record from here
-from .bodies import BODY_CASES  # noqa: E402
-
-CASES.update(BODY_CASES)
-from .cohesion import COHESION_CASES  # noqa: E402
-
-CASES.update(COHESION_CASES)
