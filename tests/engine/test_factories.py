@@ -268,7 +268,7 @@ def test_truncated_lognormal_bounds_and_moments():
     pdf = stats.lognorm(s=0.5, scale=1e-3).pdf
     norm = integrate.quad(pdf, 0.7e-3, 2.5e-3)[0]
     for k in (1, 2, 3):
-        expected = integrate.quad(lambda x: x**k * pdf(x), 0.7e-3, 2.5e-3, epsrel=1e-12)[0] / norm
+        expected = integrate.quad(lambda x, k=k: x**k * pdf(x), 0.7e-3, 2.5e-3, epsrel=1e-12)[0] / norm
         assert d.moment(k) == pytest.approx(expected, rel=1e-7)
     sd = math.sqrt(d.moment(2) - d.moment(1) ** 2)
     assert r.mean() == pytest.approx(d.moment(1), abs=Z * sd / math.sqrt(n))
