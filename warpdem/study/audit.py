@@ -392,7 +392,7 @@ def _solution_note(sol, fit: ModelFit) -> str:
     cols = [f"{f}_actual" for f in fit.factors] if f"{fit.factors[0]}_actual" in pts else fit.factors
     lo = pts[cols].min().to_numpy()
     hi = pts[cols].max().to_numpy()
-    span = ", ".join(f"{f} {l:.4g}..{h:.4g}" for f, l, h in zip(fit.factors, lo, hi))
+    span = ", ".join(f"{f} {a:.4g}..{b:.4g}" for f, a, b in zip(fit.factors, lo, hi))
     return f"{len(pts)} sampled points of the target contour inside the region span {span}; chosen: {sol.rule}"
 
 
