@@ -50,13 +50,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli backport
-    import tomli as tomllib
-
 from .analysis import ModelFit, backward_eliminate, effects_table, fit_model, parse_term, solve_target, term_label
 from .designs import Factor, alias_structure, box_behnken, ccd_alpha, central_composite, plackett_burman
+from .spec import tomllib  # the standard library's, or the tomli backport on Python 3.10
 
 __all__ = [
     "REFERENCE_ENV",
