@@ -12,12 +12,13 @@ import time
 import numpy as np
 import warp as wp
 
-wp.config.quiet = True
 from warpdem.engine.builder import ModelBuilder
 from warpdem.engine.clumps import pellet_template
 from warpdem.engine.materials import Interaction, Material, RollingModel
 from warpdem.engine.solver import Solver, SolverOptions
 from warpdem.scene.rigs import STEEL
+
+wp.config.quiet = True
 
 mode = sys.argv[1] if len(sys.argv) > 1 else "shared"
 n = int(sys.argv[2]) if len(sys.argv) > 2 else 60
@@ -60,7 +61,7 @@ s = Solver(m, SolverOptions(clump_contact_mass=mode))
 st, c = m.state(), s.contacts()
 mass = 1330 * tpl.volume
 t0 = time.time()
-for k in range(40):
+for _ in range(40):
     st = s.run(st, c, int(0.01 / s.dt))
     v = st.clump_v.numpy()
     w = st.clump_w.numpy()

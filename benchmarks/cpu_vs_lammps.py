@@ -13,10 +13,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import warp as wp  # noqa: E402
-from lammps_bed import run_lammps_bed  # noqa: E402
+import warp as wp
+from lammps_bed import run_lammps_bed
 
-from warpdem.verify.bench import run_bench  # noqa: E402
+from warpdem.verify.bench import run_bench
 
 
 def main():

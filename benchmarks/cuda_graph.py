@@ -13,11 +13,11 @@ import time
 import numpy as np
 import warp as wp
 
-wp.config.quiet = True
-
-from warpdem.engine import solver  # noqa: E402
+from warpdem.engine import solver
 from warpdem.scene import rigs
-from warpdem.scene.runner import run_scene  # noqa: E402
+from warpdem.scene.runner import run_scene
+
+wp.config.quiet = True
 
 p = argparse.ArgumentParser()
 p.add_argument("--rig", default="die_press")

@@ -15,12 +15,12 @@ import time
 
 import warp as wp
 
-wp.config.quiet = True
+from warpdem.scene import rigs
+from warpdem.scene.runner import scene_solver
+from warpdem.scene.stage import build
+from warpdem.verify.bench import contacts_per_sphere, kernel_profile
 
-from warpdem.scene import rigs  # noqa: E402
-from warpdem.scene.runner import scene_solver  # noqa: E402
-from warpdem.scene.stage import build  # noqa: E402
-from warpdem.verify.bench import contacts_per_sphere, kernel_profile  # noqa: E402
+wp.config.quiet = True
 
 p = argparse.ArgumentParser()
 p.add_argument("--device", default="cuda")

@@ -11,11 +11,11 @@ import time
 import numpy as np
 import warp as wp
 
-wp.config.quiet = True
+import warpdem as wd
+from warpdem.engine.clumps import pellet_template
+from warpdem.verify.bench import kernel_profile
 
-import warpdem as wd  # noqa: E402
-from warpdem.engine.clumps import pellet_template  # noqa: E402
-from warpdem.verify.bench import kernel_profile  # noqa: E402
+wp.config.quiet = True
 
 p = argparse.ArgumentParser()
 p.add_argument("--device", default="cuda")

@@ -10,10 +10,10 @@ import time
 
 import warp as wp
 
-wp.config.quiet = True
+from warpdem.scene import rigs
+from warpdem.scene.runner import run_scene
 
-from warpdem.scene import rigs  # noqa: E402
-from warpdem.scene.runner import run_scene  # noqa: E402
+wp.config.quiet = True
 
 p = argparse.ArgumentParser()
 p.add_argument("--device", default="cuda")

@@ -12,9 +12,10 @@ import time
 
 import warp as wp
 
-wp.config.quiet = True
 from warpdem.study import execute as ex
 from warpdem.study import spec as sp
+
+wp.config.quiet = True
 
 study = sp.load_study(sys.argv[1])
 table = sp.design_table(study)

@@ -23,22 +23,17 @@ def _box_mesh(size):
     """Closed, outward-oriented 12-triangle mesh of a box centred at the origin."""
     half = 0.5 * np.asarray(size)
     v = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float) * half
+    # two triangles per face, the faces at -x, +x, -y, +y, -z, +z (vertex index = 4 ix + 2 iy + iz)
     f = np.array(
         [
-            [0, 1, 3],
-            [0, 3, 2],
-            [4, 6, 7],
-            [4, 7, 5],
-            [0, 4, 5],
-            [0, 5, 1],
-            [2, 3, 7],
-            [2, 7, 6],
-            [0, 2, 6],
-            [0, 6, 4],
-            [1, 5, 7],
-            [1, 7, 3],
+            [[0, 1, 3], [0, 3, 2]],
+            [[4, 6, 7], [4, 7, 5]],
+            [[0, 4, 5], [0, 5, 1]],
+            [[2, 3, 7], [2, 7, 6]],
+            [[0, 2, 6], [0, 6, 4]],
+            [[1, 5, 7], [1, 7, 3]],
         ]
-    )
+    ).reshape(-1, 3)
     return v, f
 
 

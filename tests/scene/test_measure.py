@@ -12,7 +12,6 @@ from warpdem.scene.measure import (
     angle_cone,
     angle_image,
     angle_surface_fit,
-    impact_phases,
     impact_summary,
     plot_angles,
     plot_press,
@@ -271,26 +270,6 @@ def test_impact_summary_hand_made():
     assert math.isnan(impact_summary([0, 0], [0, 0], [0, 0])["mean_energy_per_impact_j"])
 
 
-def test_impact_phases_differences():
-    """impact_phases: counts and energies of a phase are differences of cumulative snapshots, max speed is
-    taken as given per phase; phases keep their order."""
-    snaps = {
-        "fill": (np.array([2, 0, 1]), np.array([0.2, 0.0, 0.1]), np.array([1.0, 0.0, 0.5])),
-        "press": (np.array([5, 4, 1]), np.array([0.5, 0.8, 0.1]), np.array([0.3, 2.0, 0.0])),
-        "eject": (np.array([5, 4, 7]), np.array([0.5, 0.8, 1.3]), np.array([0.0, 0.0, 3.0])),
-    }
-    out = impact_phases(snaps)
-    assert list(out) == ["fill", "press", "eject"]
-    assert out["fill"]["total_count"] == 3 and out["fill"]["total_energy_j"] == pytest.approx(0.3)
-    assert out["press"]["total_count"] == 7 and out["press"]["total_energy_j"] == pytest.approx(1.1)
-    assert out["press"]["hot_faces"] == [1, 0] and out["press"]["max_speed_face"] == 1
-    assert out["eject"]["total_count"] == 6 and out["eject"]["total_energy_j"] == pytest.approx(1.2)
-    assert out["eject"]["max_speed_m_s"] == 3.0 and out["eject"]["hot_faces"] == [2]
-    bad = dict(snaps, eject=(np.array([5, 3, 7]), snaps["eject"][1], snaps["eject"][2]))
-    with pytest.raises(ValueError, match=r"snapshots\['eject'\].*cumulative"):
-        impact_phases(bad)
-
-
 # --------------------------------------------------------------------------------------------------
 # settling
 # --------------------------------------------------------------------------------------------------
@@ -308,6 +287,20 @@ def test_settle_monitor():
     one = SettleMonitor(1.0, window=1)
     assert one.update(0.0, 0.5) is True
     assert SettleMonitor(1.0).update(0.0, 1.0) is False  # "below" is strict
+
+
+def test_settle_monitor_per_world():
+    """SettleMonitor with one energy per world: a sample is below the threshold only when every world is,
+    a NaN world (blown up) is not below, and the streak can be restored (a resumed run)."""
+    m = SettleMonitor(1e-6, window=2)
+    assert m.update(0.0, np.array([5e-7, 2e-6])) is False and m.streak == 0
+    assert m.update(0.1, np.array([5e-7, 5e-7])) is False and m.streak == 1
+    assert m.update(0.2, np.array([5e-7, np.nan])) is False and m.streak == 0
+    resumed = SettleMonitor(1e-6, window=2)
+    resumed.streak = 1
+    assert resumed.update(0.3, np.array([1e-7, 1e-7])) is True
+    with pytest.raises(ValueError, match="kinetic_energy_per_particle = "):
+        m.update(0.3, np.array([1e-7, -1e-7]))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -370,7 +363,6 @@ _Z, _F = np.linspace(0.09, 0.03, 50), np.linspace(0.0, 100.0, 50)
         (lambda: impact_summary([1, 1], [0, 0, 0], [0, 0]), "face_energy = "),
         (lambda: impact_summary([1, 1], [0, 0], [0, -1.0]), "face_max_speed = "),
         (lambda: impact_summary([1, 1], [0, 0], [0, 0], face_area=[1.0, 0.0]), "face_area = "),
-        (lambda: impact_phases({}), "snapshots = "),
         (lambda: SettleMonitor(0.0), "threshold = 0.0"),
         (lambda: SettleMonitor(-1e-6), "threshold = -1e-06"),
         (lambda: SettleMonitor(1e-6, window=0), "window = 0"),

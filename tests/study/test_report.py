@@ -40,21 +40,20 @@ def _pb():
     return runs, factors, {r.factor: f"{r.parameter}, {r.pair}" for r in lv.itertuples()}
 
 
+def _aor_report(out: Path, table: tuple, title: str, target: float | None, model: str = "quadratic", **kw) -> dict:
+    """write_report of a seed run ``table`` ((runs, factors, labels) as _bbd, _ccd, _pb return it) for the
+    angle of repose with ``target`` [deg]; ``kw``: write_report's other options."""
+    runs, factors, labels = table
+    responses = [{**AOR, "target": target}]
+    return write_report(out, runs, title=title, factors=factors, labels=labels, responses=responses, model=model, **kw)
+
+
 @pytest.fixture(scope="module")
 def bbd_report(tmp_path_factory):
     runs, factors, labels = _bbd()
     out = tmp_path_factory.mktemp("bbd")
-    res = write_report(
-        out,
-        runs,
-        title="Pellets BBD",
-        factors=factors,
-        labels=labels,
-        responses=[{**AOR, "target": 28.27}],
-        model="quadratic",
-        design_kind="Box-Behnken, 3 factors, 5 centre points",
-        notes=["seed 000 Table 10"],
-    )
+    kind = "Box-Behnken, 3 factors, 5 centre points"
+    res = _aor_report(out, (runs, factors, labels), "Pellets BBD", 28.27, design_kind=kind, notes=["seed 000 Table 10"])
     return out, res, runs, factors
 
 
@@ -62,16 +61,8 @@ def bbd_report(tmp_path_factory):
 def ccd_report(tmp_path_factory):
     runs, factors, labels = _ccd()
     out = tmp_path_factory.mktemp("ccd")
-    res = write_report(
-        out,
-        runs,
-        title="Wet feed CCD",
-        factors=factors,
-        labels=labels,
-        responses=[{**AOR, "target": 54.25}],
-        model="quadratic",
-        design_kind="central composite, alpha 2, 9 centre points",
-    )
+    kind = "central composite, alpha 2, 9 centre points"
+    res = _aor_report(out, (runs, factors, labels), "Wet feed CCD", 54.25, design_kind=kind)
     return out, res, runs, factors
 
 
@@ -188,16 +179,7 @@ def test_pb_linear_report_and_unreachable_target(tmp_path):
     row without replicates; a 90 deg target is outside the predicted range and reported as
     unreachable, with no chosen settings."""
     runs, factors, labels = _pb()
-    res = write_report(
-        tmp_path,
-        runs,
-        title="Pellets PB",
-        factors=factors,
-        labels=labels,
-        responses=[{**AOR, "target": 90.0}],
-        model="linear",
-        design_kind="Plackett-Burman",
-    )
+    res = _aor_report(tmp_path, (runs, factors, labels), "Pellets PB", 90.0, "linear", design_kind="Plackett-Burman")
     fit = fit_model(runs, "aor_deg", list("ABCDEF"), "linear", factors)
     csv = _anova_csv_matches_fit(tmp_path / "anova_aor_deg.csv", fit)
     assert "Lack of Fit" not in set(csv["Source"])
@@ -221,15 +203,7 @@ def test_failed_run_excluded_and_listed(tmp_path):
         point_type=np.where(runs["run"] > 12, "center", "edge"), replicate=1, wall_s=np.linspace(10, 20, len(runs))
     )
     runs.loc[runs["run"] == 5, "aor_deg"] = np.nan
-    res = write_report(
-        tmp_path,
-        runs,
-        title="BBD with a failure",
-        factors=factors,
-        labels=labels,
-        responses=[{**AOR, "target": None}],
-        model="quadratic",
-    )
+    res = _aor_report(tmp_path, (runs, factors, labels), "BBD with a failure", None)
     r = res["aor_deg"]
     assert r["failed_runs"] == [5] and r["n_used"] == 16
     assert r["chosen"] is None and r["reachable"] is None and "optimum_aor_deg.csv" not in res["files"]
@@ -266,16 +240,7 @@ def test_model_fallback_to_largest_estimable(tmp_path):
     md = (tmp_path / "ff" / "report.md").read_text()
     assert "Model fallback" in md and "not estimable" in md.split("## Notes")[1]
 
-    runs, pfactors, labels = _pb()
-    res = write_report(
-        tmp_path / "pb",
-        runs,
-        title="PB",
-        factors=pfactors,
-        labels=labels,
-        responses=[{**AOR, "target": None}],
-        model="2fi",
-    )
+    res = _aor_report(tmp_path / "pb", _pb(), "PB", None, "2fi")
     assert res["aor_deg"]["terms"] == list("ABCDEF") and "Linear" in res["aor_deg"]["model_fallback"]
 
 
@@ -283,16 +248,7 @@ def test_elimination_reported(tmp_path):
     """eliminate=True gives backward_eliminate's hierarchical model (seed 001 CCD at alpha
     0.05) and lists the removed terms with their p-values."""
     runs, factors, labels = _ccd()
-    res = write_report(
-        tmp_path,
-        runs,
-        title="CCD reduced",
-        factors=factors,
-        labels=labels,
-        responses=[{**AOR, "target": None}],
-        model="quadratic",
-        eliminate=True,
-    )
+    res = _aor_report(tmp_path, (runs, factors, labels), "CCD reduced", None, eliminate=True)
     back = backward_eliminate(runs, "aor_deg", ["X1", "X2", "X3"], "quadratic", 0.05, levels=factors)
     r = res["aor_deg"]
     assert r["terms"] == back.labels and r["eliminated"] == [e["removed"] for e in back.elimination]

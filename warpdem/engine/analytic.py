@@ -50,10 +50,6 @@ def _d_of_s(s):
     return s * s - 2.0 * np.sqrt(s)
 
 
-def _f_of_s(s):
-    return 4.0 * s**3 / 3.0 - 4.0 * s**1.5
-
-
 def jkr_length_scale(r_star: float, e_star: float, gamma: float) -> float:
     """A = (pi gamma R*^2 / E*)^(1/3) [m]: a = s A."""
     return (math.pi * gamma * r_star**2 / e_star) ** (1.0 / 3.0)

@@ -23,8 +23,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy import special, stats
-from scipy.spatial import cKDTree
 
 from .materials import _check, _finite
 
@@ -87,6 +85,8 @@ def _margins(where: str, margin, n: int) -> np.ndarray:
 
 def _norm_interval(a, b):
     """P(a < Z < b) for a standard normal Z, accurate in either tail."""
+    from scipy import special
+
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     return np.where(a > 0.0, special.ndtr(-a) - special.ndtr(-b), special.ndtr(b) - special.ndtr(a))
 
@@ -190,6 +190,8 @@ class TruncatedNormal(_Moments):
             object.__setattr__(self, name, float(getattr(self, name)))
 
     def _dist(self):
+        from scipy import stats
+
         return stats.truncnorm(
             (self.low - self.mean) / self.std, (self.high - self.mean) / self.std, loc=self.mean, scale=self.std
         )
@@ -276,6 +278,8 @@ class LogNormal(_Moments):
         if math.isinf(a) and math.isinf(b):
             z = rng.standard_normal(count)
         else:
+            from scipy import stats
+
             z = stats.truncnorm.rvs(a, b, size=count, random_state=rng)
         r = self.median * np.exp(self.sigma_log * z)
         lo, hi = self.radius_range()
@@ -929,6 +933,8 @@ class _SizeBinnedTrees:
 
     @staticmethod
     def _build(x: np.ndarray, r: np.ndarray) -> tuple:
+        from scipy.spatial import cKDTree
+
         return (cKDTree(x), x, np.append(r, -np.inf), float(r.min()), float(r.max()))
 
     def add(self, x: np.ndarray, r: np.ndarray) -> None:
@@ -1071,6 +1077,8 @@ def _rsa(
         cand, cand_idx, cand_a = prop[hits[first_hit]], idx[who], a[who]
         keep = np.ones(len(cand_idx), dtype=bool)
         if len(cand_idx) > 1:
+            from scipy.spatial import cKDTree
+
             pairs = cKDTree(cand).query_pairs(2.0 * float(cand_a.max()), output_type="ndarray")
             if len(pairs):
                 i, j = pairs[:, 0], pairs[:, 1]

@@ -120,6 +120,20 @@ def _quats(value, where: str, name: str, k: int, allowed: str) -> np.ndarray:
     return q / norm[:, None]
 
 
+def _all_or_none(where: str, group: dict) -> bool:
+    """Whether the arrays of ``group`` (name -> value or None) are given; refuses a group given in part."""
+    given = [k for k, v in group.items() if v is not None]
+    if given and len(given) < len(group):
+        missing = [k for k in group if k not in given][0]
+        _fail(
+            where,
+            missing,
+            None,
+            f"an array, since {given[0]} is given ({', '.join(group)} are all given or all None)",
+        )
+    return bool(given)
+
+
 def _readonly(a: np.ndarray) -> np.ndarray:
     a = np.ascontiguousarray(a)
     a.setflags(write=False)
@@ -148,8 +162,35 @@ def _identifiers(names: list[str], fallback: str) -> list[str]:
 # -- geometry ---------------------------------------------------------------------------------------------------
 
 
+def _rows3(value, where: str, name: str, n: str, low: int, what: str) -> np.ndarray:
+    """``value`` as a finite float64 array of ``what`` [m], shape (n, 3) with at least ``low`` rows (``n`` is
+    the row count's letter in messages)."""
+    a = _floats(value, where, name, (None, 3), f"an ({n}, 3) array of {what} in m, {n} >= {low}", unit="m")
+    if a.shape[0] < low:
+        _fail(where, f"{name}.shape", a.shape, f"({n}, 3) with {n} >= {low}")
+    return a
+
+
 @dataclass(frozen=True)
-class WallGeometry:
+class _NamedGeometry:
+    """A named piece of what the writer draws; a subclass's ``_arrays`` validates its array fields, which
+    are then stored read-only."""
+
+    name: str
+
+    def __post_init__(self):
+        where = f"{type(self).__name__} {self.name!r}"
+        if not isinstance(self.name, str) or not self.name:
+            _fail(where, "name", self.name, "a non-empty string")
+        for field_name, a in self._arrays(where).items():
+            object.__setattr__(self, field_name, _readonly(a))
+
+    def _arrays(self, where: str) -> dict:
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class WallGeometry(_NamedGeometry):
     """A triangle mesh wall as the writer draws it.
 
     Attributes:
@@ -158,32 +199,16 @@ class WallGeometry:
         triangles: vertex indices of each triangle, shape (F, 3), F >= 1, integers in [0, V).
     """
 
-    name: str
     vertices: np.ndarray
     triangles: np.ndarray
 
-    def __post_init__(self):
-        where = f"WallGeometry {self.name!r}"
-        if not isinstance(self.name, str) or not self.name:
-            _fail(where, "name", self.name, "a non-empty string")
-        v = _floats(
-            self.vertices, where, "vertices", (None, 3), "an (V, 3) array of vertex positions in m, V >= 3", unit="m"
-        )
-        if v.shape[0] < 3:
-            _fail(where, "vertices.shape", v.shape, "(V, 3) with V >= 3")
-        t = _ints(
-            self.triangles,
-            where,
-            "triangles",
-            (None, 3),
-            f"an (F, 3) array of vertex indices in [0, {len(v)})",
-            0,
-            len(v),
-        )
+    def _arrays(self, where: str) -> dict:
+        v = _rows3(self.vertices, where, "vertices", "V", 3, "vertex positions")
+        n = len(v)
+        t = _ints(self.triangles, where, "triangles", (None, 3), f"an (F, 3) array of vertex indices in [0, {n})", 0, n)
         if t.shape[0] < 1:
             _fail(where, "triangles.shape", t.shape, "(F, 3) with F >= 1")
-        object.__setattr__(self, "vertices", _readonly(v))
-        object.__setattr__(self, "triangles", _readonly(t))
+        return {"vertices": v, "triangles": t}
 
     @property
     def face_count(self) -> int:
@@ -191,7 +216,7 @@ class WallGeometry:
 
 
 @dataclass(frozen=True)
-class ShapeGeometry:
+class ShapeGeometry(_NamedGeometry):
     """One clump template (multi-sphere particle shape) as the writer draws it.
 
     Attributes:
@@ -200,19 +225,11 @@ class ShapeGeometry:
         sphere_radius: sphere radii [m], shape (s,), finite and > 0.
     """
 
-    name: str
     sphere_offset: np.ndarray
     sphere_radius: np.ndarray
 
-    def __post_init__(self):
-        where = f"ShapeGeometry {self.name!r}"
-        if not isinstance(self.name, str) or not self.name:
-            _fail(where, "name", self.name, "a non-empty string")
-        c = _floats(
-            self.sphere_offset, where, "sphere_offset", (None, 3), "an (s, 3) array of offsets in m, s >= 1", unit="m"
-        )
-        if c.shape[0] < 1:
-            _fail(where, "sphere_offset.shape", c.shape, "(s, 3) with s >= 1")
+    def _arrays(self, where: str) -> dict:
+        c = _rows3(self.sphere_offset, where, "sphere_offset", "s", 1, "offsets")
         r = _floats(
             self.sphere_radius,
             where,
@@ -222,8 +239,7 @@ class ShapeGeometry:
             positive=True,
             unit="m",
         )
-        object.__setattr__(self, "sphere_offset", _readonly(c))
-        object.__setattr__(self, "sphere_radius", _readonly(r))
+        return {"sphere_offset": c, "sphere_radius": r}
 
     @classmethod
     def from_template(cls, template) -> ShapeGeometry:
@@ -331,6 +347,11 @@ _SAND = (0.80, 0.68, 0.45)
 _WALL_GREY = (0.6, 0.6, 0.62)
 
 
+def _schema_attrs(prim, *names: str) -> dict:
+    """The schema attributes ``names`` of the UsdGeom ``prim``, each made by its ``Create<Name>Attr``, by name."""
+    return {name: getattr(prim, f"Create{name[0].upper()}{name[1:]}Attr")() for name in names}
+
+
 class ResultWriter:
     """Writes a time-sampled USD stage (and a VTK series for ParaView) frame by frame.
 
@@ -433,13 +454,7 @@ class ResultWriter:
         pts = UsdGeom.Points.Define(stage, "/World/Spheres")
         pts.CreateDisplayColorAttr([_SAND])
         self._pts = pts
-        self._pts_attrs = {
-            "points": pts.CreatePointsAttr(),
-            "widths": pts.CreateWidthsAttr(),
-            "ids": pts.CreateIdsAttr(),
-            "velocities": pts.CreateVelocitiesAttr(),
-            "extent": pts.CreateExtentAttr(),
-        }
+        self._pts_attrs = _schema_attrs(pts, "points", "widths", "ids", "velocities", "extent")
         pts.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
 
         self._build_instancer(stage)
@@ -457,15 +472,9 @@ class ResultWriter:
 
         inst = UsdGeom.PointInstancer.Define(stage, "/World/Clumps")
         self._inst = inst
-        self._inst_attrs = {
-            "positions": inst.CreatePositionsAttr(),
-            "orientations": inst.CreateOrientationsAttr(),
-            "scales": inst.CreateScalesAttr(),
-            "protoIndices": inst.CreateProtoIndicesAttr(),
-            "ids": inst.CreateIdsAttr(),
-            "velocities": inst.CreateVelocitiesAttr(),
-            "extent": inst.CreateExtentAttr(),
-        }
+        self._inst_attrs = _schema_attrs(
+            inst, "positions", "orientations", "scales", "protoIndices", "ids", "velocities", "extent"
+        )
         root = "/World/Clumps/Prototypes"
         self.prototype_paths = [f"{root}/{n}" for n in _identifiers([s.name for s in self.shapes], "shape")]
         u = self._unit
@@ -568,48 +577,7 @@ class ResultWriter:
         """
         if self._result is not None:
             raise RuntimeError(f"ResultWriter.add_frame: the writer of {self.usd_path} is closed")
-        f = self._validate_frame(
-            time,
-            sphere_x,
-            sphere_r,
-            sphere_id,
-            sphere_v,
-            clump_x,
-            clump_q,
-            clump_shape,
-            clump_scale,
-            clump_id,
-            clump_v,
-            wall_pose,
-            face_impacts,
-            face_energy,
-        )
-        frame = len(self._times)
-        self._write_usd(frame, f)
-        if self.vtk:
-            self._write_vtk(frame, f)
-        self._times.append(f["time"])
-        if self.flush_every and len(self._times) % self.flush_every == 0:
-            self.flush()
-
-    def _validate_frame(
-        self,
-        time,
-        sphere_x,
-        sphere_r,
-        sphere_id,
-        sphere_v,
-        clump_x,
-        clump_q,
-        clump_shape,
-        clump_scale,
-        clump_id,
-        clump_v,
-        wall_pose,
-        face_impacts,
-        face_energy,
-    ) -> dict:
-        """Every input checked (and converted) before anything is written, so a bad frame leaves no trace."""
+        # every input is checked (and converted) before anything is written, so a bad frame leaves no trace
         where = "ResultWriter.add_frame"
         if not _finite(time):
             _fail(where, "time", time, "a finite time in s")
@@ -617,17 +585,7 @@ class ResultWriter:
         if self._times and not time > self._times[-1]:
             _fail(where, "time", time, f"a time > {self._times[-1]!r} s (the previous frame's)")
 
-        group = {"sphere_x": sphere_x, "sphere_r": sphere_r, "sphere_id": sphere_id}
-        given = [k for k, v in group.items() if v is not None]
-        if given and len(given) < 3:
-            missing = [k for k in group if k not in given][0]
-            _fail(
-                where,
-                missing,
-                None,
-                f"an array, since {given[0]} is given (sphere_x, sphere_r, sphere_id are all given or all None)",
-            )
-        if given:
+        if _all_or_none(where, {"sphere_x": sphere_x, "sphere_r": sphere_r, "sphere_id": sphere_id}):
             sx = _floats(sphere_x, where, "sphere_x", (None, 3), "an (n, 3) array of sphere centres in m", unit="m")
             n = sx.shape[0]
             sr = _floats(
@@ -649,18 +607,9 @@ class ResultWriter:
                 sphere_v, where, "sphere_v", (n, 3), f"({n}, 3): one velocity in m/s per loose sphere, or None"
             )
 
-        group = {"clump_x": clump_x, "clump_q": clump_q, "clump_shape": clump_shape, "clump_id": clump_id}
-        given = [k for k, v in group.items() if v is not None]
-        if given and len(given) < 4:
-            missing = [k for k in group if k not in given][0]
-            _fail(
-                where,
-                missing,
-                None,
-                f"an array, since {given[0]} is given (clump_x, clump_q, clump_shape, "
-                "clump_id are all given or all None)",
-            )
-        if given:
+        if _all_or_none(
+            where, {"clump_x": clump_x, "clump_q": clump_q, "clump_shape": clump_shape, "clump_id": clump_id}
+        ):
             cx, cq, cs, cscale = _check_clumps(where, clump_x, clump_q, clump_shape, clump_scale, len(self.shapes))
             k = cx.shape[0]
             cid = _ints(clump_id, where, "clump_id", (k,), f"({k},): one id per row of clump_x (shape {cx.shape})")
@@ -688,7 +637,7 @@ class ResultWriter:
             pose[:, 3:] = _quats(pose[:, 3:], where, "wall_pose[:, 3:]", w, "unit quaternions (x, y, z, w)")
         impacts = self._per_face(where, "face_impacts", face_impacts, integer=True)
         energy = self._per_face(where, "face_energy", face_energy, integer=False)
-        return dict(
+        f = dict(
             time=time,
             sx=sx,
             sr=sr,
@@ -704,6 +653,13 @@ class ResultWriter:
             impacts=impacts,
             energy=energy,
         )
+        frame = len(self._times)
+        self._write_usd(frame, f)
+        if self.vtk:
+            self._write_vtk(frame, f)
+        self._times.append(f["time"])
+        if self.flush_every and len(self._times) % self.flush_every == 0:
+            self.flush()
 
     def _per_face(self, where: str, name: str, value, integer: bool):
         if value is None:

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -33,7 +33,6 @@ __all__ = [
     "angle_cone",
     "angle_image",
     "angle_surface_fit",
-    "impact_phases",
     "impact_summary",
     "plot_angles",
     "plot_press",
@@ -813,52 +812,6 @@ def impact_summary(face_count, face_energy, face_max_speed, face_area=None, hot:
     return out
 
 
-def impact_phases(snapshots: Mapping[str, Sequence], face_area=None) -> dict:
-    """Per-phase impact summaries from cumulative snapshots taken at the end of each phase.
-
-    Counts and energies are cumulative over the run, so a phase's own values are the differences of
-    consecutive snapshots (the first phase is its snapshot). The per-face maximum speed is reset at
-    each phase start by the caller, so it is taken as given.
-
-    Args:
-        snapshots: phase name -> (face_count (F,), face_energy [J] (F,), face_max_speed [m/s] (F,)),
-            in phase order (dict insertion order), at least one phase.
-        face_area: face areas [m^2], shape (F,), or None.
-
-    Returns:
-        dict phase name -> :func:`impact_summary` of that phase.
-    """
-    if not isinstance(snapshots, Mapping) or len(snapshots) == 0:
-        _bad(
-            "snapshots",
-            type(snapshots).__name__ if not isinstance(snapshots, Mapping) else snapshots,
-            "a non-empty dict phase name -> (face_count, face_energy, face_max_speed)",
-        )
-    out = {}
-    prev_c = prev_e = None
-    for name, snap in snapshots.items():
-        try:
-            count, energy, speed = snap
-        except (TypeError, ValueError):
-            _bad(f"snapshots[{name!r}]", type(snap).__name__, "a tuple (face_count, face_energy, face_max_speed)")
-        c, e, v, _ = _impact_arrays(count, energy, speed, None)
-        if prev_c is None:
-            dc, de = c, e
-        else:
-            if c.shape != prev_c.shape:
-                _bad(f"snapshots[{name!r}]", _short(c), f"the same face count {prev_c.shape} as the previous phase")
-            dc, de = c - prev_c, e - prev_e
-            if np.any(dc < 0):
-                _bad(f"snapshots[{name!r}]", _short(c), "cumulative face counts (not below the previous snapshot)")
-            # float sums accumulate rounding; only a real decrease is an error
-            if np.any(de < -1e-9 * max(float(prev_e.max()), 1e-300)):
-                _bad(f"snapshots[{name!r}]", _short(e), "cumulative face energies (not below the previous snapshot)")
-            de = np.maximum(de, 0.0)
-        out[name] = impact_summary(dc, de, v, face_area)
-        prev_c, prev_e = c, e
-    return out
-
-
 # --------------------------------------------------------------------------------------------------
 # settling
 # --------------------------------------------------------------------------------------------------
@@ -872,31 +825,42 @@ class SettleMonitor:
         window: consecutive updates that must all be below the threshold, >= 1.
 
     Attributes:
-        history: list of (time [s], kinetic energy per particle [J]), one per update.
+        history: list of (time [s], kinetic energy per particle [J]), one per update, the energy as given
+            (a float, or an array of one per world).
         settled_time: time [s] of the update at which the monitor first reported settled, or None.
+        streak: consecutive updates below the threshold so far (a resumed run restores it).
     """
 
     def __init__(self, threshold: float, window: int = 3):
         self.threshold = _positive("threshold", threshold, "J")
         self.window = _int_at_least("window", window, 1)
-        self.history: list[tuple[float, float]] = []
+        self.history: list[tuple[float, float | np.ndarray]] = []
         self.settled_time: float | None = None
-        self._streak = 0
+        self.streak = 0
 
-    def update(self, time: float, kinetic_energy_per_particle: float) -> bool:
-        """Record one sample (time [s], kinetic energy per particle [J]).
+    def update(self, time: float, kinetic_energy_per_particle) -> bool:
+        """Record one sample: time [s] and kinetic energy per particle [J], a number or an array of one per
+        world (shape (W,)); with an array the sample is below the threshold only when every world is.
 
-        Returns True when the last ``window`` samples were all below the threshold; a sample at or
-        above it starts the count again.
+        A NaN energy (a world that blew up) is not below the threshold. Returns True when the last
+        ``window`` samples were all below the threshold; a sample at or above it starts the count again.
         """
         t = _finite("time", time, "s")
-        ke = _finite("kinetic_energy_per_particle", kinetic_energy_per_particle, "J")
-        if ke < 0:
-            _bad("kinetic_energy_per_particle", kinetic_energy_per_particle, "an energy >= 0 J")
+        ke = kinetic_energy_per_particle
+        if np.ndim(ke) == 0:
+            if isinstance(ke, bool) or not isinstance(ke, numbers.Real):
+                _bad("kinetic_energy_per_particle", ke, "a number [J] or one per world, shape (W,)")
+            ke = float(ke)
+        else:
+            ke = np.array(ke, dtype=float)
+            if ke.ndim != 1 or ke.size == 0:
+                _bad("kinetic_energy_per_particle", _short(ke), "a number [J] or one per world, shape (W,)")
+        if np.any(ke < 0):
+            _bad("kinetic_energy_per_particle", ke if np.ndim(ke) == 0 else _short(ke), "energies >= 0 J")
         if self.history and t < self.history[-1][0]:
             _bad("time", time, f"a time >= the previous update's {self.history[-1][0]!r} s")
         self.history.append((t, ke))
-        self._streak = self._streak + 1 if ke < self.threshold else 0
+        self.streak = self.streak + 1 if np.all(ke < self.threshold) else 0
         if self.settled and self.settled_time is None:
             self.settled_time = t
         return self.settled
@@ -904,7 +868,7 @@ class SettleMonitor:
     @property
     def settled(self) -> bool:
         """Whether the last ``window`` updates were all below the threshold."""
-        return self._streak >= self.window
+        return self.streak >= self.window
 
 
 # --------------------------------------------------------------------------------------------------

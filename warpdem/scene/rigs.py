@@ -47,6 +47,14 @@ def _check_params(p) -> None:
             )
 
 
+def _check_order(p, name: str, relation: str, bound_name: str, bound: float) -> None:
+    """Refuse a parameter ``name`` of ``p`` that is not strictly ``relation`` ("more than", or "less than" /
+    "below") ``bound``, named ``bound_name`` in the message."""
+    v = getattr(p, name)
+    if not (v > bound if relation == "more than" else v < bound):
+        raise ValueError(f"{type(p).__name__}: {name} = {v} is not allowed; expected {relation} {bound_name} = {bound}")
+
+
 def _bound3(shape: ShapeSpec) -> float:
     """(bounding radius / equivalent radius)^3 of a shape: a static fill places clumps by their bounding
     spheres, so a fill region needs this much more room than the particles' own volume suggests."""
@@ -162,6 +170,57 @@ sized with it and the particles settle to ~0.6."""
 STEEL = Material("steel", density=7930.0, poisson_ratio=0.3, shear_modulus=7.7e10)
 """304 stainless steel of seed 000 (G = 77 GPa, nu = 0.3, 7930 kg/m^3)."""
 
+ORE = Material("ore", density=2404.0, poisson_ratio=0.25, shear_modulus=2.5e6)
+"""Phosphate ore of seed 002 (2404 kg/m^3, G = 2.5 MPa, nu = 0.25; its printed E = 1 MPa conflicts with G,
+so G is kept)."""
+
+
+def _ore_eepa(surface_energy: float = 1.0, pull_off_force: float = -0.009) -> Interaction:
+    """Ore-ore contact at seed 002's optimum: EEPA, e 0.15, mu_s 0.7, constant-torque mu_r 0.3, surface energy
+    [J/m^2] and pull-off force [N] as given (the seed's 1.0 and -0.009 by default)."""
+    return Interaction(
+        restitution=0.15,
+        static_friction=0.7,
+        rolling_friction=0.3,
+        law=ContactLaw.EEPA,
+        surface_energy=surface_energy,
+        pull_off_force=pull_off_force,
+        rolling_model=RollingModel.CONSTANT_TORQUE,
+    )
+
+
+def _pairs(particle: str, wall: str, particle_particle: Interaction, particle_wall: Interaction) -> list:
+    """A rig's three pairs: particle-particle, particle-wall and wall-wall (walls never touch each other, but
+    every pair of materials needs a value)."""
+    return [
+        (particle, particle, particle_particle),
+        (particle, wall, particle_wall),
+        (wall, wall, Interaction(restitution=0.5, static_friction=0.3)),
+    ]
+
+
+def _pour(name: str, region: tuple, material: str, shape: str, radius: float, spread: float, **kw) -> FactorySpec:
+    """A dynamic factory releasing particles of ``radius`` [m] (relative SD ``spread``) into ``region`` in
+    batches every POUR_INTERVAL; ``kw``: count or mass, rate, seed, initial_velocity as in FactorySpec."""
+    return FactorySpec(name, "dynamic", region, material, shape, _sizes(radius, spread), interval=POUR_INTERVAL, **kw)
+
+
+def _ore_pour(p, name: str, region: tuple, shape: ShapeSpec, rate: float, **amount) -> FactorySpec:
+    """The ore pour of seed 002's rigs (``p``: their parameters): particles of ``p.particle_radius`` leave
+    ``region`` at ``p.pour_speed`` [m/s] downward, ``rate`` per second; ``amount``: count and/or mass."""
+    return _pour(
+        name,
+        region,
+        "ore",
+        shape.name,
+        p.particle_radius,
+        p.radius_spread,
+        rate=rate,
+        seed=p.seed,
+        initial_velocity=(0.0, 0.0, -p.pour_speed),
+        **amount,
+    )
+
 
 # ----------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
@@ -199,11 +258,7 @@ class Funnel:
         _check_params(self)
         if self.material not in ("pellet", "feed"):
             raise ValueError(f"Funnel: material = {self.material!r} is not allowed; expected pellet or feed")
-        if self.outlet_diameter >= self.top_diameter:
-            raise ValueError(
-                f"Funnel: outlet_diameter = {self.outlet_diameter} is not allowed; expected less than "
-                f"top_diameter = {self.top_diameter}"
-            )
+        _check_order(self, "outlet_diameter", "less than", "top_diameter", self.top_diameter)
         if not 0 < self.cone_angle < 180:
             raise ValueError(f"Funnel: cone_angle = {self.cone_angle} is not allowed; expected (0, 180) degrees")
 
@@ -233,11 +288,6 @@ class Funnel:
                 surface_energy=self.surface_energy,
             )
             pw = Interaction(restitution=0.1, static_friction=0.45, rolling_friction=0.2, rolling_model=epsd)
-        pairs = [
-            ("grain", "grain", pp),
-            ("grain", "steel", pw),
-            ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3)),
-        ]
         cone_h = geo.funnel_height(self.top_diameter, self.outlet_diameter, self.cone_angle)
         top_z = self.outlet_height + self.stem_length + cone_h
         fv, ft = geo.funnel(
@@ -251,22 +301,21 @@ class Funnel:
         pv, pt = geo.grid_plate(self.plate_size, self.plate_size, max(self.cell, self.plate_size / 40))
         bound = radius * (1 + 2 * self.radius_spread) * (1.42 if shape.kind == "clump" else 1.0)
         region = ("cylinder", (0.0, 0.0, top_z + 2 * bound), 0.4 * self.top_diameter, max(8 * bound, 0.02), None)
-        fac = FactorySpec(
+        fac = _pour(
             "pour",
-            "dynamic",
             region,
             "grain",
             shape.name,
-            _sizes(radius, self.radius_spread),
+            radius,
+            self.radius_spread,
             count=int(self.count),
             rate=self.rate,
             seed=int(self.seed),
-            interval=POUR_INTERVAL,
         )
         return SceneSpec(
             rig="funnel",
             materials=[grain, STEEL],
-            pairs=pairs,
+            pairs=_pairs("grain", "steel", pp, pw),
             shapes=[shape],
             walls=[WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "steel")],
             factories=[fac],
@@ -338,27 +387,18 @@ class LiftingCylinder:
     def spec(self) -> SceneSpec:
         shape, _ = _shape(self.particle, "LiftingCylinder")
         r = self.particle_radius
-        ore = Material("ore", density=2404.0, poisson_ratio=0.25, shear_modulus=2.5e6)
-        eepa = Interaction(
-            restitution=0.15,
-            static_friction=0.7,
-            rolling_friction=0.3,
-            law=ContactLaw.EEPA,
-            surface_energy=self.surface_energy,
-            pull_off_force=self.pull_off_force,
-            rolling_model=RollingModel.CONSTANT_TORQUE,
+        pairs = _pairs(
+            "ore",
+            "steel",
+            _ore_eepa(self.surface_energy, self.pull_off_force),
+            Interaction(restitution=0.15, static_friction=0.5, rolling_friction=0.1),
         )
-        pairs = [
-            ("ore", "ore", eepa),
-            ("ore", "steel", Interaction(restitution=0.15, static_friction=0.5, rolling_friction=0.1)),
-            ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3)),
-        ]
         R, H = self.inner_diameter / 2, self.height
         lift = self.lift_height or H + 0.02
         coat_r = self.coat_radius or r
         margin = (2 * coat_r if self.coated else 0.0) + r * (1 + 2 * self.radius_spread) * 1.45
         v_mean = 4.0 / 3.0 * math.pi * r**3 * (1 + 3 * self.radius_spread**2)
-        count = self.count or self.mass / (ore.density * v_mean)
+        count = self.count or self.mass / (ORE.density * v_mean)
         pour_r = R - margin
         rate = _pour_rate(
             math.pi * pour_r**2 * self.pour_height, v_mean, _bound3(shape), self.pour_height, self.pour_speed
@@ -382,23 +422,10 @@ class LiftingCylinder:
             cyl.coat = {"radius": coat_r, "material": "ore", "side": 1, "seed": self.seed}
             base.coat = {"radius": coat_r, "material": "ore", "side": 1, "seed": self.seed + 1}
         region = ("cylinder", (0.0, 0.0, H + r), pour_r, self.pour_height, None)
-        fac = FactorySpec(
-            "pour",
-            "dynamic",
-            region,
-            "ore",
-            shape.name,
-            _sizes(r, self.radius_spread),
-            count=self.count or None,
-            mass=self.mass or None,
-            rate=rate,
-            seed=self.seed,
-            interval=POUR_INTERVAL,
-            initial_velocity=(0.0, 0.0, -self.pour_speed),
-        )
+        fac = _ore_pour(self, "pour", region, shape, rate, count=self.count or None, mass=self.mass or None)
         return SceneSpec(
             rig="lifting_cylinder",
-            materials=[ore, STEEL],
+            materials=[ORE, STEEL],
             pairs=pairs,
             shapes=[shape],
             walls=[cyl, base],
@@ -406,7 +433,7 @@ class LiftingCylinder:
             run=RunSpec(
                 duration=t1 + self.after_lift,
                 dt_fraction=self.dt_fraction,
-                settle_energy=_settle_energy(ore, r),
+                settle_energy=_settle_energy(ORE, r),
                 settle_after=t1,
                 output_interval=0.05,
             ),
@@ -450,11 +477,7 @@ class DiePress:
 
     def __post_init__(self):
         _check_params(self)
-        if self.inlet_diameter <= self.die_diameter:
-            raise ValueError(
-                f"DiePress: inlet_diameter = {self.inlet_diameter} is not allowed; expected more than "
-                f"die_diameter = {self.die_diameter}"
-            )
+        _check_order(self, "inlet_diameter", "more than", "die_diameter", self.die_diameter)
         if not 0 < self.max_travel < 1:
             raise ValueError(f"DiePress: max_travel = {self.max_travel} is not allowed; expected a fraction in (0, 1)")
 
@@ -462,31 +485,20 @@ class DiePress:
         r = self.particle_radius
         feed = Material("feed", density=440.0, poisson_ratio=0.25, shear_modulus=10.0e6)
         steel = Material("steel", density=7850.0, poisson_ratio=0.3, shear_modulus=7.0e10)
-        pairs = [
-            (
-                "feed",
-                "feed",
-                Interaction(
-                    restitution=0.15,
-                    static_friction=0.51,
-                    rolling_friction=0.21,
-                    law=ContactLaw.JKR,
-                    surface_energy=0.65,
-                    rolling_model=RollingModel.CONSTANT_TORQUE,
-                ),
+        ct = RollingModel.CONSTANT_TORQUE
+        pairs = _pairs(
+            "feed",
+            "steel",
+            Interaction(
+                restitution=0.15,
+                static_friction=0.51,
+                rolling_friction=0.21,
+                law=ContactLaw.JKR,
+                surface_energy=0.65,
+                rolling_model=ct,
             ),
-            (
-                "feed",
-                "steel",
-                Interaction(
-                    restitution=0.1,
-                    static_friction=0.45,
-                    rolling_friction=0.2,
-                    rolling_model=RollingModel.CONSTANT_TORQUE,
-                ),
-            ),
-            ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3)),
-        ]
+            Interaction(restitution=0.1, static_friction=0.45, rolling_friction=0.2, rolling_model=ct),
+        )
         R = self.die_diameter / 2
         # a die a few particles wide packs a static fill more loosely still (wall effect)
         packing_loose, packing_bed = 0.6 * LOOSE_PACKING, 0.58
@@ -582,49 +594,20 @@ class TruckTipper:
 
     def __post_init__(self):
         _check_params(self)
-        if self.bucket_width >= self.body_width:
-            raise ValueError(
-                f"TruckTipper: bucket_width = {self.bucket_width} is not allowed; expected less than "
-                f"body_width = {self.body_width}"
-            )
-        if self.lip_height >= self.body_height + self.bucket_height:
-            raise ValueError(
-                f"TruckTipper: lip_height = {self.lip_height} is not allowed; expected below "
-                f"body_height + bucket_height = {self.body_height + self.bucket_height}"
-            )
+        _check_order(self, "bucket_width", "less than", "body_width", self.body_width)
+        _check_order(self, "lip_height", "below", "body_height + bucket_height", self.body_height + self.bucket_height)
 
     def spec(self) -> SceneSpec:
         shape, _ = _shape(self.particle, "TruckTipper")
         r = self.particle_radius
-        ore = Material("ore", density=2404.0, poisson_ratio=0.25, shear_modulus=2.5e6)
-        pairs = [
-            (
-                "ore",
-                "ore",
-                Interaction(
-                    restitution=0.15,
-                    static_friction=0.7,
-                    rolling_friction=0.3,
-                    law=ContactLaw.EEPA,
-                    surface_energy=1.0,
-                    pull_off_force=-0.009,
-                    rolling_model=RollingModel.CONSTANT_TORQUE,
-                ),
-            ),
-            (
-                "ore",
-                "steel",
-                Interaction(
-                    restitution=0.3,
-                    static_friction=0.5,
-                    rolling_friction=0.1,
-                    law=ContactLaw.JKR,
-                    surface_energy=0.1,
-                    rolling_model=RollingModel.CONSTANT_TORQUE,
-                ),
-            ),
-            ("steel", "steel", Interaction(restitution=0.5, static_friction=0.3)),
-        ]
+        ore_steel = Interaction(
+            restitution=0.3,
+            static_friction=0.5,
+            rolling_friction=0.1,
+            law=ContactLaw.JKR,
+            surface_energy=0.1,
+            rolling_model=RollingModel.CONSTANT_TORQUE,
+        )
         L, W, H = self.body_length, self.body_width, self.body_height
         body_v, body_t = geo.open_box(L, W, H, self.cell, open_sides=("top", "rear"))
         gate_v, gate_t = geo.open_box(L, W, H, self.cell, open_sides=("top", "bottom", "front", "left", "right"))
@@ -678,23 +661,11 @@ class TruckTipper:
         body = WallSpec("Body", body_v, body_t, "steel", *_pose_samples(tt, body_pose))
         gate = WallSpec("Tailgate", gate_v, gate_t, "steel", *_pose_samples(tt, gate_pose))
         ground = WallSpec("Ground", ground_v, ground_t, "steel")
-        fac = FactorySpec(
-            "load",
-            "dynamic",
-            region,
-            "ore",
-            shape.name,
-            _sizes(r, self.radius_spread),
-            count=count,
-            rate=rate,
-            seed=self.seed,
-            interval=POUR_INTERVAL,
-            initial_velocity=(0.0, 0.0, -self.pour_speed),
-        )
+        fac = _ore_pour(self, "load", region, shape, rate, count=count)
         return SceneSpec(
             rig="truck_tipper",
-            materials=[ore, STEEL],
-            pairs=pairs,
+            materials=[ORE, STEEL],
+            pairs=_pairs("ore", "steel", _ore_eepa(), ore_steel),
             shapes=[shape],
             walls=[body, gate, bucket, ground],
             factories=[fac],

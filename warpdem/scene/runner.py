@@ -233,8 +233,8 @@ def run_scene(
     impulse_prev = state.wall_impulse.numpy().copy()
     t_prev = 0.0
     stop_reason = "duration"
-    settled_since = 0
-    settle_needed = 3
+    # RunSpec: settled when every world stays below settle_energy for three outputs in a row
+    settle = ms.SettleMonitor(run.settle_energy, window=3) if run.settle_energy > 0 else None
     eps = 0.5 * solver.dt
     ckpt = (
         out / "checkpoint.npz"
@@ -247,7 +247,9 @@ def run_scene(
         book = _load_checkpoint(ckpt, fingerprint, state, contacts)
         if book is not None:
             series, impulse_prev, t_prev = book["series"], book["impulse_prev"], book["t_prev"]
-            phase_snap, settled_since = book["phase_snap"], book["settled_since"]
+            phase_snap = book["phase_snap"]
+            if settle is not None:
+                settle.streak = book["settled_since"]
             resumed_from = state.time
             series.setdefault("tick_wall_s", [])
             series.setdefault("rebuilds", [])
@@ -304,11 +306,9 @@ def run_scene(
         factories_done = all(
             state.released.get(f, {}).get("count", 0) >= rec["count"] for f, rec in enumerate(model.factories)
         )
-        if run.settle_energy > 0 and t >= run.settle_after and factories_done:
-            settled_since = settled_since + 1 if np.all(ke < run.settle_energy) else 0
-            if settled_since >= settle_needed:
-                stop_reason = "settled"
-                break
+        if settle is not None and t >= run.settle_after and factories_done and settle.update(t, ke):
+            stop_reason = "settled"
+            break
         now = time.perf_counter()
         # a dense bed can take a minute per tick on the GPU: stop before the tick that would overrun
         stopping = stop_after > 0 and (now - t_wall0) + (now - t_tick) >= stop_after
@@ -323,7 +323,7 @@ def run_scene(
                     "impulse_prev": impulse_prev,
                     "t_prev": t_prev,
                     "phase_snap": phase_snap,
-                    "settled_since": settled_since,
+                    "settled_since": settle.streak if settle is not None else 0,
                 },
             )
             t_ckpt = time.perf_counter()

@@ -625,9 +625,9 @@ def response_range(
         best_v, best_z = math.inf, None
         for x0 in starts:
             r = optimize.minimize(
-                lambda z: sign * surf(z),
+                lambda z, sign=sign: sign * surf(z),
                 x0,
-                jac=lambda z: sign * surf.grad(z),
+                jac=lambda z, sign=sign: sign * surf.grad(z),
                 method="L-BFGS-B",
                 bounds=list(zip(lo, hi)),
             )

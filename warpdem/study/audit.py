@@ -50,13 +50,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli backport
-    import tomli as tomllib
-
 from .analysis import ModelFit, backward_eliminate, effects_table, fit_model, parse_term, solve_target, term_label
 from .designs import Factor, alias_structure, box_behnken, ccd_alpha, central_composite, plackett_burman
+from .spec import tomllib  # the standard library's, or the tomli backport on Python 3.10
 
 __all__ = [
     "REFERENCE_ENV",
@@ -179,6 +175,14 @@ class _Audit:
                 "source": source,
             }
         )
+
+    def check(self, name, ok, note="", source="", kind="reproduce"):
+        """Record a yes/no finding ``ok`` (expected: True)."""
+        self.add(name, ok, True, "", ok, note, source, kind)
+
+    def same(self, name, value, expected, note="", source="", kind="reproduce"):
+        """Record a unitless ``value`` that must equal ``expected``."""
+        self.add(name, value, expected, "", value == expected, note, source, kind)
 
     def number(self, name, value, printed, unit="", note="", source="", kind="reproduce", slack=0.0, decimals=None):
         """Compare a recomputed number with a printed one (string or float)."""
@@ -387,12 +391,40 @@ def _significant(fit: ModelFit, alpha: float) -> list[str]:
     return [lab for lab in fit.labels if fit.anova.loc[lab, "p"] < alpha]
 
 
+def _audit_reduced_equation(a: _Audit, prefix: str, X: pd.DataFrame, y, levels: dict, eq: dict, elimination, refit):
+    """A published reduced model ``eq`` (term -> printed coefficient, actual units): hierarchical backward
+    elimination (alpha 0.05) of the full quadratic in the columns of ``X`` must keep its terms, and those
+    terms refitted to ``y`` must give its coefficients. ``elimination`` and ``refit`` are the (note, source)
+    of the two kinds of record; "{removed}" in the first note lists the terms removed. Returns the refit
+    and its rounding slack (:func:`_fit_and_slack`)."""
+    fac = list(X.columns)
+    terms = [k for k in eq if k != "const"]
+    back = backward_eliminate(X.assign(y=y.map(_num)), "y", fac, "quadratic", 0.05, levels=levels)
+    removed = ", ".join(f"{e['removed']} (p={e['p']:.3f})" for e in back.elimination)
+    a.add(
+        f"{prefix}.reduced_model_terms",
+        ", ".join(back.labels),
+        ", ".join(terms),
+        "",
+        back.labels == terms,
+        elimination[0].replace("{removed}", removed),
+        elimination[1],
+    )
+    rfit, rsl = _fit_and_slack(X, y, fac, terms, levels)
+    ours = rfit.equation("actual")
+    for key, printed in eq.items():
+        mono = () if key == "const" else parse_term(key, fac)
+        slack = rsl.get(f"eq.{key}", 0.0)
+        a.number(f"{prefix}.equation_actual.{key}", ours[mono], printed, "", refit[0], refit[1], slack=slack)
+    return rfit, rsl
+
+
 def _solution_note(sol, fit: ModelFit) -> str:
     pts = sol.family
     cols = [f"{f}_actual" for f in fit.factors] if f"{fit.factors[0]}_actual" in pts else fit.factors
     lo = pts[cols].min().to_numpy()
     hi = pts[cols].max().to_numpy()
-    span = ", ".join(f"{f} {l:.4g}..{h:.4g}" for f, l, h in zip(fit.factors, lo, hi))
+    span = ", ".join(f"{f} {a:.4g}..{b:.4g}" for f, a, b in zip(fit.factors, lo, hi))
     return f"{len(pts)} sampled points of the target contour inside the region span {span}; chosen: {sol.rule}"
 
 
@@ -424,7 +456,7 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
         )
     sig = ", ".join(_significant(fit, 0.05))
     exp_sig, srcx = SEED_TEXT_VALUES["pellets.pb.significant"]
-    a.add("pellets.pb.significant_terms", sig, exp_sig, "", sig == exp_sig, "terms with p < 0.05", srcx)
+    a.same("pellets.pb.significant_terms", sig, exp_sig, "terms with p < 0.05", srcx)
     # equation (5) in actual units
     eq = _parse_equation(P["pb_equation_actual_units"], fac)
     ours = fit.equation("actual")
@@ -449,11 +481,8 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
         )
     # PB design = classical generator, Design-Expert layout
     same = bool((plackett_burman(fac, 12)[fac].to_numpy() == data.to_numpy()).all())
-    a.add(
+    a.check(
         "pellets.pb.design_is_classical_pb12",
-        same,
-        True,
-        "",
         same,
         "Table 6 equals the 12-run cyclic Plackett-Burman design (generator ++-+++---+-, one "
         "shift per row, Design-Expert layout) in standard order",
@@ -471,11 +500,8 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
         "F": "pp_restitution",
     }
     ok = all(abs(levels[f].low - mr[n][0]) < 1e-12 and abs(levels[f].high - mr[n][1]) < 1e-12 for f, n in names.items())
-    a.add(
+    a.check(
         "pellets.pb.levels_equal_measured_ranges",
-        ok,
-        True,
-        "",
         ok,
         "PB low/high levels (Table 5) equal the measured ranges (Tables 2, 3)",
         "seed 000 Tables 2, 3, 5",
@@ -586,11 +612,8 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
     bbd = _csv(ref, "pellets_bbd_runs.csv")
     fac3 = list("CDE")
     same = bool(np.array_equal(box_behnken(fac3, 5)[fac3].to_numpy(), bbd[fac3].astype(float).to_numpy()))
-    a.add(
+    a.check(
         "pellets.bbd.design_is_standard_bbd",
-        same,
-        True,
-        "",
         same,
         "Table 10 equals the 3-factor Box-Behnken design with 5 centre runs in standard order",
         "seed 000 Table 10",
@@ -608,42 +631,21 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
     _audit_anova(a, "pellets.bbd", bfit, bsl, _csv(ref, "pellets_bbd_anova_published.csv"), fac3, src11, notes)
     sig = ", ".join(_significant(bfit, 0.05))
     exp_sig, srcx = SEED_TEXT_VALUES["pellets.bbd.significant"]
-    a.add(
-        "pellets.bbd.significant_terms",
-        sig,
-        exp_sig,
-        "",
-        sig == exp_sig,
-        "terms with p < 0.05 in the full quadratic model",
-        srcx,
-    )
-    back = backward_eliminate(
-        bbd[fac3].astype(float).assign(y=bbd["aor_deg"].map(_num)), "y", fac3, "quadratic", 0.05, levels=blv
-    )
+    a.same("pellets.bbd.significant_terms", sig, exp_sig, "terms with p < 0.05 in the full quadratic model", srcx)
     eq6 = _parse_equation(P["bbd_equation_actual_units"], fac3)
-    terms6 = [k for k in eq6 if k != "const"]
-    a.add(
-        "pellets.bbd.reduced_model_terms",
-        ", ".join(back.labels),
-        ", ".join(terms6),
-        "",
-        back.labels == terms6,
-        "hierarchical backward elimination (alpha 0.05) of the full quadratic fitted to Table 10",
-        "seed 000 eq. (6)",
-    )
-    rfit, rsl = _fit_and_slack(bbd[fac3].astype(float), bbd["aor_deg"], fac3, terms6, blv)
-    ours = rfit.equation("actual")
-    for key, printed in eq6.items():
-        mono = () if key == "const" else parse_term(key, fac3)
-        a.number(
-            f"pellets.bbd.equation_actual.{key}",
-            ours[mono],
-            printed,
-            "",
+    rfit, _ = _audit_reduced_equation(
+        a,
+        "pellets.bbd",
+        bbd[fac3].astype(float),
+        bbd["aor_deg"],
+        blv,
+        eq6,
+        ("hierarchical backward elimination (alpha 0.05) of the full quadratic fitted to Table 10", "seed 000 eq. (6)"),
+        (
             "same terms refitted to Table 10 in actual units",
             "seed 000 eq. (6) / published.toml bbd_equation_actual_units",
-            slack=rsl.get(f"eq.{key}", 0.0),
-        )
+        ),
+    )
     opt = P["optimum"]
     pt = {f: opt[f] for f in fac3}
     half = {f: 0.005 for f in fac3}
@@ -696,15 +698,8 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
         "pp_rolling": opt["E"],
     }
     ok = all(abs(cal[k] - v) < 1e-12 for k, v in pairs.items())
-    a.add(
-        "pellets.calibrated_set",
-        ok,
-        True,
-        "",
-        ok,
-        "Table 12 = PB fixed levels + BBD optimum",
-        "seed 000 Table 12",
-        "consistency",
+    a.check(
+        "pellets.calibrated_set", ok, "Table 12 = PB fixed levels + BBD optimum", "seed 000 Table 12", "consistency"
     )
     ver = P["verification"]
     _rel_err_record(
@@ -790,25 +785,19 @@ def _wetfeed(a: _Audit, ref: Path, pub: dict):
         )
     sig = ", ".join(_significant(fit, 0.01))
     exp_sig, srcx = SEED_TEXT_VALUES["wetfeed.pb.significant"]
-    a.add("wetfeed.pb.significant_terms", sig, exp_sig, "", sig == exp_sig, "terms with p < 0.01", srcx)
+    a.same("wetfeed.pb.significant_terms", sig, exp_sig, "terms with p < 0.01", srcx)
     std = {tuple(r) for r in plackett_burman(fac, 12)[fac].to_numpy()}
     ok = all(tuple(r) in std for r in runs[fac].astype(float).to_numpy())
-    a.add(
+    a.check(
         "wetfeed.pb.design_is_classical_pb12",
-        ok,
-        True,
-        "",
         ok,
         "Table 3 rows are the 12 rows of the cyclic PB12 design (Design-Expert layout), in a randomised order",
         "seed 001 Table 3",
         "consistency",
     )
     ok = all(abs(f.high - 2 * f.low) < 1e-12 for f in levels.values())
-    a.add(
+    a.check(
         "wetfeed.pb.high_is_twice_low",
-        ok,
-        True,
-        "",
         ok,
         "'the high level was set to twice the low level'",
         "seed 001 Table 2",
@@ -854,11 +843,8 @@ def _wetfeed(a: _Audit, ref: Path, pub: dict):
         for f in fac3
         for c, col in ((-2, "level_minus2"), (-1, "level_minus1"), (2, "level_plus2"))
     )
-    a.add(
+    a.check(
         "wetfeed.ccd.levels_equally_spaced",
-        ok,
-        True,
-        "",
         ok,
         "levels -2..+2 = centre + code * step",
         "seed 001 Table 5",
@@ -881,11 +867,8 @@ def _wetfeed(a: _Audit, ref: Path, pub: dict):
     ccd = _csv(ref, "wetfeed_ccd_runs.csv")
     ours_ccd = central_composite(fac3, alpha=2, center_points=9)[fac3].to_numpy()
     same = sorted(map(tuple, ours_ccd)) == sorted(map(tuple, ccd[fac3].astype(float).to_numpy()))
-    a.add(
+    a.check(
         "wetfeed.ccd.design_is_ccd_alpha2",
-        same,
-        True,
-        "",
         same,
         "Table 6 rows = central composite design, 3 factors, alpha 2, 8 + 6 + 9 runs (any order)",
         "seed 001 Table 6",
@@ -997,7 +980,6 @@ def _wetfeed(a: _Audit, ref: Path, pub: dict):
             "seed 001 text / published.toml optimum_coded",
             "info",
         )
-    vals = [f"{v:.2f}" for v in W["verification_aor_deg"]]
     mean = float(np.mean(W["verification_aor_deg"]))
     a.number(
         "wetfeed.verification.mean_aor_deg",
@@ -1110,11 +1092,8 @@ def _phosphate(a: _Audit, ref: Path, pub: dict):
     coded = pd.DataFrame({c: flv[c].to_coded(ffd[c].map(_num).to_numpy()) for c in cols})
     src14 = "seed 002 Fig. 14 / phosphate_ffd_runs.csv"
     on_levels = bool(np.allclose(np.abs(coded.to_numpy()), 1.0))
-    a.add(
+    a.check(
         "phosphate.ffd.runs_on_levels",
-        on_levels,
-        True,
-        "",
         on_levels,
         "every run at the low or high level of ffd_ranges",
         src14,
@@ -1137,12 +1116,10 @@ def _phosphate(a: _Audit, ref: Path, pub: dict):
         "consistency",
     )
     al = alias_structure(5, "E=ABCD")
-    a.add(
+    a.same(
         "phosphate.ffd.resolution",
         al.resolution,
         5,
-        "",
-        al.resolution == 5,
         "2^(5-1) with I = ABCDE is resolution V",
         "seed 002 section 5",
         "consistency",
@@ -1234,42 +1211,31 @@ def _phosphate(a: _Audit, ref: Path, pub: dict):
     data = pd.DataFrame({f: bbd[csv_cols[f]].map(_num) for f in fac})
     src18 = "seed 002 Fig. 18, eq. (20)"
     same = bool(np.array_equal(box_behnken(fac, 3)[fac].to_numpy(), data.to_numpy()))
-    a.add(
+    a.check(
         "phosphate.bbd.design_is_standard_bbd",
-        same,
-        True,
-        "",
         same,
         "Fig. 18 equals the 3-factor Box-Behnken design with 3 centre runs (Minitab's 15 runs) in standard order",
         "seed 002 Fig. 18",
         "consistency",
     )
     eq = _parse_equation(H["bbd_equation_actual_units"], fac)
-    terms = [k for k in eq if k != "const"]
-    back = backward_eliminate(data.assign(y=bbd["aor_deg"].map(_num)), "y", fac, "quadratic", 0.05, levels=blv)
-    a.add(
-        "phosphate.bbd.reduced_model_terms",
-        ", ".join(back.labels),
-        ", ".join(terms),
-        "",
-        back.labels == terms,
-        "hierarchical backward elimination (alpha 0.05; 0.1 gives the same) of the full quadratic "
-        "fitted to Fig. 18; removed " + ", ".join(f"{e['removed']} (p={e['p']:.3f})" for e in back.elimination),
-        src18,
-    )
-    rfit, rsl = _fit_and_slack(data, bbd["aor_deg"], fac, terms, blv)
-    ours = rfit.equation("actual")
-    for key, printed in eq.items():
-        mono = () if key == "const" else parse_term(key, fac)
-        a.number(
-            f"phosphate.bbd.equation_actual.{key}",
-            ours[mono],
-            printed,
-            "",
+    rfit, rsl = _audit_reduced_equation(
+        a,
+        "phosphate.bbd",
+        data,
+        bbd["aor_deg"],
+        blv,
+        eq,
+        (
+            "hierarchical backward elimination (alpha 0.05; 0.1 gives the same) of the full quadratic "
+            "fitted to Fig. 18; removed {removed}",
+            src18,
+        ),
+        (
             "eq. (20)'s terms fitted to Fig. 18 in actual units (B static friction, C rolling, D surface energy)",
             src18 + " / published.toml bbd_equation_actual_units",
-            slack=rsl.get(f"eq.{key}", 0.0),
-        )
+        ),
+    )
     ffit = fit_model(data.assign(y=bbd["aor_deg"].map(_num)), "y", fac, "quadratic", blv)
     a.number(
         "phosphate.bbd.r2",

@@ -121,22 +121,23 @@ def _factor_map(factors: Iterable[Factor] | Mapping[str, Factor]) -> dict[str, F
     return {f.name: f for f in factors}
 
 
-def to_coded(df: pd.DataFrame, factors: Iterable[Factor] | Mapping[str, Factor]) -> pd.DataFrame:
-    """Copy of ``df`` with every column named by a factor converted from actual to coded units."""
+def _convert(df: pd.DataFrame, factors, convert) -> pd.DataFrame:
+    """Copy of ``df`` with every column named by a factor converted by ``convert(factor, values)``."""
     out = df.copy()
     for name, f in _factor_map(factors).items():
         if name in out.columns:
-            out[name] = f.to_coded(out[name].to_numpy(dtype=float))
+            out[name] = convert(f, out[name].to_numpy(dtype=float))
     return out
+
+
+def to_coded(df: pd.DataFrame, factors: Iterable[Factor] | Mapping[str, Factor]) -> pd.DataFrame:
+    """Copy of ``df`` with every column named by a factor converted from actual to coded units."""
+    return _convert(df, factors, Factor.to_coded)
 
 
 def to_actual(df: pd.DataFrame, factors: Iterable[Factor] | Mapping[str, Factor]) -> pd.DataFrame:
     """Copy of ``df`` with every column named by a factor converted from coded to actual units."""
-    out = df.copy()
-    for name, f in _factor_map(factors).items():
-        if name in out.columns:
-            out[name] = f.to_actual(out[name].to_numpy(dtype=float))
-    return out
+    return _convert(df, factors, Factor.to_actual)
 
 
 def factor_names(k: int) -> list[str]:

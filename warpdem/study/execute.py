@@ -27,6 +27,7 @@ same number of devices to pick up a checkpoint; finished points are kept whateve
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -169,7 +170,7 @@ def run_batch(
     )
     info = dict(res.info)
     out = []
-    for row, m in zip(rows, res.metrics):
+    for m in res.metrics:
         responses = {r.name: _response(m, r.measure) for r in study.responses}
         out.append({"responses": responses, "metrics": m, "info": info})
     return out
@@ -189,6 +190,15 @@ def _progress_bar(total: int, initial: int, desc: str, enabled: bool):
     except ImportError:  # tqdm is a dependency; the GPU machine may lack it
         return None
     return tqdm(total=total, initial=initial, desc=desc, unit="run", smoothing=0.0)
+
+
+def _batch_tick(bar, base: float, worlds: int, label: str, frac: float, msg: str) -> None:
+    """Progress of one launch of ``worlds`` worlds, ``frac`` done: ``bar`` (or None) stands at ``base`` runs
+    plus that fraction of the launch's."""
+    if bar is not None:
+        bar.n = base + frac * worlds
+        bar.set_postfix_str(f"{label}: {worlds} worlds, {msg}", refresh=False)
+        bar.refresh()
 
 
 def _check_folder(out: Path, study: sp.StudySpec) -> None:
@@ -334,7 +344,7 @@ def _run_parallel(
         for i, f in enumerate(futures):
             try:
                 results[i] = f.result()
-            except Exception as e:  # noqa: BLE001 - kept, raised after every device has finished
+            except Exception as e:  # kept, raised after every device has finished
                 errors.append((plan[i][0], e))
     _results_csv(study, out)
     for (d, bs), r in zip(plan, results):
@@ -407,13 +417,7 @@ def run_study(
         stopped = _run_parallel(study, out, batches, devices, bar, t0, checkpoint_every, stop_after, log)
     for k, batch in enumerate(batches if len(devices) == 1 else []):
         base = bar.n if bar is not None else 0
-
-        def tick(frac, msg, n=len(batch), base=base):
-            if bar is not None:
-                bar.n = base + frac * n
-                bar.set_postfix_str(f"batch {k + 1}/{len(batches)}: {n} worlds, {msg}", refresh=False)
-                bar.refresh()
-
+        tick = functools.partial(_batch_tick, bar, base, len(batch), f"batch {k + 1}/{len(batches)}")
         tb = time.perf_counter()
         launch = out / "launches" / _launch_id(batch)
         # the first launch of a call always starts (and saves a checkpoint at least), so every call advances

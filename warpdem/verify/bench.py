@@ -192,7 +192,6 @@ def run_bench(
     n = model.sphere_count
     b_model, b_state, b_contacts = device_bytes(model), 2 * device_bytes(state), device_bytes(contacts)
     ke = 0.5 * float(np.sum(state.sphere_v.numpy() ** 2)) / n
-    bodies = model.clump_count or n
     return {
         "device": str(wp.get_device(device).name if is_cuda else "cpu"),
         "law": law,

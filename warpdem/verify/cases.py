@@ -16,19 +16,27 @@ from warpdem.engine.builder import ModelBuilder
 from warpdem.engine.materials import Material, effective_moduli
 from warpdem.engine.solver import Solver, SolverOptions
 
+from .bodies import BODY_CASES
+from .cohesion import COHESION_CASES
 from .record import RIGID, Record
 
 # ------------------------------------------------------------------------------------------------
 # helpers
 
 
-def _two_body_scene(mat: Material, wall: bool, gravity=(0.0, 0.0, 0.0)):
-    b = ModelBuilder(gravity=gravity)
+def _two_body_scene(mat: Material, wall: bool, **interaction) -> ModelBuilder:
+    """A builder without gravity holding ``mat`` and, with ``wall``, the plane z = 0 of a rigid copy of it;
+    ``interaction`` (set_interaction's keywords) applies between ``mat`` and the plane, or ``mat`` itself."""
+    b = ModelBuilder(gravity=(0.0, 0.0, 0.0))
     b.add_material(mat)
     if wall:
         b.add_material(
             Material("rigid", density=mat.density, poisson_ratio=mat.poisson_ratio, youngs_modulus=mat.E * RIGID)
         )
+    if interaction:
+        b.set_interaction(mat.name, "rigid" if wall else mat.name, **interaction)
+    if wall:
+        b.add_plane((0, 0, 0), (0, 0, 1), "rigid")
     return b
 
 
@@ -73,55 +81,56 @@ def hertz_expected(e_star: float, r_star: float, m_star: float, v: float):
 # Chung & Ooi (2011) tests 1-4
 
 
-def case_chung_ooi_1(device: str = "cpu") -> list[Record]:
-    """Test 1: two identical spheres, normal elastic impact at +-10 m/s (glass, limestone)."""
+def _normal_impacts(
+    device, test: str, materials, R: float, v: float, wall: bool, *, static_friction: float, dt_fraction: float
+) -> list[Record]:
+    """Chung & Ooi tests 1 and 2: an elastic head-on impact for each of ``materials``, two spheres of radius
+    ``R`` [m] meeting at +-``v`` [m/s] or, with ``wall``, one hitting a rigid plane at ``v``; the peak force
+    [N], peak overlap [m] and contact time [s] against Hertz within 1 %."""
     out = []
-    for label, E, nu, rho in (("glass", 48e9, 0.20, 2800.0), ("limestone", 20e9, 0.25, 2500.0)):
-        mat = Material(label, density=rho, youngs_modulus=E, poisson_ratio=nu)
-        R, v = 0.01, 10.0
-        b = _two_body_scene(mat, wall=False)
-        b.set_interaction(label, label, restitution=1.0, static_friction=0.35)
-        b.add_sphere((-R - 1e-5, 0, 0), R, label, velocity=(v, 0, 0))
-        b.add_sphere((R + 1e-5, 0, 0), R, label, velocity=(-v, 0, 0))
-        model = b.finalize(device)
-        solver = Solver(model, SolverOptions(dt_fraction=0.02))
-        f, d, tc, _ = _run_contact(
-            solver, model.state(), solver.contacts(), lambda x: 2 * R - (x[1, 0] - x[0, 0]), 20000
-        )
-        e_star = effective_moduli(mat, mat)[0]
+    for mat in materials:
+        b = _two_body_scene(mat, wall, restitution=1.0, static_friction=static_friction)
         m = mat.density * 4 / 3 * math.pi * R**3
-        fe, de, te = hertz_expected(e_star, R / 2, m / 2, 2 * v)
-        case = f"Chung-Ooi 1 {label}"
+        if wall:
+            b.add_sphere((0, 0, R + 1e-6), R, mat.name, velocity=(0, 0, -v))
+            nu = mat.poisson_ratio
+            expected = hertz_expected(mat.E / (1 - nu * nu), R, m, v)
+        else:
+            b.add_sphere((-R - 1e-5, 0, 0), R, mat.name, velocity=(v, 0, 0))
+            b.add_sphere((R + 1e-5, 0, 0), R, mat.name, velocity=(-v, 0, 0))
+            expected = hertz_expected(effective_moduli(mat, mat)[0], R / 2, m / 2, 2 * v)
+        model = b.finalize(device)
+        solver = Solver(model, SolverOptions(dt_fraction=dt_fraction))
+        f, d, tc, _ = _run_contact(
+            solver,
+            model.state(),
+            solver.contacts(),
+            lambda x: R - x[0, 2] if wall else 2 * R - (x[1, 0] - x[0, 0]),
+            20000,
+        )
+        case = f"{test} {mat.name}"
         out += [
-            Record(case, "peak force", f, fe, "N", 0.01),
-            Record(case, "peak overlap", d, de, "m", 0.01),
-            Record(case, "contact time", tc, te, "s", 0.01),
+            Record(case, "peak force", f, expected[0], "N", 0.01),
+            Record(case, "peak overlap", d, expected[1], "m", 0.01),
+            Record(case, "contact time", tc, expected[2], "s", 0.01),
         ]
     return out
+
+
+def case_chung_ooi_1(device: str = "cpu") -> list[Record]:
+    """Test 1: two identical spheres, normal elastic impact at +-10 m/s (glass, limestone)."""
+    glass = Material("glass", density=2800.0, youngs_modulus=48e9, poisson_ratio=0.20)
+    limestone = Material("limestone", density=2500.0, youngs_modulus=20e9, poisson_ratio=0.25)
+    return _normal_impacts(
+        device, "Chung-Ooi 1", (glass, limestone), 0.01, 10.0, wall=False, static_friction=0.35, dt_fraction=0.02
+    )
 
 
 def case_chung_ooi_2(device: str = "cpu") -> list[Record]:
     """Test 2: sphere (R = 0.1 m) on a rigid plane at 0.2 m/s (Al alloy, Mg alloy)."""
-    out = []
-    for label, E, nu, rho in (("Al alloy", 70e9, 0.30, 2699.0), ("Mg alloy", 40e9, 0.35, 1800.0)):
-        mat = Material(label, density=rho, youngs_modulus=E, poisson_ratio=nu)
-        R, v = 0.1, 0.2
-        b = _two_body_scene(mat, wall=True)
-        b.set_interaction(label, "rigid", restitution=1.0, static_friction=0.0)
-        b.add_plane((0, 0, 0), (0, 0, 1), "rigid")
-        b.add_sphere((0, 0, R + 1e-6), R, label, velocity=(0, 0, -v))
-        model = b.finalize(device)
-        solver = Solver(model, SolverOptions(dt_fraction=0.005))
-        f, d, tc, _ = _run_contact(solver, model.state(), solver.contacts(), lambda x: R - x[0, 2], 20000)
-        e_star = E / (1 - nu * nu)
-        fe, de, te = hertz_expected(e_star, R, rho * 4 / 3 * math.pi * R**3, v)
-        case = f"Chung-Ooi 2 {label}"
-        out += [
-            Record(case, "peak force", f, fe, "N", 0.01),
-            Record(case, "peak overlap", d, de, "m", 0.01),
-            Record(case, "contact time", tc, te, "s", 0.01),
-        ]
-    return out
+    al = Material("Al alloy", density=2699.0, youngs_modulus=70e9, poisson_ratio=0.30)
+    mg = Material("Mg alloy", density=1800.0, youngs_modulus=40e9, poisson_ratio=0.35)
+    return _normal_impacts(device, "Chung-Ooi 2", (al, mg), 0.1, 0.2, wall=True, static_friction=0.0, dt_fraction=0.005)
 
 
 def case_chung_ooi_3(device: str = "cpu") -> list[Record]:
@@ -130,7 +139,6 @@ def case_chung_ooi_3(device: str = "cpu") -> list[Record]:
     R, v = 0.0025, 3.9
     es = (0.1, 0.3, 0.5, 0.7, 0.9)
     b = _two_body_scene(mat, wall=True)
-    b.add_plane((0, 0, 0), (0, 0, 1), "rigid")
     b.add_sphere((0, 0, R + 1e-6), R, "alumina", velocity=(0, 0, -v))
     # one world per restitution: the sweep is one batched launch
     b.replicate(len(es))
@@ -157,9 +165,7 @@ def case_chung_ooi_4(device: str = "cpu") -> list[Record]:
     mat = Material("alumina", density=4000.0, youngs_modulus=380e9, poisson_ratio=0.23)
     R, v, mu, e = 0.0025, 3.9, 0.092, 0.98
     angles = (40.0, 50.0, 60.0, 70.0, 80.0)
-    b = _two_body_scene(mat, wall=True)
-    b.set_interaction("alumina", "rigid", restitution=e, static_friction=mu)
-    b.add_plane((0, 0, 0), (0, 0, 1), "rigid")
+    b = _two_body_scene(mat, wall=True, restitution=e, static_friction=mu)
     b.add_sphere((0, 0, R + 1e-6), R, "alumina")
     b.replicate(len(angles))
     model = b.finalize(device)
@@ -452,6 +458,9 @@ CASES = {
     "elastic_bounce": case_elastic_bounce,
     "mesh_vs_plane": case_mesh_vs_plane,
     "batch_invariance": case_batch_invariance,
+    # the cases of the other capabilities live beside this module
+    **BODY_CASES,
+    **COHESION_CASES,
 }
 
 
@@ -463,12 +472,3 @@ def run_all(device: str = "cpu", only: list[str] | None = None) -> list[Record]:
             continue
         records += fn(device)
     return records
-
-
-# cases of the other capabilities live beside this module; they import Record from here
-from .bodies import BODY_CASES  # noqa: E402
-
-CASES.update(BODY_CASES)
-from .cohesion import COHESION_CASES  # noqa: E402
-
-CASES.update(COHESION_CASES)

@@ -257,28 +257,11 @@ def case_cohesive_stress(device: str = "cpu", steps: int = 100_000) -> list[Reco
     b = ModelBuilder()
     b.add_material(Material("ore", density=2000.0, youngs_modulus=5e6, poisson_ratio=0.3))
     b.add_material(Material("steel", density=7800.0, youngs_modulus=2e11, poisson_ratio=0.3))
+    sticky = dict(restitution=0.1, rolling_friction=0.1, rolling_model="EPSD", surface_energy=5.0)
     b.set_interaction(
-        "ore",
-        "ore",
-        restitution=0.1,
-        static_friction=0.6,
-        rolling_friction=0.1,
-        rolling_model="EPSD",
-        law="EEPA",
-        surface_energy=5.0,
-        pull_off_force=-1e-4,
-        plasticity_ratio=0.6,
+        "ore", "ore", static_friction=0.6, law="EEPA", pull_off_force=-1e-4, plasticity_ratio=0.6, **sticky
     )
-    b.set_interaction(
-        "ore",
-        "steel",
-        restitution=0.1,
-        static_friction=0.5,
-        rolling_friction=0.1,
-        rolling_model="EPSD",
-        law="JKR",
-        surface_energy=5.0,
-    )
+    b.set_interaction("ore", "steel", static_friction=0.5, law="JKR", **sticky)
     b.add_plane((0, 0, 0), (0, 0, 1), "steel")
     for axis in (0, 1):
         for side in (-1.0, 1.0):
