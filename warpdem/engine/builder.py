@@ -11,6 +11,7 @@ import warp as wp
 from warpdem.kernels.params import PairParams
 
 from . import analytic
+from .checks import vec3
 from .materials import Interaction, InteractionTable, Material, pair_table
 from .motion import WallMotion
 from .types import ContactLaw, Model
@@ -35,13 +36,6 @@ INTERACTION_SCALARS = (
 """Interaction fields that :meth:`ModelBuilder.vary` can set per world."""
 
 
-def _vec3(value, where: str, name: str) -> np.ndarray:
-    a = np.asarray(value, dtype=np.float64).reshape(-1)
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"{where}: {name} = {value!r} is not allowed; expected three finite numbers")
-    return a
-
-
 class ModelBuilder:
     """Collects materials, spheres and walls of one world, then replicates and finalises.
 
@@ -56,7 +50,7 @@ class ModelBuilder:
     """
 
     def __init__(self, gravity=(0.0, 0.0, -9.81)):
-        self.gravity = _vec3(gravity, "ModelBuilder", "gravity")
+        self.gravity = np.array(vec3("ModelBuilder", "gravity", gravity))
         self.materials: list[Material] = []
         self.interactions = InteractionTable()
         self._x, self._r, self._mat, self._v, self._w = [], [], [], [], []
@@ -427,8 +421,8 @@ class ModelBuilder:
 
     def add_plane(self, point, normal, material, world: int = -1) -> int:
         """Add an infinite plane through ``point`` [m] whose ``normal`` points to the particle side."""
-        p = _vec3(point, "add_plane", "point")
-        nrm = _vec3(normal, "add_plane", "normal")
+        p = np.array(vec3("add_plane", "point", point))
+        nrm = np.array(vec3("add_plane", "normal", normal))
         length = np.linalg.norm(nrm)
         if length == 0:
             raise ValueError("add_plane: normal = (0, 0, 0) is not allowed; expected a non-zero vector")
@@ -469,7 +463,7 @@ class ModelBuilder:
         """Simulation domain: the box from ``low`` to ``high`` ((x, y, z) [m]), the same in every world. A body
         (clump or free sphere) whose centre leaves it is removed at the next list rebuild and counted in
         ``State.world_removed``. Without a domain nothing is removed."""
-        lo, hi = _vec3(low, "set_domain", "low"), _vec3(high, "set_domain", "high")
+        lo, hi = np.array(vec3("set_domain", "low", low)), np.array(vec3("set_domain", "high", high))
         if not np.all(lo < hi):
             raise ValueError(
                 f"set_domain: low = {tuple(lo.tolist())} and high = {tuple(hi.tolist())} are not "

@@ -10,24 +10,14 @@ dense per-world device arrays by :func:`pair_table`.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from .checks import check, check_number, enum_value
 from .types import ContactLaw, RollingModel
-
-
-def _check(cond: bool, where: str, field_name: str, value, allowed: str) -> None:
-    if not cond:
-        raise ValueError(f"{where}: {field_name} = {value!r} is not allowed; expected {allowed}")
-
-
-def _finite(x) -> bool:
-    try:
-        return math.isfinite(float(x))
-    except (TypeError, ValueError):
-        return False
 
 
 @dataclass(frozen=True)
@@ -53,38 +43,19 @@ class Material:
 
     def __post_init__(self):
         where = f"Material {self.name!r}"
-        _check(isinstance(self.name, str) and self.name != "", where, "name", self.name, "a non-empty string")
-        _check(_finite(self.density) and self.density > 0, where, "density", self.density, "a density > 0 kg/m^3")
-        _check(
-            _finite(self.poisson_ratio) and -1.0 < self.poisson_ratio < 0.5,
-            where,
-            "poisson_ratio",
-            self.poisson_ratio,
-            "a value in (-1, 0.5)",
-        )
+        check(isinstance(self.name, str) and self.name != "", where, "name", self.name, "a non-empty string")
+        check_number(where, "density", self.density, lambda v: v > 0, "a density > 0 kg/m^3")
+        check_number(where, "poisson_ratio", self.poisson_ratio, lambda v: -1.0 < v < 0.5, "a value in (-1, 0.5)")
         if self.youngs_modulus is None and self.shear_modulus is None:
             raise ValueError(f"{where}: give youngs_modulus or shear_modulus (neither was given)")
         nu = float(self.poisson_ratio)
-        if self.youngs_modulus is not None:
-            _check(
-                _finite(self.youngs_modulus) and self.youngs_modulus > 0,
-                where,
-                "youngs_modulus",
-                self.youngs_modulus,
-                "a modulus > 0 Pa",
-            )
-        if self.shear_modulus is not None:
-            _check(
-                _finite(self.shear_modulus) and self.shear_modulus > 0,
-                where,
-                "shear_modulus",
-                self.shear_modulus,
-                "a modulus > 0 Pa",
-            )
+        for name in ("youngs_modulus", "shear_modulus"):
+            if getattr(self, name) is not None:
+                check_number(where, name, getattr(self, name), lambda v: v > 0, "a modulus > 0 Pa")
         if self.youngs_modulus is not None and self.shear_modulus is not None:
             e, g = float(self.youngs_modulus), float(self.shear_modulus)
             if nu >= 0.0:
-                _check(
+                check(
                     g <= 0.5 * e * (1 + 1e-9),
                     where,
                     "shear_modulus",
@@ -92,7 +63,7 @@ class Material:
                     f"at most E/2 = {0.5 * e:.6g} Pa for a non-negative Poisson's ratio",
                 )
             implied = 0.5 * e / (1.0 + nu)
-            _check(
+            check(
                 abs(g - implied) <= 0.01 * implied,
                 where,
                 "shear_modulus",
@@ -117,6 +88,26 @@ class Material:
         return math.pi * radius * math.sqrt(self.density / self.G) / (0.1631 * self.poisson_ratio + 0.8766)
 
 
+_ENUM_ALIASES = {
+    "A": "CONSTANT_TORQUE",
+    "TYPE_A": "CONSTANT_TORQUE",
+    "STANDARD": "CONSTANT_TORQUE",
+    "C": "EPSD",
+    "TYPE_C": "EPSD",
+    "HM": "HERTZ_MINDLIN",
+    "HM_JKR": "JKR",
+    "HERTZ_MINDLIN_JKR": "JKR",
+    "HERTZ_MINDLIN_WITH_JKR": "JKR",
+}
+"""EDEM's names of the rolling models and contact laws (upper case, ``_`` for spaces) -> member names."""
+
+
+def _param(default: float, ok, allowed: str):
+    """A numeric contact parameter: its default, the test ``ok(value)`` a value must pass and the words for
+    what passes (an Interaction checks every such field, so a new parameter brings its own check)."""
+    return field(default=default, metadata={"ok": ok, "allowed": allowed})
+
+
 @dataclass(frozen=True)
 class Interaction:
     """Contact parameters of a pair of materials (EDEM's "interaction").
@@ -137,124 +128,37 @@ class Interaction:
         tangential_stiffness_multiplier: EEPA k_t factor [-], > 0.
     """
 
-    restitution: float = 0.5
-    static_friction: float = 0.5
-    rolling_friction: float = 0.0
+    restitution: float = _param(0.5, lambda v: 0.0 < v <= 1.0, "a coefficient of restitution in (0, 1]")
+    static_friction: float = _param(0.5, lambda v: v >= 0.0, "a friction coefficient >= 0")
+    rolling_friction: float = _param(0.0, lambda v: v >= 0.0, "a rolling friction coefficient >= 0")
     rolling_model: RollingModel = RollingModel.CONSTANT_TORQUE
-    rolling_damping: float = 0.3
+    rolling_damping: float = _param(0.3, lambda v: v >= 0.0, "a damping ratio >= 0")
     law: ContactLaw = ContactLaw.HERTZ_MINDLIN
-    surface_energy: float = 0.0
-    pull_off_force: float = 0.0
-    slope_exponent: float = 1.5
-    plasticity_ratio: float = 0.5
-    tensile_exponent: float = 1.5
-    tangential_stiffness_multiplier: float = 1.0
+    surface_energy: float = _param(0.0, lambda v: v >= 0.0, "a surface energy >= 0 J/m^2")
+    pull_off_force: float = _param(0.0, lambda v: v <= 0.0, "a constant pull-off force <= 0 N (attractive)")
+    slope_exponent: float = _param(1.5, lambda v: 1.0 <= v <= 2.0, "an exponent in [1, 2]")
+    plasticity_ratio: float = _param(0.5, lambda v: 0.0 <= v < 1.0, "a ratio in [0, 1)")
+    tensile_exponent: float = _param(1.5, lambda v: 0.0 < v <= 3.0, "an exponent in (0, 3]")
+    tangential_stiffness_multiplier: float = _param(1.0, lambda v: v > 0.0, "a factor > 0")
 
     def __post_init__(self):
         where = "Interaction"
-        _check(
-            _finite(self.restitution) and 0.0 < self.restitution <= 1.0,
-            where,
-            "restitution",
-            self.restitution,
-            "a coefficient of restitution in (0, 1]",
-        )
-        _check(
-            _finite(self.static_friction) and self.static_friction >= 0.0,
-            where,
-            "static_friction",
-            self.static_friction,
-            "a friction coefficient >= 0",
-        )
-        _check(
-            _finite(self.rolling_friction) and self.rolling_friction >= 0.0,
-            where,
-            "rolling_friction",
-            self.rolling_friction,
-            "a rolling friction coefficient >= 0",
-        )
-        _check(
-            _finite(self.rolling_damping) and self.rolling_damping >= 0.0,
-            where,
-            "rolling_damping",
-            self.rolling_damping,
-            "a damping ratio >= 0",
-        )
-        _check(
-            _finite(self.surface_energy) and self.surface_energy >= 0.0,
-            where,
-            "surface_energy",
-            self.surface_energy,
-            "a surface energy >= 0 J/m^2",
-        )
-        _check(
-            _finite(self.pull_off_force) and self.pull_off_force <= 0.0,
-            where,
-            "pull_off_force",
-            self.pull_off_force,
-            "a constant pull-off force <= 0 N (attractive)",
-        )
-        _check(
-            _finite(self.slope_exponent) and 1.0 <= self.slope_exponent <= 2.0,
-            where,
-            "slope_exponent",
-            self.slope_exponent,
-            "an exponent in [1, 2]",
-        )
-        _check(
-            _finite(self.plasticity_ratio) and 0.0 <= self.plasticity_ratio < 1.0,
-            where,
-            "plasticity_ratio",
-            self.plasticity_ratio,
-            "a ratio in [0, 1)",
-        )
-        _check(
-            _finite(self.tensile_exponent) and 0.0 < self.tensile_exponent <= 3.0,
-            where,
-            "tensile_exponent",
-            self.tensile_exponent,
-            "an exponent in (0, 3]",
-        )
-        _check(
-            _finite(self.tangential_stiffness_multiplier) and self.tangential_stiffness_multiplier > 0.0,
-            where,
-            "tangential_stiffness_multiplier",
-            self.tangential_stiffness_multiplier,
-            "a factor > 0",
-        )
-        object.__setattr__(self, "rolling_model", _enum(RollingModel, self.rolling_model, where, "rolling_model"))
-        object.__setattr__(self, "law", _enum(ContactLaw, self.law, where, "law"))
-        _check(self.law != ContactLaw.NONE, where, "law", self.law, "a contact law other than NONE")
+        enums = []
+        for f in dataclasses.fields(self):
+            if isinstance(f.default, enum.Enum):
+                enums.append(f)
+            else:
+                check_number(where, f.name, getattr(self, f.name), f.metadata["ok"], f.metadata["allowed"])
+        for f in enums:
+            value = enum_value(type(f.default), where, f.name, getattr(self, f.name), _ENUM_ALIASES)
+            object.__setattr__(self, f.name, value)
+        check(self.law != ContactLaw.NONE, where, "law", self.law, "a contact law other than NONE")
 
     @property
     def beta(self) -> float:
         """Damping factor beta = ln e / sqrt(ln^2 e + pi^2) (0 for e = 1)."""
         le = math.log(self.restitution)
         return le / math.sqrt(le * le + math.pi * math.pi)
-
-
-def _enum(cls, value, where, name):
-    if isinstance(value, cls):
-        return value
-    if isinstance(value, str):
-        key = value.strip().upper().replace("-", "_").replace(" ", "_")
-        aliases = {
-            "A": "CONSTANT_TORQUE",
-            "TYPE_A": "CONSTANT_TORQUE",
-            "STANDARD": "CONSTANT_TORQUE",
-            "C": "EPSD",
-            "TYPE_C": "EPSD",
-            "HM": "HERTZ_MINDLIN",
-            "HM_JKR": "JKR",
-            "HERTZ_MINDLIN_JKR": "JKR",
-            "HERTZ_MINDLIN_WITH_JKR": "JKR",
-        }
-        key = aliases.get(key, key)
-        if key in cls.__members__:
-            return cls[key]
-    elif isinstance(value, (int, np.integer)) and int(value) in {m.value for m in cls}:
-        return cls(int(value))
-    raise ValueError(f"{where}: {name} = {value!r} is not allowed; expected one of {', '.join(cls.__members__)}")
 
 
 @dataclass

@@ -43,21 +43,12 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from warpdem.engine.checks import fail, is_finite, readonly
+
 __all__ = ["ResultWriter", "ShapeGeometry", "WallGeometry", "expand_clumps", "quat_to_matrix", "side_view_png"]
 
 
 # -- validation helpers -----------------------------------------------------------------------------------------
-
-
-def _short(a) -> str:
-    """A compact repr for error messages (arrays can be long)."""
-    if isinstance(a, np.ndarray):
-        return np.array2string(a, precision=6, threshold=12, separator=", ")
-    return repr(a)
-
-
-def _fail(where: str, name: str, value, allowed: str):
-    raise ValueError(f"{where}: {name} = {_short(value)} is not allowed; expected {allowed}")
 
 
 def _shape_ok(shape: tuple, want: tuple) -> bool:
@@ -71,18 +62,18 @@ def _floats(
     try:
         a = np.array(value, dtype=np.float64)
     except (TypeError, ValueError):
-        _fail(where, name, value, allowed)
+        fail(where, name, value, allowed)
     if not _shape_ok(a.shape, want):
-        _fail(where, f"{name}.shape", a.shape, allowed)
+        fail(where, f"{name}.shape", a.shape, allowed)
     bad = ~np.isfinite(a)
     if positive:
         bad |= ~(a > 0)
     if bad.any():
         what = ("finite values > 0" if positive else "finite values") + (f" in {unit}" if unit else "")
         if a.ndim == 0:
-            _fail(where, name, a, what)
+            fail(where, name, a, what)
         i = int(np.flatnonzero(bad.reshape(a.shape[0], -1).any(axis=1))[0])
-        _fail(where, f"{name}[{i}]", a[i], what)
+        fail(where, f"{name}[{i}]", a[i], what)
     return a
 
 
@@ -92,10 +83,10 @@ def _ints(
     """``value`` as an int64 array of shape ``want``, entries in [lo, hi) where given."""
     a = np.asarray(value)
     if a.dtype.kind not in "iu" and not (a.size == 0 and a.dtype.kind == "f"):
-        _fail(where, f"{name}.dtype", a.dtype, f"an integer array, {allowed}")
+        fail(where, f"{name}.dtype", a.dtype, f"an integer array, {allowed}")
     a = a.astype(np.int64)
     if not _shape_ok(a.shape, want):
-        _fail(where, f"{name}.shape", a.shape, allowed)
+        fail(where, f"{name}.shape", a.shape, allowed)
     bad = np.zeros(a.shape, bool)
     if lo is not None:
         bad |= a < lo
@@ -104,9 +95,9 @@ def _ints(
     if bad.any():
         rng = f"integers in [{lo}, {hi})" if hi is not None else f"integers >= {lo}"
         if a.ndim == 0:
-            _fail(where, name, int(a), rng)
+            fail(where, name, int(a), rng)
         i = int(np.flatnonzero(bad.reshape(a.shape[0], -1).any(axis=1))[0])
-        _fail(where, f"{name}[{i}]", a[i] if a.ndim > 1 else int(a[i]), rng)
+        fail(where, f"{name}[{i}]", a[i] if a.ndim > 1 else int(a[i]), rng)
     return a
 
 
@@ -116,14 +107,8 @@ def _quats(value, where: str, name: str, k: int, allowed: str) -> np.ndarray:
     norm = np.linalg.norm(q, axis=1)
     bad = np.flatnonzero(~(norm > 1e-12))
     if bad.size:
-        _fail(where, f"{name}[{bad[0]}]", q[bad[0]], "a non-zero quaternion (x, y, z, w)")
+        fail(where, f"{name}[{bad[0]}]", q[bad[0]], "a non-zero quaternion (x, y, z, w)")
     return q / norm[:, None]
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a = np.ascontiguousarray(a)
-    a.setflags(write=False)
-    return a
 
 
 _IDENT_BAD = re.compile(r"[^A-Za-z0-9_]")
@@ -165,12 +150,12 @@ class WallGeometry:
     def __post_init__(self):
         where = f"WallGeometry {self.name!r}"
         if not isinstance(self.name, str) or not self.name:
-            _fail(where, "name", self.name, "a non-empty string")
+            fail(where, "name", self.name, "a non-empty string")
         v = _floats(
             self.vertices, where, "vertices", (None, 3), "an (V, 3) array of vertex positions in m, V >= 3", unit="m"
         )
         if v.shape[0] < 3:
-            _fail(where, "vertices.shape", v.shape, "(V, 3) with V >= 3")
+            fail(where, "vertices.shape", v.shape, "(V, 3) with V >= 3")
         t = _ints(
             self.triangles,
             where,
@@ -181,9 +166,9 @@ class WallGeometry:
             len(v),
         )
         if t.shape[0] < 1:
-            _fail(where, "triangles.shape", t.shape, "(F, 3) with F >= 1")
-        object.__setattr__(self, "vertices", _readonly(v))
-        object.__setattr__(self, "triangles", _readonly(t))
+            fail(where, "triangles.shape", t.shape, "(F, 3) with F >= 1")
+        object.__setattr__(self, "vertices", readonly(v))
+        object.__setattr__(self, "triangles", readonly(t))
 
     @property
     def face_count(self) -> int:
@@ -207,12 +192,12 @@ class ShapeGeometry:
     def __post_init__(self):
         where = f"ShapeGeometry {self.name!r}"
         if not isinstance(self.name, str) or not self.name:
-            _fail(where, "name", self.name, "a non-empty string")
+            fail(where, "name", self.name, "a non-empty string")
         c = _floats(
             self.sphere_offset, where, "sphere_offset", (None, 3), "an (s, 3) array of offsets in m, s >= 1", unit="m"
         )
         if c.shape[0] < 1:
-            _fail(where, "sphere_offset.shape", c.shape, "(s, 3) with s >= 1")
+            fail(where, "sphere_offset.shape", c.shape, "(s, 3) with s >= 1")
         r = _floats(
             self.sphere_radius,
             where,
@@ -222,8 +207,8 @@ class ShapeGeometry:
             positive=True,
             unit="m",
         )
-        object.__setattr__(self, "sphere_offset", _readonly(c))
-        object.__setattr__(self, "sphere_radius", _readonly(r))
+        object.__setattr__(self, "sphere_offset", readonly(c))
+        object.__setattr__(self, "sphere_radius", readonly(r))
 
     @classmethod
     def from_template(cls, template) -> ShapeGeometry:
@@ -273,10 +258,10 @@ def _shape_list(shapes, where: str) -> list:
     try:
         shapes = list(shapes)
     except TypeError:
-        _fail(where, "shapes", shapes, "a list of ShapeGeometry")
+        fail(where, "shapes", shapes, "a list of ShapeGeometry")
     for i, sh in enumerate(shapes):
         if not (hasattr(sh, "sphere_offset") and hasattr(sh, "sphere_radius")):
-            _fail(where, f"shapes[{i}]", sh, "a ShapeGeometry (or ClumpTemplate)")
+            fail(where, f"shapes[{i}]", sh, "a ShapeGeometry (or ClumpTemplate)")
     return shapes
 
 
@@ -376,10 +361,10 @@ class ResultWriter:
         try:
             walls = list(walls)
         except TypeError:
-            _fail(where, "walls", walls, "a list of WallGeometry")
+            fail(where, "walls", walls, "a list of WallGeometry")
         for i, wall in enumerate(walls):
             if not isinstance(wall, WallGeometry):
-                _fail(where, f"walls[{i}]", wall, "a WallGeometry")
+                fail(where, f"walls[{i}]", wall, "a WallGeometry")
         shapes = _shape_list(shapes, where)
         shapes = [sh if isinstance(sh, ShapeGeometry) else ShapeGeometry.from_template(sh) for sh in shapes]
         if (
@@ -387,15 +372,15 @@ class ResultWriter:
             or os.path.basename(usd_name) != usd_name
             or os.path.splitext(usd_name)[1].lower() not in (".usd", ".usdc", ".usda")
         ):
-            _fail(where, "usd_name", usd_name, "a file name (no directory) ending in .usdc, .usd or .usda")
-        if frames_per_second is not None and not (_finite(frames_per_second) and frames_per_second > 0):
-            _fail(where, "frames_per_second", frames_per_second, "None or a rate > 0 per second")
+            fail(where, "usd_name", usd_name, "a file name (no directory) ending in .usdc, .usd or .usda")
+        if frames_per_second is not None and not (is_finite(frames_per_second) and frames_per_second > 0):
+            fail(where, "frames_per_second", frames_per_second, "None or a rate > 0 per second")
         if not isinstance(up_axis, str) or up_axis.upper() not in ("Y", "Z"):
-            _fail(where, "up_axis", up_axis, '"Z" or "Y"')
-        if not (_finite(meters_per_unit) and meters_per_unit > 0):
-            _fail(where, "meters_per_unit", meters_per_unit, "a length > 0 m")
+            fail(where, "up_axis", up_axis, '"Z" or "Y"')
+        if not (is_finite(meters_per_unit) and meters_per_unit > 0):
+            fail(where, "meters_per_unit", meters_per_unit, "a length > 0 m")
         if isinstance(flush_every, bool) or not isinstance(flush_every, (int, np.integer)) or flush_every < 0:
-            _fail(where, "flush_every", flush_every, "an integer >= 0 (0: save only at close)")
+            fail(where, "flush_every", flush_every, "an integer >= 0 (0: save only at close)")
 
         from pxr import Sdf, Usd, UsdGeom  # here, not at module level: pictures and expand_clumps need no pxr
 
@@ -414,7 +399,7 @@ class ResultWriter:
         self._result: dict | None = None
 
         if Sdf.Layer.Find(str(self.usd_path)):
-            _fail(
+            fail(
                 where,
                 "usd_name",
                 usd_name,
@@ -611,17 +596,17 @@ class ResultWriter:
     ) -> dict:
         """Every input checked (and converted) before anything is written, so a bad frame leaves no trace."""
         where = "ResultWriter.add_frame"
-        if not _finite(time):
-            _fail(where, "time", time, "a finite time in s")
+        if not is_finite(time):
+            fail(where, "time", time, "a finite time in s")
         time = float(time)
         if self._times and not time > self._times[-1]:
-            _fail(where, "time", time, f"a time > {self._times[-1]!r} s (the previous frame's)")
+            fail(where, "time", time, f"a time > {self._times[-1]!r} s (the previous frame's)")
 
         group = {"sphere_x": sphere_x, "sphere_r": sphere_r, "sphere_id": sphere_id}
         given = [k for k, v in group.items() if v is not None]
         if given and len(given) < 3:
             missing = [k for k in group if k not in given][0]
-            _fail(
+            fail(
                 where,
                 missing,
                 None,
@@ -653,7 +638,7 @@ class ResultWriter:
         given = [k for k, v in group.items() if v is not None]
         if given and len(given) < 4:
             missing = [k for k in group if k not in given][0]
-            _fail(
+            fail(
                 where,
                 missing,
                 None,
@@ -666,7 +651,7 @@ class ResultWriter:
             cid = _ints(clump_id, where, "clump_id", (k,), f"({k},): one id per row of clump_x (shape {cx.shape})")
         else:
             if clump_scale is not None and np.size(clump_scale) != 0:
-                _fail(where, "clump_scale", clump_scale, "None when clump_x is None")
+                fail(where, "clump_scale", clump_scale, "None when clump_x is None")
             k = 0
             cx, cq, cs = np.zeros((0, 3)), np.zeros((0, 4)), np.zeros(0, np.int64)
             cscale, cid = np.zeros(0), np.zeros(0, np.int64)
@@ -712,7 +697,7 @@ class ResultWriter:
         if isinstance(value, np.ndarray) and value.dtype != object:
             value = list(value) if value.ndim == 2 else [value]
         if not isinstance(value, (list, tuple)) or len(value) != w:
-            _fail(where, name, value, f"None or a list of {w} arrays, one per wall")
+            fail(where, name, value, f"None or a list of {w} arrays, one per wall")
         out = []
         for i, (a, wall) in enumerate(zip(value, self.walls)):
             fw = wall.face_count
@@ -912,13 +897,6 @@ class ResultWriter:
         self.close()
 
 
-def _finite(x) -> bool:
-    try:
-        return math.isfinite(float(x))
-    except (TypeError, ValueError):
-        return False
-
-
 # -- pictures ---------------------------------------------------------------------------------------------------
 
 # axis -> (horizontal, vertical, sign): screen right x screen up points at the viewer, so no picture is
@@ -1003,7 +981,7 @@ def side_view_png(
     """
     where = "side_view_png"
     if axis not in _VIEWS:
-        _fail(where, "axis", axis, '"x", "y" or "z"')
+        fail(where, "axis", axis, '"x", "y" or "z"')
     x = _floats(sphere_x, where, "sphere_x", (None, 3), "an (n, 3) array of sphere centres in m")
     n = x.shape[0]
     r = _floats(
@@ -1015,10 +993,10 @@ def side_view_png(
     walls = []
     if walls_world is not None:
         if not isinstance(walls_world, (list, tuple)):
-            _fail(where, "walls_world", walls_world, "None or a list of (vertices (V, 3), triangles (F, 3))")
+            fail(where, "walls_world", walls_world, "None or a list of (vertices (V, 3), triangles (F, 3))")
         for i, item in enumerate(walls_world):
             if not isinstance(item, (list, tuple)) or len(item) != 2:
-                _fail(where, f"walls_world[{i}]", item, "a pair (vertices (V, 3), triangles (F, 3))")
+                fail(where, f"walls_world[{i}]", item, "a pair (vertices (V, 3), triangles (F, 3))")
             v = _floats(item[0], where, f"walls_world[{i}][0]", (None, 3), "a (V, 3) array of vertices in m")
             t = _ints(
                 item[1],
@@ -1031,7 +1009,7 @@ def side_view_png(
             )
             walls.append((v, t))
     if not isinstance(dpi, (int, np.integer)) or isinstance(dpi, bool) or not 10 <= dpi <= 2000:
-        _fail(where, "dpi", dpi, "an integer in [10, 2000]")
+        fail(where, "dpi", dpi, "an integer in [10, 2000]")
 
     import matplotlib
 

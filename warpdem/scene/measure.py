@@ -28,6 +28,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from warpdem.engine.checks import fail, finite_number
+
 __all__ = [
     "SettleMonitor",
     "angle_cone",
@@ -66,12 +68,7 @@ _LATTICE_TURN = math.atan(1.0 / ((1.0 + math.sqrt(5.0)) / 2.0) ** 2)
 
 
 def _bad(name: str, value, allowed: str):
-    raise ValueError(f"{name} = {value!r} is not allowed; expected {allowed}")
-
-
-def _short(a: np.ndarray) -> str:
-    """A short description of an array for error messages (the array itself may be huge)."""
-    return f"array of shape {a.shape}"
+    fail("", name, value, allowed)
 
 
 def _int_at_least(name: str, value, low: int) -> int:
@@ -86,29 +83,27 @@ def _positive(name: str, value, unit: str) -> float:
     return float(value)
 
 
-def _finite(name: str, value, unit: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        _bad(name, value, f"a finite number {unit}".rstrip())
-    return float(value)
+def _finite_number(name: str, value, unit: str) -> float:
+    return finite_number("", name, value, f"a finite number {unit}".rstrip())
 
 
 def _spheres(x, r) -> tuple[np.ndarray, np.ndarray]:
     x = np.asarray(x, dtype=float)
     r = np.asarray(r, dtype=float)
     if x.ndim != 2 or x.shape[1] != 3 or x.shape[0] == 0:
-        _bad("x", _short(x), "sphere centres [m] of shape (n, 3) with n >= 1")
+        _bad("x", x, "sphere centres [m] of shape (n, 3) with n >= 1")
     if r.shape != (x.shape[0],):
-        _bad("r", _short(r), f"radii [m] of shape ({x.shape[0]},), one per row of x")
+        _bad("r", r, f"radii [m] of shape ({x.shape[0]},), one per row of x")
     if not np.all(np.isfinite(x)):
-        _bad("x", _short(x), "finite coordinates (found NaN or inf)")
+        _bad("x", x, "finite coordinates (found NaN or inf)")
     if not np.all(np.isfinite(r) & (r > 0)):
-        _bad("r", _short(r), "finite radii > 0 m")
+        _bad("r", r, "finite radii > 0 m")
     return x, r
 
 
 def _zones(inner, outer) -> tuple[float, float]:
-    inner = _finite("inner", inner, "")
-    outer = _finite("outer", outer, "")
+    inner = _finite_number("inner", inner, "")
+    outer = _finite_number("outer", outer, "")
     if not 0 <= inner < 1:
         _bad("inner", inner, "a fraction of the pile extent in [0, 1)")
     if not inner < outer <= 1:
@@ -142,7 +137,7 @@ def _base_layer(x: np.ndarray, r: np.ndarray, base_z: float) -> np.ndarray:
     if not near.any():
         _bad(
             "x",
-            _short(x),
+            x,
             f"a pile with spheres on the base plane z = base_z = {base_z} m "
             f"(none has its centre within {BASE_LAYER_RADII} radii of it)",
         )
@@ -171,7 +166,7 @@ def pile_spheres(x, r, base_z: float = 0.0, gap: float = 0.1) -> np.ndarray:
     from scipy.spatial import cKDTree
 
     x, r = _spheres(x, r)
-    gap = _finite("gap", gap, "[-]")
+    gap = _finite_number("gap", gap, "[-]")
     n = len(r)
     pairs = cKDTree(x).query_pairs(2.0 * (1.0 + gap) * float(r.max()), output_type="ndarray")
     if len(pairs):
@@ -239,7 +234,7 @@ def angle_surface_fit(
     x, r = _spheres(x, r)
     slices = _int_at_least("slices", slices, 2)
     bins = _int_at_least("bins", bins, 3)
-    base_z = _finite("base_z", base_z, "m")
+    base_z = _finite_number("base_z", base_z, "m")
     inner, outer = _zones(inner, outer)
     cx, cy = _axis(x, r, center)
 
@@ -352,7 +347,7 @@ def angle_cone(x, r, base_z: float = 0.0, center=(0.0, 0.0), toe_correction: boo
         the angle in degrees.
     """
     x, r = _spheres(x, r)
-    base_z = _finite("base_z", base_z, "m")
+    base_z = _finite_number("base_z", base_z, "m")
     cx, cy = _axis(x, r, center)
     if not isinstance(toe_correction, (bool, np.bool_)):
         _bad("toe_correction", toe_correction, "True or False")
@@ -363,7 +358,7 @@ def angle_cone(x, r, base_z: float = 0.0, center=(0.0, 0.0), toe_correction: boo
         rb = float(np.percentile(rho, BASE_PERCENTILE))
         hb = h - 2.0 * float(r[base].mean())
         if rb <= 0 or hb <= 0:
-            _bad("x", _short(x), "a pile wider and higher than its bottom layer for toe_correction=True")
+            _bad("x", x, "a pile wider and higher than its bottom layer for toe_correction=True")
         return math.degrees(math.atan2(hb, rb))
     d = 2.0 * float(np.percentile(rho + r[base], BASE_PERCENTILE))
     return math.degrees(math.atan2(2.0 * h, d))
@@ -393,8 +388,8 @@ def silhouette(
         and ``center``.
     """
     x, r = _spheres(x, r)
-    az = _finite("azimuth_deg", azimuth_deg, "deg")
-    base_z = _finite("base_z", base_z, "m")
+    az = _finite_number("azimuth_deg", azimuth_deg, "deg")
+    base_z = _finite_number("base_z", base_z, "m")
     p = float(r.min()) / 4.0 if pixel is None else _positive("pixel", pixel, "m")
     cx, cy = _axis(x, r, center)
     t = math.radians(az)
@@ -493,7 +488,7 @@ def angle_image(
     """
     x, r = _spheres(x, r)
     views = _int_at_least("views", views, 1)
-    base_z = _finite("base_z", base_z, "m")
+    base_z = _finite_number("base_z", base_z, "m")
     inner, outer = _zones(inner, outer)
     p = float(r.min()) / 4.0 if pixel is None else _positive("pixel", pixel, "m")
     cx, cy = _axis(x, r, center)
@@ -581,15 +576,15 @@ def synthetic_cone(
     Returns:
         (x, r): centres [m], shape (n, 3), and radii [m], shape (n,).
     """
-    a = _finite("angle_deg", angle_deg, "deg")
+    a = _finite_number("angle_deg", angle_deg, "deg")
     if not 0 < a < 90:
         _bad("angle_deg", angle_deg, "a slope in (0, 90) deg")
     big_r = _positive("base_radius", base_radius, "m")
     r0 = _positive("sphere_radius", sphere_radius, "m")
-    pd = _finite("polydispersity", polydispersity, "")
+    pd = _finite_number("polydispersity", polydispersity, "")
     if not 0 <= pd < 1:
         _bad("polydispersity", polydispersity, "a fraction in [0, 1)")
-    base_z = _finite("base_z", base_z, "m")
+    base_z = _finite_number("base_z", base_z, "m")
     if center is None:
         _bad("center", center, "(cx, cy) in m")
     cx, cy = _axis(np.zeros((1, 3)), np.ones(1), center)
@@ -646,18 +641,18 @@ def _press_arrays(piston_z, piston_force) -> tuple[np.ndarray, np.ndarray]:
     z = np.asarray(piston_z, dtype=float)
     f = np.asarray(piston_force, dtype=float)
     if z.ndim != 1 or z.size < 2:
-        _bad("piston_z", _short(z), "piston face heights [m] of shape (k,) with k >= 2")
+        _bad("piston_z", z, "piston face heights [m] of shape (k,) with k >= 2")
     if f.shape != z.shape:
-        _bad("piston_force", _short(f), f"axial forces [N] of shape {z.shape}, one per piston_z sample")
+        _bad("piston_force", f, f"axial forces [N] of shape {z.shape}, one per piston_z sample")
     if not np.all(np.isfinite(z)):
-        _bad("piston_z", _short(z), "finite heights (found NaN or inf)")
+        _bad("piston_z", z, "finite heights (found NaN or inf)")
     if not np.all(np.isfinite(f)):
-        _bad("piston_force", _short(f), "finite forces (found NaN or inf)")
+        _bad("piston_force", f, "finite forces (found NaN or inf)")
     # the stroke is a loading curve: an upward step means unloading or mixed-up samples
     tol = 1e-9 * max(float(np.ptp(z)), 1e-300)
     up = np.flatnonzero(np.diff(z) > tol)
     if up.size:
-        _bad("piston_z", _short(z), f"a monotonic downward stroke (it rises after sample {int(up[0])})")
+        _bad("piston_z", z, f"a monotonic downward stroke (it rises after sample {int(up[0])})")
     return z, f
 
 
@@ -678,11 +673,11 @@ def press_curve(piston_z, piston_force, contact_z: float | None = None) -> dict:
     if contact_z is None:
         fmax = float(f.max())
         if fmax <= 0:
-            _bad("piston_force", _short(f), "some positive force (the piston never touched the bed); or give contact_z")
+            _bad("piston_force", f, "some positive force (the piston never touched the bed); or give contact_z")
         i0 = int(np.argmax(f > 0.01 * fmax))
         zc = float(z[i0])
     else:
-        zc = _finite("contact_z", contact_z, "m")
+        zc = _finite_number("contact_z", contact_z, "m")
         below = np.flatnonzero(z <= zc)
         if below.size == 0:
             _bad("contact_z", contact_z, f"a height reached by the piston (lowest piston_z = {z.min():.6g} m)")
@@ -714,7 +709,7 @@ def press_summary(
     """
     z, f = _press_arrays(piston_z, piston_force)
     fill = _positive("fill_height", fill_height, "m")
-    backstop_z = _finite("backstop_z", backstop_z, "m")
+    backstop_z = _finite_number("backstop_z", backstop_z, "m")
     reached = False
     if force_limit is None:
         z_end, f_max = float(z.min()), float(f.max())
@@ -750,29 +745,29 @@ def press_summary(
 def _impact_arrays(face_count, face_energy, face_max_speed, face_area):
     c = np.asarray(face_count)
     if c.ndim != 1 or c.size == 0:
-        _bad("face_count", _short(c), "impact counts of shape (F,) with F >= 1")
+        _bad("face_count", c, "impact counts of shape (F,) with F >= 1")
     if not (
         np.issubdtype(c.dtype, np.integer)
         or (np.issubdtype(c.dtype, np.floating) and np.all(np.isfinite(c)) and np.all(c == np.round(c)))
     ):
-        _bad("face_count", _short(c), "whole-number impact counts")
+        _bad("face_count", c, "whole-number impact counts")
     c = c.astype(np.int64)
     if np.any(c < 0):
-        _bad("face_count", _short(c), "counts >= 0")
+        _bad("face_count", c, "counts >= 0")
     e = np.asarray(face_energy, dtype=float)
     v = np.asarray(face_max_speed, dtype=float)
     for name, a, unit in (("face_energy", e, "J"), ("face_max_speed", v, "m/s")):
         if a.shape != c.shape:
-            _bad(name, _short(a), f"shape {c.shape} like face_count")
+            _bad(name, a, f"shape {c.shape} like face_count")
         if not np.all(np.isfinite(a) & (a >= 0)):
-            _bad(name, _short(a), f"finite values >= 0 {unit}")
+            _bad(name, a, f"finite values >= 0 {unit}")
     area = None
     if face_area is not None:
         area = np.asarray(face_area, dtype=float)
         if area.shape != c.shape:
-            _bad("face_area", _short(area), f"shape {c.shape} like face_count")
+            _bad("face_area", area, f"shape {c.shape} like face_count")
         if not np.all(np.isfinite(area) & (area > 0)):
-            _bad("face_area", _short(area), "finite face areas > 0 m^2")
+            _bad("face_area", area, "finite face areas > 0 m^2")
     return c, e, v, area
 
 
@@ -846,13 +841,13 @@ def impact_phases(snapshots: Mapping[str, Sequence], face_area=None) -> dict:
             dc, de = c, e
         else:
             if c.shape != prev_c.shape:
-                _bad(f"snapshots[{name!r}]", _short(c), f"the same face count {prev_c.shape} as the previous phase")
+                _bad(f"snapshots[{name!r}]", c, f"the same face count {prev_c.shape} as the previous phase")
             dc, de = c - prev_c, e - prev_e
             if np.any(dc < 0):
-                _bad(f"snapshots[{name!r}]", _short(c), "cumulative face counts (not below the previous snapshot)")
+                _bad(f"snapshots[{name!r}]", c, "cumulative face counts (not below the previous snapshot)")
             # float sums accumulate rounding; only a real decrease is an error
             if np.any(de < -1e-9 * max(float(prev_e.max()), 1e-300)):
-                _bad(f"snapshots[{name!r}]", _short(e), "cumulative face energies (not below the previous snapshot)")
+                _bad(f"snapshots[{name!r}]", e, "cumulative face energies (not below the previous snapshot)")
             de = np.maximum(de, 0.0)
         out[name] = impact_summary(dc, de, v, face_area)
         prev_c, prev_e = c, e
@@ -889,8 +884,8 @@ class SettleMonitor:
         Returns True when the last ``window`` samples were all below the threshold; a sample at or
         above it starts the count again.
         """
-        t = _finite("time", time, "s")
-        ke = _finite("kinetic_energy_per_particle", kinetic_energy_per_particle, "J")
+        t = _finite_number("time", time, "s")
+        ke = _finite_number("kinetic_energy_per_particle", kinetic_energy_per_particle, "J")
         if ke < 0:
             _bad("kinetic_energy_per_particle", kinetic_energy_per_particle, "an energy >= 0 J")
         if self.history and t < self.history[-1][0]:

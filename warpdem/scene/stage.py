@@ -30,13 +30,13 @@ Time codes: ``timeCodesPerSecond`` = :data:`TIME_CODES_PER_SECOND`, so time code
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import json
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from warpdem.engine.checks import did_you_mean
 from warpdem.engine.materials import Interaction, Material
 from warpdem.engine.solver import CLUMP_CONTACT_MASSES
 from warpdem.engine.types import ContactLaw, RollingModel
@@ -458,8 +458,7 @@ class _Reader:
         for prop in prim.GetAuthoredProperties():
             name = prop.GetName()
             if name.startswith(NS) and name not in known:
-                near = difflib.get_close_matches(name, sorted(known), n=1)
-                hint = f"; did you mean {near[0]!r}?" if near else f"; known: {', '.join(sorted(known))}"
+                hint = f"{did_you_mean(name, known)}; known: {', '.join(sorted(known))}"
                 self.fail(prim, name, f"is not a warpdem attribute here{hint}")
 
     def get(self, prim, name: str, kind: str = "number", required: bool = True, default=None, time=None):

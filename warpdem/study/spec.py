@@ -99,7 +99,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import difflib
 import hashlib
 import json
 import math
@@ -116,6 +115,8 @@ try:  # Python >= 3.11
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli backport
     import tomli as tomllib
+
+from warpdem.engine.checks import did_you_mean, finite_number, is_number, not_allowed
 
 from . import designs
 from .analysis import model_terms
@@ -216,27 +217,16 @@ def _rigs():
     return rigs
 
 
-def _suggest(word: str, choices) -> str:
-    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
-    return f" (did you mean {close[0]!r}?)" if close else ""
-
-
 def _bad(where: str, key: str, value, expected: str) -> StudyError:
-    return StudyError(f"{where}: {key} = {value!r} is not allowed; expected {expected}")
+    return StudyError(not_allowed(where, key, value, expected))
 
 
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
-
-
-def _number(where: str, key: str, v, *, finite: bool = True) -> float:
-    if not _is_number(v) or (finite and not math.isfinite(float(v))):
-        raise _bad(where, key, v, "a finite number")
-    return float(v)
+def _number(where: str, key: str, v) -> float:
+    return finite_number(where, key, v, error=StudyError)
 
 
 def _integer(where: str, key: str, v, minimum: int) -> int:
-    if not _is_number(v) or float(v) != int(v) or int(v) < minimum:
+    if not is_number(v) or float(v) != int(v) or int(v) < minimum:
         raise _bad(where, key, v, f"an integer >= {minimum}")
     return int(v)
 
@@ -284,7 +274,7 @@ def _mapping(where: str, key: str, v, names: Sequence[str], need_all: bool) -> F
     if unknown:
         raise StudyError(
             f"{where}: {key} names factor {unknown[0]!r}, which is not a factor"
-            f"{_suggest(unknown[0], names)}; factors: {', '.join(names)}"
+            f"{did_you_mean(unknown[0], names)}; factors: {', '.join(names)}"
         )
     if need_all:
         missing = [n for n in names if n not in v]
@@ -317,7 +307,7 @@ def _key_problem(key: str, rig: str | None, factor: bool) -> str | None:
         if rig is not None:
             rf = _rig_fields(rig)
             if key not in rf:
-                return f"a {rig} parameter{_suggest(key, rf)} ({', '.join(rf)}) or one of {keyed}"
+                return f"a {rig} parameter{did_you_mean(key, rf)} ({', '.join(rf)}) or one of {keyed}"
             if factor:
                 d = rf[key].default
                 if isinstance(d, (bool, str)):
@@ -327,20 +317,20 @@ def _key_problem(key: str, rig: str | None, factor: bool) -> str | None:
         if len(parts) != 3 or not all(parts):
             return f"material.NAME.FIELD (one of {forms})"
         if parts[2] not in MATERIAL_SCALARS:
-            return f"a material field: {', '.join(MATERIAL_SCALARS)}{_suggest(parts[2], MATERIAL_SCALARS)}"
+            return f"a material field: {', '.join(MATERIAL_SCALARS)}{did_you_mean(parts[2], MATERIAL_SCALARS)}"
         return None
     if head == "interaction":
         if len(parts) != 4 or not all(parts):
             return f"interaction.A.B.FIELD with two material names (one of {forms})"
         if parts[3] not in scalars:
             what = "a numeric interaction field" if factor else "an interaction field"
-            return f"{what}: {', '.join(scalars)}{_suggest(parts[3], scalars)}"
+            return f"{what}: {', '.join(scalars)}{did_you_mean(parts[3], scalars)}"
         return None
     if head == "run":
         fields_ = _run_fields()
         if len(parts) != 2 or parts[1] not in fields_:
             return f"run.FIELD with FIELD one of {', '.join(fields_)}" + (
-                _suggest(parts[1], fields_) if len(parts) == 2 else ""
+                did_you_mean(parts[1], fields_) if len(parts) == 2 else ""
             )
         return None
     if head in ("measure", "factory"):
@@ -351,7 +341,7 @@ def _key_problem(key: str, rig: str | None, factor: bool) -> str | None:
         if head == "factory" and (len(parts) != 3 or not parts[1] or parts[2] not in _FACTORY_FIELDS):
             return f"factory.NAME.FIELD with FIELD one of {', '.join(_FACTORY_FIELDS)}"
         return None
-    return f"one of {forms}" + _suggest(head, ("material", "interaction", "run", "measure", "factory"))
+    return f"one of {forms}" + did_you_mean(head, ("material", "interaction", "run", "measure", "factory"))
 
 
 def is_rig_key(key: str) -> bool:
@@ -471,7 +461,7 @@ class DesignSpec:
     def __post_init__(self):
         w = "[design]"
         if self.kind not in DESIGN_KINDS:
-            raise _bad(w, "kind", self.kind, f"one of {', '.join(DESIGN_KINDS)}{_suggest(self.kind, DESIGN_KINDS)}")
+            raise _bad(w, "kind", self.kind, f"one of {', '.join(DESIGN_KINDS)}{did_you_mean(self.kind, DESIGN_KINDS)}")
         for opt in _OPTIONS:
             if getattr(self, opt) is not None and opt not in _KIND_OPTIONS[self.kind]:
                 kinds = [k for k, o in _KIND_OPTIONS.items() if opt in o]
@@ -483,7 +473,7 @@ class DesignSpec:
         set_("replicates", _integer(w, "replicates", self.replicates, 1))
         set_("randomize", _boolean(w, "randomize", self.randomize))
         if self.runs is not None:
-            if not _is_number(self.runs) or self.runs not in (12, 20):
+            if not is_number(self.runs) or self.runs not in (12, 20):
                 raise _bad(w, "runs", self.runs, "12 or 20 (Plackett-Burman runs)")
             set_("runs", int(self.runs))
         if self.center_points is not None:
@@ -512,7 +502,7 @@ class DesignSpec:
                 if self.alpha.lower() not in ("rotatable", "orthogonal", "face"):
                     raise _bad(w, "alpha", self.alpha, 'a number > 0, "rotatable", "orthogonal" or "face"')
                 set_("alpha", self.alpha.lower())
-            elif not _is_number(self.alpha) or not (math.isfinite(self.alpha) and self.alpha > 0):
+            elif not is_number(self.alpha) or not (math.isfinite(self.alpha) and self.alpha > 0):
                 raise _bad(w, "alpha", self.alpha, 'a number > 0, "rotatable", "orthogonal" or "face"')
             else:
                 set_("alpha", float(self.alpha))
@@ -573,7 +563,7 @@ class ResponseSpec:
                 where,
                 "measure",
                 m,
-                f"a metric key: {', '.join(MEASURES)}{_suggest(m, MEASURES)}, or a dotted path into the metrics",
+                f"a metric key: {', '.join(MEASURES)}{did_you_mean(m, MEASURES)}, or a dotted path into the metrics",
             )
         _string(where, "unit", self.unit)
         if self.target is not None:
@@ -600,7 +590,7 @@ class AnalysisSpec:
                     "model",
                     m,
                     'linear, 2fi, quadratic, none or a list of terms such as ["A", "A*B", "A^2"]'
-                    + _suggest(m.lower(), ("linear", "2fi", "quadratic", "none")),
+                    + did_you_mean(m.lower(), ("linear", "2fi", "quadratic", "none")),
                 )
             object.__setattr__(self, "model", m.lower())
         elif m is not None:
@@ -670,7 +660,7 @@ class StudySpec:
                 f"({', '.join(rigs.RIGS)}) and scene (a stage path relative to the study file)"
             )
         if self.rig is not None and self.rig not in rigs.RIGS:
-            raise _bad(w, "rig", self.rig, f"one of {', '.join(rigs.RIGS)}{_suggest(self.rig, rigs.RIGS)}")
+            raise _bad(w, "rig", self.rig, f"one of {', '.join(rigs.RIGS)}{did_you_mean(self.rig, rigs.RIGS)}")
         set_("smoke", _boolean(w, "smoke", self.smoke))
         if self.path is not None:
             set_("path", Path(self.path))
@@ -696,7 +686,7 @@ class StudySpec:
             problem = _key_problem(k, self.rig, factor=False)
             if problem:
                 raise _bad("[fixed]", "key", k, problem)
-            if not isinstance(v, (str, bool, int, float)) or (_is_number(v) and not math.isfinite(v)):
+            if not isinstance(v, (str, bool, int, float)) or (is_number(v) and not math.isfinite(v)):
                 raise _bad("[fixed]", k, v, "a string, a boolean or a finite number")
         set_("fixed", FrozenMap(self.fixed))
 
@@ -769,7 +759,7 @@ class StudySpec:
                 _mapping(w, "start", d.start, names, need_all=True)
             if d.base is not None:
                 if d.base not in names:
-                    raise _bad(w, "base", d.base, f"a factor name: {', '.join(names)}{_suggest(d.base, names)}")
+                    raise _bad(w, "base", d.base, f"a factor name: {', '.join(names)}{did_you_mean(d.base, names)}")
                 if d.coefficients[d.base] == 0:
                     raise _bad(w, f"coefficients.{d.base}", 0.0, "a non-zero coefficient for the base factor")
             if d.step is not None and all(v == 0 for v in d.step.values()):
@@ -875,7 +865,7 @@ def _check_keys(table: str, data, label: str) -> dict:
     for k in data:
         if k not in allowed:
             raise StudyError(
-                f"{label}: key {k!r} is not allowed{_suggest(k, allowed)}; expected one of {', '.join(allowed)}"
+                f"{label}: key {k!r} is not allowed{did_you_mean(k, allowed)}; expected one of {', '.join(allowed)}"
             )
     for k in _REQUIRED.get(table, ()):
         if k not in data:
@@ -901,7 +891,8 @@ def _from_dict(data: Mapping, path) -> StudySpec:
     for t in data:
         if t not in _TABLES:
             raise StudyError(
-                f"table [{t}] is not allowed{_suggest(t, _TABLES)}; expected " + ", ".join(f"[{x}]" for x in _TABLES)
+                f"table [{t}] is not allowed{did_you_mean(t, _TABLES)}; expected "
+                + ", ".join(f"[{x}]" for x in _TABLES)
             )
     for t in ("study", "factors", "design", "responses"):
         if t not in data:
@@ -1088,7 +1079,7 @@ def design_table(spec: StudySpec) -> pd.DataFrame:
 
 
 def _canon(v):
-    if _is_number(v):
+    if is_number(v):
         return _round(v)
     return v
 
