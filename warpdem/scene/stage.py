@@ -405,20 +405,16 @@ def write_stage(spec: SceneSpec, path=None):
             g.AddTranslateOp().Set(Gf.Vec3d(base[0], base[1], base[2] + height / 2))
         g.CreatePurposeAttr(UsdGeom.Tokens.guide)
         prim = g.GetPrim()
-
-        def fa(name, tname, value):
-            prim.CreateAttribute(NS + "factory:" + name, getattr(Sdf.ValueTypeNames, tname)).Set(value)
-
-        fa("mode", "Token", fac.mode)
+        _factory_attr(prim, "mode", "Token", fac.mode)
         prim.CreateRelationship(NS + "factory:material").SetTargets(
             [Sdf.Path(f"/World/Materials/{_ident(fac.material)}")]
         )
         prim.CreateRelationship(NS + "factory:shape").SetTargets([Sdf.Path(f"/World/Shapes/{_ident(fac.shape)}")])
         if kind == "cylinder" and fac.region[4] is not None:
-            fa("topRadius", "Double", float(fac.region[4]))
+            _factory_attr(prim, "topRadius", "Double", float(fac.region[4]))
         for name, value in (("count", fac.count), ("seed", fac.seed)):
             if value is not None:
-                fa(name, "Int", int(value))
+                _factory_attr(prim, name, "Int", int(value))
         for name, value in (
             ("mass", fac.mass),
             ("rate", fac.rate),
@@ -427,15 +423,22 @@ def write_stage(spec: SceneSpec, path=None):
             ("interval", fac.interval),
         ):
             if value is not None:
-                fa(name, "Double", float(value))
-        fa("initialVelocity", "Double3", Gf.Vec3d(*map(float, fac.initial_velocity)))
+                _factory_attr(prim, name, "Double", float(value))
+        _factory_attr(prim, "initialVelocity", "Double3", Gf.Vec3d(*map(float, fac.initial_velocity)))
         sz = dict(fac.sizes)
-        fa("sizeDistribution", "Token", sz.pop("distribution"))
+        _factory_attr(prim, "sizeDistribution", "Token", sz.pop("distribution"))
         for k, v in sz.items():
-            fa("size" + k[0].upper() + _camel(k)[1:], "Double", float(v))
+            _factory_attr(prim, "size" + k[0].upper() + _camel(k)[1:], "Double", float(v))
     if path:
         stage.GetRootLayer().Save()
     return stage
+
+
+def _factory_attr(prim, name: str, type_name: str, value) -> None:
+    """Author ``warpdem:factory:<name>`` of Sdf value type ``type_name`` on ``prim``."""
+    from pxr import Sdf
+
+    prim.CreateAttribute(NS + "factory:" + name, getattr(Sdf.ValueTypeNames, type_name)).Set(value)
 
 
 # ----------------------------------------------------------------------------------------------------
