@@ -12,28 +12,13 @@ from warpdem.kernels.params import PairParams
 
 from . import analytic
 from .checks import vec3
-from .materials import Interaction, InteractionTable, Material, pair_table
+from .materials import INTERACTION_SCALARS, Interaction, InteractionTable, Material, pair_table
 from .motion import WallMotion
 from .types import ContactLaw, Model
 
 GLUED_VOLUME = 1.0e12
 """Body volume [m^3] of a sphere glued to a wall: its mass exceeds any particle's by > 1e10, so a contact's
 reduced mass is the particle's to float32 precision, while products of masses stay finite in float32."""
-
-
-INTERACTION_SCALARS = (
-    "restitution",
-    "static_friction",
-    "rolling_friction",
-    "rolling_damping",
-    "surface_energy",
-    "pull_off_force",
-    "slope_exponent",
-    "plasticity_ratio",
-    "tensile_exponent",
-    "tangential_stiffness_multiplier",
-)
-"""Interaction fields that :meth:`ModelBuilder.vary` can set per world."""
 
 
 class ModelBuilder:

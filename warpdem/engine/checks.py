@@ -7,10 +7,12 @@ A refused value raises ``ValueError`` (or the caller's subclass of it) with the 
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import enum
 import math
 import numbers
+import typing
 from collections.abc import Callable, Iterable, Mapping
 from typing import NoReturn
 
@@ -137,3 +139,15 @@ def did_you_mean(word, choices: Iterable) -> str:
     misspelt ``word`` meant, else ""."""
     near = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
     return f" (did you mean {near[0]!r}?)" if near else ""
+
+
+def number_fields(cls) -> dict[str, type]:
+    """The fields of dataclass ``cls`` annotated ``float`` or ``int`` (or either ``| None``), in field order,
+    each with that type: the fields a bare number sets."""
+    hints = typing.get_type_hints(cls)
+    out = {}
+    for f in dataclasses.fields(cls):
+        kinds = [t for t in (hints[f.name], *typing.get_args(hints[f.name])) if t in (float, int)]
+        if kinds:
+            out[f.name] = kinds[0]
+    return out

@@ -16,7 +16,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .checks import check, check_number, enum_value
+from warpdem.kernels.params import PairParams
+
+from .checks import check, check_number, enum_value, number_fields
 from .types import ContactLaw, RollingModel
 
 
@@ -102,10 +104,12 @@ _ENUM_ALIASES = {
 """EDEM's names of the rolling models and contact laws (upper case, ``_`` for spaces) -> member names."""
 
 
-def _param(default: float, ok, allowed: str):
-    """A numeric contact parameter: its default, the test ``ok(value)`` a value must pass and the words for
-    what passes (an Interaction checks every such field, so a new parameter brings its own check)."""
-    return field(default=default, metadata={"ok": ok, "allowed": allowed})
+def _param(default, pair: str, ok=None, allowed: str = ""):
+    """A contact parameter: its default, the PairParams field it fills (``warpdem.kernels.params``) and,
+    for a number, the test ``ok(value)`` a value must pass and the words for what passes. Everything else
+    follows from the Interaction fields: their checks, the per-world scalars, the stage attributes, the
+    override keys; a new parameter needs only its field here and its PairParams field."""
+    return field(default=default, metadata={"pair": pair, "ok": ok, "allowed": allowed})
 
 
 @dataclass(frozen=True)
@@ -128,37 +132,52 @@ class Interaction:
         tangential_stiffness_multiplier: EEPA k_t factor [-], > 0.
     """
 
-    restitution: float = _param(0.5, lambda v: 0.0 < v <= 1.0, "a coefficient of restitution in (0, 1]")
-    static_friction: float = _param(0.5, lambda v: v >= 0.0, "a friction coefficient >= 0")
-    rolling_friction: float = _param(0.0, lambda v: v >= 0.0, "a rolling friction coefficient >= 0")
-    rolling_model: RollingModel = RollingModel.CONSTANT_TORQUE
-    rolling_damping: float = _param(0.3, lambda v: v >= 0.0, "a damping ratio >= 0")
-    law: ContactLaw = ContactLaw.HERTZ_MINDLIN
-    surface_energy: float = _param(0.0, lambda v: v >= 0.0, "a surface energy >= 0 J/m^2")
-    pull_off_force: float = _param(0.0, lambda v: v <= 0.0, "a constant pull-off force <= 0 N (attractive)")
-    slope_exponent: float = _param(1.5, lambda v: 1.0 <= v <= 2.0, "an exponent in [1, 2]")
-    plasticity_ratio: float = _param(0.5, lambda v: 0.0 <= v < 1.0, "a ratio in [0, 1)")
-    tensile_exponent: float = _param(1.5, lambda v: 0.0 < v <= 3.0, "an exponent in (0, 3]")
-    tangential_stiffness_multiplier: float = _param(1.0, lambda v: v > 0.0, "a factor > 0")
+    # restitution fills PairParams.beta through the property beta
+    restitution: float = _param(0.5, "beta", lambda v: 0.0 < v <= 1.0, "a coefficient of restitution in (0, 1]")
+    static_friction: float = _param(0.5, "mu_s", lambda v: v >= 0.0, "a friction coefficient >= 0")
+    rolling_friction: float = _param(0.0, "mu_r", lambda v: v >= 0.0, "a rolling friction coefficient >= 0")
+    rolling_model: RollingModel = _param(RollingModel.CONSTANT_TORQUE, "rolling_model")
+    rolling_damping: float = _param(0.3, "rolling_damping", lambda v: v >= 0.0, "a damping ratio >= 0")
+    law: ContactLaw = _param(ContactLaw.HERTZ_MINDLIN, "law")
+    surface_energy: float = _param(0.0, "gamma", lambda v: v >= 0.0, "a surface energy >= 0 J/m^2")
+    pull_off_force: float = _param(0.0, "f0", lambda v: v <= 0.0, "a constant pull-off force <= 0 N (attractive)")
+    slope_exponent: float = _param(1.5, "eepa_n", lambda v: 1.0 <= v <= 2.0, "an exponent in [1, 2]")
+    plasticity_ratio: float = _param(0.5, "lambda_p", lambda v: 0.0 <= v < 1.0, "a ratio in [0, 1)")
+    tensile_exponent: float = _param(1.5, "chi", lambda v: 0.0 < v <= 3.0, "an exponent in (0, 3]")
+    tangential_stiffness_multiplier: float = _param(1.0, "ks_fac", lambda v: v > 0.0, "a factor > 0")
 
     def __post_init__(self):
         where = "Interaction"
-        enums = []
         for f in dataclasses.fields(self):
-            if isinstance(f.default, enum.Enum):
-                enums.append(f)
-            else:
+            if f.name not in INTERACTION_ENUMS:
                 check_number(where, f.name, getattr(self, f.name), f.metadata["ok"], f.metadata["allowed"])
-        for f in enums:
-            value = enum_value(type(f.default), where, f.name, getattr(self, f.name), _ENUM_ALIASES)
-            object.__setattr__(self, f.name, value)
+        for name, cls in INTERACTION_ENUMS.items():
+            object.__setattr__(self, name, enum_value(cls, where, name, getattr(self, name), _ENUM_ALIASES))
         check(self.law != ContactLaw.NONE, where, "law", self.law, "a contact law other than NONE")
+
+    def pair_fields(self) -> dict:
+        """The PairParams fields this interaction fills, by PairParams name (enums as their integers)."""
+        out = {f.metadata["pair"]: getattr(self, f.name) for f in dataclasses.fields(self)}
+        out["beta"] = self.beta
+        return {k: int(v) if isinstance(v, enum.Enum) else v for k, v in out.items()}
 
     @property
     def beta(self) -> float:
         """Damping factor beta = ln e / sqrt(ln^2 e + pi^2) (0 for e = 1)."""
         le = math.log(self.restitution)
         return le / math.sqrt(le * le + math.pi * math.pi)
+
+
+INTERACTION_FIELDS = tuple(f.name for f in dataclasses.fields(Interaction))
+"""Every Interaction field, in order (the stage's pair attributes and the override keys follow it)."""
+INTERACTION_ENUMS = {
+    f.name: type(f.default) for f in dataclasses.fields(Interaction) if isinstance(f.default, enum.Enum)
+}
+"""Interaction fields holding an enum member -> the enum (a token on a stage)."""
+INTERACTION_SCALARS = tuple(number_fields(Interaction))
+"""The numeric Interaction fields: what :meth:`warpdem.engine.builder.ModelBuilder.vary` can set per world."""
+MATERIAL_SCALARS = tuple(number_fields(Material))
+"""The numeric Material fields: what an override (and a per-world variation) can set."""
 
 
 @dataclass
@@ -191,45 +210,13 @@ def effective_moduli(ma: Material, mb: Material) -> tuple[float, float]:
 def pair_table(materials_per_world: list[list[Material]], tables_per_world: list[InteractionTable]) -> np.ndarray:
     """Dense PairParams fields, shape (W, M, M), as a NumPy structured array (W = len of the lists, 1 or world_count)."""
     w_count, m_count = len(materials_per_world), len(materials_per_world[0])
-    dtype = np.dtype(
-        [
-            ("e_star", np.float32),
-            ("g_star", np.float32),
-            ("beta", np.float32),
-            ("mu_s", np.float32),
-            ("mu_r", np.float32),
-            ("rolling_model", np.int32),
-            ("rolling_damping", np.float32),
-            ("law", np.int32),
-            ("gamma", np.float32),
-            ("f0", np.float32),
-            ("eepa_n", np.float32),
-            ("lambda_p", np.float32),
-            ("chi", np.float32),
-            ("ks_fac", np.float32),
-        ]
-    )
+    dtype = np.dtype(PairParams.numpy_dtype())
     out = np.zeros((w_count, m_count, m_count), dtype=dtype)
     for w in range(w_count):
         mats, table = materials_per_world[w], tables_per_world[w]
         for a in range(m_count):
             for b in range(m_count):
-                ia = table.get(mats[a].name, mats[b].name)
                 e_star, g_star = effective_moduli(mats[a], mats[b])
-                out[w, a, b] = (
-                    e_star,
-                    g_star,
-                    ia.beta,
-                    ia.static_friction,
-                    ia.rolling_friction,
-                    int(ia.rolling_model),
-                    ia.rolling_damping,
-                    int(ia.law),
-                    ia.surface_energy,
-                    ia.pull_off_force,
-                    ia.slope_exponent,
-                    ia.plasticity_ratio,
-                    ia.tensile_exponent,
-                    ia.tangential_stiffness_multiplier,
-                )
+                fields = {"e_star": e_star, "g_star": g_star, **table.get(mats[a].name, mats[b].name).pair_fields()}
+                out[w, a, b] = tuple(fields[name] for name in dtype.names)
     return out

@@ -36,10 +36,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from warpdem.engine.checks import did_you_mean
-from warpdem.engine.materials import Interaction, Material
+from warpdem.engine.checks import did_you_mean, enum_value
+from warpdem.engine.materials import INTERACTION_ENUMS, INTERACTION_FIELDS, Interaction, Material
 from warpdem.engine.solver import CLUMP_CONTACT_MASSES
-from warpdem.engine.types import ContactLaw, RollingModel
 
 TIME_CODES_PER_SECOND = 100.0
 NS = "warpdem:"
@@ -191,7 +190,6 @@ def _camel(name: str) -> str:
     return head + "".join(p.capitalize() for p in rest)
 
 
-PAIR_FIELDS = [f.name for f in dataclasses.fields(Interaction)]
 RUN_FIELDS = [f.name for f in dataclasses.fields(RunSpec)]
 RUN_TOKENS = {"clump_contact_mass": CLUMP_CONTACT_MASSES}
 """Run settings that are words, with the words allowed (the others are numbers)."""
@@ -235,7 +233,7 @@ KNOWN = {
     | {NS + "run:" + _camel(f) for f in RUN_FIELDS}
     | {NS + "measure:" + _camel(f) for f in MEASURE_SCALARS},
     "material": {NS + "youngsModulus", NS + "shearModulus", NS + "poissonRatio"},
-    "pair": {NS + "pair:materials"} | {NS + "pair:" + _camel(f) for f in PAIR_FIELDS},
+    "pair": {NS + "pair:materials"} | {NS + "pair:" + _camel(f) for f in INTERACTION_FIELDS},
     "shape": {NS + "shape:kind"},
     "wall": {NS + "coat:" + _camel(f) for f in COAT_FIELDS},
     "factory": {NS + "factory:" + _camel(f) for f in FACTORY_FIELDS},
@@ -323,14 +321,10 @@ def write_stage(spec: SceneSpec, path=None):
         prim.CreateRelationship(NS + "pair:materials").SetTargets(
             [Sdf.Path(f"/World/Materials/{_ident(a)}"), Sdf.Path(f"/World/Materials/{_ident(b)}")]
         )
-        for f in PAIR_FIELDS:
+        for f in INTERACTION_FIELDS:
             v = getattr(ia, f)
-            if f == "law":
-                prim.CreateAttribute(NS + "pair:law", Sdf.ValueTypeNames.Token).Set(ContactLaw(v).name.lower())
-            elif f == "rolling_model":
-                prim.CreateAttribute(NS + "pair:rollingModel", Sdf.ValueTypeNames.Token).Set(
-                    RollingModel(v).name.lower()
-                )
+            if f in INTERACTION_ENUMS:
+                prim.CreateAttribute(NS + "pair:" + _camel(f), Sdf.ValueTypeNames.Token).Set(v.name.lower())
             else:
                 prim.CreateAttribute(NS + "pair:" + _camel(f), Sdf.ValueTypeNames.Double).Set(float(v))
 
@@ -664,30 +658,17 @@ def read_stage(path_or_stage) -> SceneSpec:
                 f"has {len(mats)} targets; expected two materials (one for a material against itself)",
             )
         kw = {}
-        for f in PAIR_FIELDS:
+        for f in INTERACTION_FIELDS:
             name = NS + "pair:" + _camel(f)
-            if f == "law":
-                v = r.get(prim, name, "token", required=False)
-                if v is not None:
-                    try:
-                        kw[f] = ContactLaw[v.upper()]
-                    except KeyError:
-                        r.fail(prim, name, f"= {v!r} is not allowed; expected hertz_mindlin, jkr or eepa")
-            elif f == "rolling_model":
-                v = r.get(prim, name, "token", required=False)
-                if v is not None:
-                    try:
-                        kw[f] = RollingModel[v.upper()]
-                    except KeyError:
-                        r.fail(
-                            prim,
-                            name,
-                            f"= {v!r} is not allowed; expected " + ", ".join(m.name.lower() for m in RollingModel),
-                        )
-            else:
-                v = r.get(prim, name, required=False)
-                if v is not None:
-                    kw[f] = v
+            cls = INTERACTION_ENUMS.get(f)
+            v = r.get(prim, name, "number" if cls is None else "token", required=False)
+            if v is not None and cls is not None:
+                try:
+                    v = enum_value(cls, "", f, v)
+                except ValueError:
+                    r.fail(prim, name, f"= {v!r} is not allowed; expected " + ", ".join(m.name.lower() for m in cls))
+            if v is not None:
+                kw[f] = v
         try:
             ia = Interaction(**kw)
         except ValueError as e:
@@ -895,14 +876,11 @@ def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
         elif parts[0] == "interaction" and len(parts) == 4:
             a, b, f = parts[1:]
             spec.material(a), spec.material(b)
-            if f not in PAIR_FIELDS:
+            if f not in INTERACTION_FIELDS:
                 raise StageError(
-                    f"--set {key}: field {f!r} is not an interaction field; expected one of " + ", ".join(PAIR_FIELDS)
+                    f"--set {key}: field {f!r} is not an interaction field; expected one of "
+                    + ", ".join(INTERACTION_FIELDS)
                 )
-            if f == "law":
-                value = ContactLaw[str(value).upper()]
-            elif f == "rolling_model":
-                value = RollingModel[str(value).upper()]
             for k, (pa, pb, ia) in enumerate(spec.pairs):
                 if {pa, pb} == {a, b}:
                     spec.pairs[k] = (pa, pb, dataclasses.replace(ia, **{f: value}))

@@ -71,7 +71,7 @@ Schema (``studies/*.toml``)::
 Override keys (``[fixed]`` keys and factor parameters) follow :func:`warpdem.scene.stage.apply_overrides`:
 ``material.NAME.FIELD`` (density, youngs_modulus, shear_modulus, poisson_ratio),
 ``interaction.A.B.FIELD`` (any :class:`~warpdem.engine.materials.Interaction` field; a factor only the numeric
-ones of ``builder.INTERACTION_SCALARS``), ``run.FIELD``, ``measure.FIELD`` and ``factory.NAME.FIELD``
+ones of ``materials.INTERACTION_SCALARS``), ``run.FIELD``, ``measure.FIELD`` and ``factory.NAME.FIELD``
 (``[fixed]`` only), and any other key is a rig parameter (with ``rig``, checked against the rig's
 parameters; a factor must name a numeric one). Only ``material.*`` and ``interaction.*`` scalars can
 differ between the batched worlds of one launch (:meth:`warpdem.engine.builder.ModelBuilder.vary`); a factor on
@@ -117,6 +117,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli ba
     import tomli as tomllib
 
 from warpdem.engine.checks import did_you_mean, finite_number, is_number, not_allowed
+from warpdem.engine.materials import INTERACTION_FIELDS, INTERACTION_SCALARS, MATERIAL_SCALARS
 
 from . import designs
 from .analysis import model_terms
@@ -176,9 +177,6 @@ MEASURES = (
 )
 """Scalar metric keys that :func:`warpdem.scene.runner.run_scene` writes per world (``metrics.json``)."""
 
-MATERIAL_SCALARS = ("density", "youngs_modulus", "shear_modulus", "poisson_ratio")
-"""Material fields an override (and a per-world variation) can set."""
-
 _MEASURE_FIELDS = ("base_height", "force_limit", "backstop_height")
 _FACTORY_FIELDS = ("count", "mass", "rate", "mass_rate", "start_time", "seed", "interval")
 _POINT_TYPE = {"factorial": "factorial", "axial": "axial", "center": "centre"}
@@ -191,18 +189,6 @@ _DIGITS = 12  # significant digits of actual values in the table and in point id
 # --------------------------------------------------------------------------------------------------
 # helpers
 # --------------------------------------------------------------------------------------------------
-
-
-def _interaction_fields():
-    from warpdem.scene.stage import PAIR_FIELDS
-
-    return tuple(PAIR_FIELDS)
-
-
-def _interaction_scalars():
-    from warpdem.engine.builder import INTERACTION_SCALARS
-
-    return tuple(INTERACTION_SCALARS)
 
 
 def _run_fields():
@@ -298,7 +284,7 @@ def _key_problem(key: str, rig: str | None, factor: bool) -> str | None:
         return "a non-empty string"
     parts = key.split(".")
     head = parts[0]
-    scalars = _interaction_scalars() if factor else _interaction_fields()
+    scalars = INTERACTION_SCALARS if factor else INTERACTION_FIELDS
     keyed = "material.NAME.FIELD, interaction.A.B.FIELD, run.FIELD" + (
         "" if factor else ", measure.FIELD, factory.NAME.FIELD"
     )
@@ -356,7 +342,7 @@ def varies_per_world(key: str) -> bool:
     if parts[0] == "material":
         return len(parts) == 3 and parts[2] in MATERIAL_SCALARS
     if parts[0] == "interaction":
-        return len(parts) == 4 and parts[3] in _interaction_scalars()
+        return len(parts) == 4 and parts[3] in INTERACTION_SCALARS
     return False
 
 
