@@ -514,16 +514,7 @@ class ModelBuilder:
                 value = float(self._variations[target][w])
                 if parts[0] == "material":
                     k = self.material_index(parts[1])
-                    m = mats[k]
-                    changes = {parts[2]: value}
-                    # E and G are tied through nu: varying one re-derives the other
-                    if parts[2] == "youngs_modulus":
-                        changes["shear_modulus"] = None
-                    elif parts[2] == "shear_modulus":
-                        changes["youngs_modulus"] = None
-                    elif parts[2] == "poisson_ratio":
-                        changes["youngs_modulus"] = None
-                    mats[k] = dataclasses.replace(m, **changes)
+                    mats[k] = mats[k].with_value(parts[2], value)
                 else:
                     a, b = parts[1], parts[2]
                     table.set(a, b, table.get(a, b), **{parts[3]: value})

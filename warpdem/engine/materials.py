@@ -22,6 +22,17 @@ from .checks import check, check_number, enum_value, number_fields
 from .types import ContactLaw, RollingModel
 
 
+def elastic_moduli(poisson_ratio: float, youngs_modulus=None, shear_modulus=None) -> tuple[float, float]:
+    """(E, G) [Pa] of an isotropic elastic solid from Poisson's ratio nu [-] and one of E and G [Pa]:
+    G = E / (2 (1 + nu)), E = 2 G (1 + nu). Given both, G follows from E."""
+    nu = float(poisson_ratio)
+    if youngs_modulus is None:
+        g = float(shear_modulus)
+        return 2.0 * g * (1.0 + nu), g
+    e = float(youngs_modulus)
+    return e, e / (2.0 * (1.0 + nu))
+
+
 @dataclass(frozen=True)
 class Material:
     """Bulk properties of one solid.
@@ -64,7 +75,7 @@ class Material:
                     g,
                     f"at most E/2 = {0.5 * e:.6g} Pa for a non-negative Poisson's ratio",
                 )
-            implied = 0.5 * e / (1.0 + nu)
+            implied = elastic_moduli(nu, youngs_modulus=e)[1]
             check(
                 abs(g - implied) <= 0.01 * implied,
                 where,
@@ -73,9 +84,19 @@ class Material:
                 f"E/(2(1+nu)) = {implied:.6g} Pa within 1% (E = {e:.6g} Pa, nu = {nu})",
             )
         elif self.youngs_modulus is None:
-            object.__setattr__(self, "youngs_modulus", 2.0 * float(self.shear_modulus) * (1.0 + nu))
+            object.__setattr__(self, "youngs_modulus", elastic_moduli(nu, shear_modulus=self.shear_modulus)[0])
         else:
-            object.__setattr__(self, "shear_modulus", float(self.youngs_modulus) / (2.0 * (1.0 + nu)))
+            object.__setattr__(self, "shear_modulus", elastic_moduli(nu, youngs_modulus=self.youngs_modulus)[1])
+
+    def with_value(self, name: str, value: float) -> Material:
+        """A copy with the numeric field ``name`` (one of :data:`MATERIAL_SCALARS`) set to ``value``. E and G
+        are tied through nu: a new E re-derives G; a new G or a new nu keeps G and re-derives E."""
+        changes = {name: value}
+        if name == "youngs_modulus":
+            changes["shear_modulus"] = None
+        elif name in ("shear_modulus", "poisson_ratio"):
+            changes["youngs_modulus"] = None
+        return dataclasses.replace(self, **changes)
 
     @property
     def E(self) -> float:  # noqa: N802 - the physics symbol

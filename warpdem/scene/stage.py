@@ -866,13 +866,7 @@ def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
                     f"--set {key}: field {parts[2]!r} is not a material scalar; expected density, "
                     "youngs_modulus, shear_modulus or poisson_ratio"
                 )
-            changes = {parts[2]: float(value)}
-            # E and G are tied through nu: a new E or nu re-derives G, a new G re-derives E
-            if parts[2] in ("youngs_modulus",):
-                changes["shear_modulus"] = None
-            elif parts[2] in ("shear_modulus", "poisson_ratio"):
-                changes["youngs_modulus"] = None
-            spec.materials[spec.materials.index(m)] = dataclasses.replace(m, **changes)
+            spec.materials[spec.materials.index(m)] = m.with_value(parts[2], float(value))
         elif parts[0] == "interaction" and len(parts) == 4:
             a, b, f = parts[1:]
             spec.material(a), spec.material(b)
