@@ -12,9 +12,12 @@ from warpdem.kernels.params import PairParams
 
 from . import analytic
 from .checks import vec3
-from .materials import INTERACTION_SCALARS, Interaction, InteractionTable, Material, pair_table
+from .keys import VARY, OverrideKey
+from .materials import Interaction, InteractionTable, Material, pair_table
 from .motion import WallMotion
 from .types import ContactLaw, Model
+
+_GRAVITY = OverrideKey("gravity")
 
 GLUED_VOLUME = 1.0e12
 """Body volume [m^3] of a sphere glued to a wall: its mass exceeds any particle's by > 1e10, so a contact's
@@ -465,29 +468,15 @@ class ModelBuilder:
     def vary(self, target: str, values) -> None:
         """Give a scalar parameter one value per world.
 
-        ``target`` is ``material.NAME.FIELD`` (density, youngs_modulus, shear_modulus, poisson_ratio),
-        ``interaction.A.B.FIELD`` (any of ``INTERACTION_SCALARS``)
-        or ``gravity`` (values shape (world_count, 3)). Call after :meth:`replicate`.
+        ``target`` is ``material.NAME.FIELD`` (any of ``MATERIAL_SCALARS``), ``interaction.A.B.FIELD`` (any of
+        ``INTERACTION_SCALARS``) or ``gravity`` (values shape (world_count, 3)); see
+        :mod:`warpdem.engine.keys`. Call after :meth:`replicate`.
         """
         vals = list(values)
         if len(vals) != self.world_count:
             raise ValueError(f"vary {target!r}: {len(vals)} values given; expected world_count = {self.world_count}")
-        parts = target.split(".")
-        if parts[0] == "material" and len(parts) == 3:
-            self.material_index(parts[1])
-            if parts[2] not in ("density", "youngs_modulus", "shear_modulus", "poisson_ratio"):
-                raise ValueError(f"vary {target!r}: field {parts[2]!r} is not a material scalar")
-        elif parts[0] == "interaction" and len(parts) == 4:
-            self.material_index(parts[1])
-            self.material_index(parts[2])
-            if parts[3] not in INTERACTION_SCALARS:
-                raise ValueError(f"vary {target!r}: field {parts[3]!r} is not an interaction scalar")
-        elif parts != ["gravity"]:
-            raise ValueError(
-                f"vary: target = {target!r} is not allowed; expected material.NAME.FIELD, "
-                "interaction.A.B.FIELD or gravity"
-            )
-        self._variations[target] = vals
+        key = VARY.parse(target, "vary", "target", defined={"material": [m.name for m in self.materials]})
+        self._variations[key] = vals
 
     def seed_worlds(self, seeds) -> None:
         """Give each world its own placement seed for the dynamic factories (integers >= 0, one per world;
@@ -503,21 +492,20 @@ class ModelBuilder:
 
     def _world_tables(self):
         """Materials and interaction tables per world (length 1 when nothing varies)."""
-        varied = [t for t in self._variations if t != "gravity"]
+        varied = [key for key in self._variations if key != _GRAVITY]
         count = self.world_count if varied else 1
         mats_w, tables_w = [], []
         for w in range(count):
             mats = list(self.materials)
             table = InteractionTable(self.interactions.default, dict(self.interactions.pairs))
-            for target in varied:
-                parts = target.split(".")
-                value = float(self._variations[target][w])
-                if parts[0] == "material":
-                    k = self.material_index(parts[1])
-                    mats[k] = mats[k].with_value(parts[2], value)
+            for key in varied:
+                value = float(self._variations[key][w])
+                if key.kind == "material":
+                    k = self.material_index(key.names[0])
+                    mats[k] = mats[k].with_value(key.field, value)
                 else:
-                    a, b = parts[1], parts[2]
-                    table.set(a, b, table.get(a, b), **{parts[3]: value})
+                    a, b = key.names
+                    table.set(a, b, table.get(a, b), **{key.field: value})
             mats_w.append(mats)
             tables_w.append(table)
         return mats_w, tables_w
@@ -544,8 +532,8 @@ class ModelBuilder:
         mats_w, tables_w = self._world_tables()
         params = pair_table(mats_w, tables_w)
         density = np.array([[m.density for m in mats] for mats in mats_w], dtype=np.float32)
-        if "gravity" in self._variations:
-            gravity = np.asarray(self._variations["gravity"], dtype=np.float32).reshape(W, 3)
+        if _GRAVITY in self._variations:
+            gravity = np.asarray(self._variations[_GRAVITY], dtype=np.float32).reshape(W, 3)
         else:
             gravity = self.gravity.astype(np.float32).reshape(1, 3)
 

@@ -36,8 +36,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from warpdem.engine.checks import did_you_mean, enum_value
-from warpdem.engine.materials import INTERACTION_ENUMS, INTERACTION_FIELDS, Interaction, Material
+from warpdem.engine.checks import check, did_you_mean, enum_value, number_fields
+from warpdem.engine.keys import KeyGrammar
+from warpdem.engine.materials import INTERACTION_ENUMS, INTERACTION_FIELDS, MATERIAL_SCALARS, Interaction, Material
 from warpdem.engine.solver import CLUMP_CONTACT_MASSES
 
 TIME_CODES_PER_SECOND = 100.0
@@ -193,17 +194,7 @@ def _camel(name: str) -> str:
 RUN_FIELDS = [f.name for f in dataclasses.fields(RunSpec)]
 RUN_TOKENS = {"clump_contact_mass": CLUMP_CONTACT_MASSES}
 """Run settings that are words, with the words allowed (the others are numbers)."""
-MEASURE_SCALARS = [
-    "kind",
-    "base_height",
-    "center",
-    "piston",
-    "force_limit",
-    "backstop_height",
-    "walls",
-    "phase_names",
-    "phase_ends",
-]
+MEASURE_FIELDS = [f.name for f in dataclasses.fields(MeasureSpec)]
 FACTORY_FIELDS = [
     "mode",
     "material",
@@ -228,10 +219,26 @@ FACTORY_FIELDS = [
 ]
 COAT_FIELDS = ["radius", "material", "side", "seed", "spacing"]
 
+MEASURE_NUMBERS = number_fields(MeasureSpec)
+"""Measurement settings an override sets (the numbers), with their types."""
+FACTORY_NUMBERS = number_fields(FactorySpec)
+"""Factory settings an override sets (the numbers), with their types."""
+OVERRIDES = KeyGrammar(
+    {
+        "material": MATERIAL_SCALARS,
+        "interaction": INTERACTION_FIELDS,
+        "run": tuple(RUN_FIELDS),
+        "measure": tuple(MEASURE_NUMBERS),
+        "factory": tuple(FACTORY_NUMBERS),
+    }
+)
+"""The keys :func:`apply_overrides` takes (see :mod:`warpdem.engine.keys`); rig parameters are
+:func:`warpdem.scene.rigs.load`'s."""
+
 KNOWN = {
     "world": {NS + "rig", NS + "authoring", NS + "domainMin", NS + "domainMax"}
     | {NS + "run:" + _camel(f) for f in RUN_FIELDS}
-    | {NS + "measure:" + _camel(f) for f in MEASURE_SCALARS},
+    | {NS + "measure:" + _camel(f) for f in MEASURE_FIELDS},
     "material": {NS + "youngsModulus", NS + "shearModulus", NS + "poissonRatio"},
     "pair": {NS + "pair:materials"} | {NS + "pair:" + _camel(f) for f in INTERACTION_FIELDS},
     "shape": {NS + "shape:kind"},
@@ -853,67 +860,38 @@ def _read_factory(r: _Reader, prim) -> FactorySpec:
 # overrides and building
 # ----------------------------------------------------------------------------------------------------
 def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
-    """Apply ``--set`` style overrides (values as strings or numbers) to a spec, in place:
-    ``material.NAME.FIELD``, ``interaction.A.B.FIELD``, ``run.FIELD``, ``measure.FIELD``,
-    ``factory.NAME.FIELD``. Rig parameters (any other key) are handled by :func:`warpdem.scene.rigs.load`."""
-    for key, raw in overrides.items():
-        parts = key.split(".")
+    """Apply ``--set`` style overrides (values as strings or numbers) to a spec, in place: the keys of
+    :data:`OVERRIDES` (``material.NAME.FIELD``, ``interaction.A.B.FIELD``, ``run.FIELD``, ``measure.FIELD``,
+    ``factory.NAME.FIELD``). Rig parameters (any other key) are handled by :func:`warpdem.scene.rigs.load`."""
+    defined = {"material": [m.name for m in spec.materials], "factory": [f.name for f in spec.factories]}
+    for text, raw in overrides.items():
+        key = OVERRIDES.parse(text, "--set", defined=defined, error=StageError)
         value = _parse(raw)
-        if parts[0] == "material" and len(parts) == 3:
-            m = spec.material(parts[1])
-            if parts[2] not in ("density", "youngs_modulus", "shear_modulus", "poisson_ratio"):
-                raise StageError(
-                    f"--set {key}: field {parts[2]!r} is not a material scalar; expected density, "
-                    "youngs_modulus, shear_modulus or poisson_ratio"
-                )
-            spec.materials[spec.materials.index(m)] = m.with_value(parts[2], float(value))
-        elif parts[0] == "interaction" and len(parts) == 4:
-            a, b, f = parts[1:]
-            spec.material(a), spec.material(b)
-            if f not in INTERACTION_FIELDS:
-                raise StageError(
-                    f"--set {key}: field {f!r} is not an interaction field; expected one of "
-                    + ", ".join(INTERACTION_FIELDS)
-                )
+        if key.kind == "material":
+            m = spec.material(key.names[0])
+            spec.materials[spec.materials.index(m)] = m.with_value(key.field, float(value))
+        elif key.kind == "interaction":
+            a, b = key.names
+            # an enum field takes the member's name: Interaction reads it
             for k, (pa, pb, ia) in enumerate(spec.pairs):
                 if {pa, pb} == {a, b}:
-                    spec.pairs[k] = (pa, pb, dataclasses.replace(ia, **{f: value}))
+                    spec.pairs[k] = (pa, pb, dataclasses.replace(ia, **{key.field: value}))
                     break
             else:
-                spec.pairs.append((a, b, Interaction(**{f: value})))
-        elif parts[0] == "run" and len(parts) == 2:
-            if parts[1] not in RUN_FIELDS:
-                raise StageError(
-                    f"--set {key}: {parts[1]!r} is not a run setting; expected one of {', '.join(RUN_FIELDS)}"
+                spec.pairs.append((a, b, Interaction(**{key.field: value})))
+        elif key.kind == "run":
+            if key.field in RUN_TOKENS:
+                check(
+                    value in RUN_TOKENS[key.field], "--set", text, value, " or ".join(RUN_TOKENS[key.field]), StageError
                 )
-            if parts[1] in RUN_TOKENS:
-                if value not in RUN_TOKENS[parts[1]]:
-                    raise StageError(
-                        f"--set {key}: {value!r} is not allowed; expected " + " or ".join(RUN_TOKENS[parts[1]])
-                    )
-                setattr(spec.run, parts[1], value)
+                setattr(spec.run, key.field, value)
             else:
-                setattr(spec.run, parts[1], float(value))
-        elif parts[0] == "measure" and len(parts) == 2:
-            if parts[1] not in ("base_height", "force_limit", "backstop_height"):
-                raise StageError(
-                    f"--set {key}: expected measure.base_height, measure.force_limit or measure.backstop_height"
-                )
-            setattr(spec.measure, parts[1], float(value))
-        elif parts[0] == "factory" and len(parts) == 3:
-            fac = next((f for f in spec.factories if f.name == parts[1]), None)
-            if fac is None:
-                raise StageError(
-                    f"--set {key}: no factory {parts[1]!r}; factories: " + ", ".join(f.name for f in spec.factories)
-                )
-            if parts[2] not in ("count", "mass", "rate", "mass_rate", "start_time", "seed", "interval"):
-                raise StageError(f"--set {key}: expected count, mass, rate, mass_rate, start_time, seed or interval")
-            setattr(fac, parts[2], int(value) if parts[2] in ("count", "seed") else float(value))
+                setattr(spec.run, key.field, float(value))
+        elif key.kind == "measure":
+            setattr(spec.measure, key.field, MEASURE_NUMBERS[key.field](value))
         else:
-            raise StageError(
-                f"--set {key}: unknown setting; expected material.NAME.FIELD, interaction.A.B.FIELD, "
-                "run.FIELD, measure.FIELD, factory.NAME.FIELD or a rig parameter"
-            )
+            fac = next(f for f in spec.factories if f.name == key.names[0])
+            setattr(fac, key.field, FACTORY_NUMBERS[key.field](value))
     return spec
 
 

@@ -68,8 +68,9 @@ Schema (``studies/*.toml``)::
     [verification]
     replicates = 0                  # verification runs at the chosen optimum, >= 0
 
-Override keys (``[fixed]`` keys and factor parameters) follow :func:`warpdem.scene.stage.apply_overrides`:
-``material.NAME.FIELD`` (density, youngs_modulus, shear_modulus, poisson_ratio),
+Override keys (``[fixed]`` keys and factor parameters) are read by the one grammar of
+:mod:`warpdem.engine.keys`, with the scene's fields of :data:`warpdem.scene.stage.OVERRIDES`:
+``material.NAME.FIELD`` (density, poisson_ratio, youngs_modulus, shear_modulus),
 ``interaction.A.B.FIELD`` (any :class:`~warpdem.engine.materials.Interaction` field; a factor only the numeric
 ones of ``materials.INTERACTION_SCALARS``), ``run.FIELD``, ``measure.FIELD`` and ``factory.NAME.FIELD``
 (``[fixed]`` only), and any other key is a rig parameter (with ``rig``, checked against the rig's
@@ -99,6 +100,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -117,7 +119,8 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli ba
     import tomli as tomllib
 
 from warpdem.engine.checks import did_you_mean, finite_number, is_number, not_allowed
-from warpdem.engine.materials import INTERACTION_FIELDS, INTERACTION_SCALARS, MATERIAL_SCALARS
+from warpdem.engine.keys import PER_WORLD, KeyGrammar
+from warpdem.engine.materials import INTERACTION_SCALARS
 
 from . import designs
 from .analysis import model_terms
@@ -177,8 +180,6 @@ MEASURES = (
 )
 """Scalar metric keys that :func:`warpdem.scene.runner.run_scene` writes per world (``metrics.json``)."""
 
-_MEASURE_FIELDS = ("base_height", "force_limit", "backstop_height")
-_FACTORY_FIELDS = ("count", "mass", "rate", "mass_rate", "start_time", "seed", "interval")
 _POINT_TYPE = {"factorial": "factorial", "axial": "axial", "center": "centre"}
 _RESERVED = {"run", "std_order", "point_type", "replicate", "world_seed", "point_id", "kind", "run_order"}
 _NAME_RE = re.compile(r"^[a-z0-9_]+$")
@@ -189,12 +190,6 @@ _DIGITS = 12  # significant digits of actual values in the table and in point id
 # --------------------------------------------------------------------------------------------------
 # helpers
 # --------------------------------------------------------------------------------------------------
-
-
-def _run_fields():
-    from warpdem.scene.stage import RUN_FIELDS
-
-    return tuple(RUN_FIELDS)
 
 
 def _rigs():
@@ -278,56 +273,27 @@ def _rig_fields(rig: str | None) -> dict[str, dataclasses.Field]:
     return {f.name: f for f in dataclasses.fields(_rigs().RIGS[rig])}
 
 
-def _key_problem(key: str, rig: str | None, factor: bool) -> str | None:
-    """Why ``key`` is not an override key (None when it is one). ``factor``: it must be a numeric scalar."""
-    if not isinstance(key, str) or not key:
-        return "a non-empty string"
-    parts = key.split(".")
-    head = parts[0]
-    scalars = INTERACTION_SCALARS if factor else INTERACTION_FIELDS
-    keyed = "material.NAME.FIELD, interaction.A.B.FIELD, run.FIELD" + (
-        "" if factor else ", measure.FIELD, factory.NAME.FIELD"
-    )
-    forms = keyed + " or a rig parameter"
-    if len(parts) == 1:
-        if rig is not None:
-            rf = _rig_fields(rig)
-            if key not in rf:
-                return f"a {rig} parameter{did_you_mean(key, rf)} ({', '.join(rf)}) or one of {keyed}"
-            if factor:
-                d = rf[key].default
-                if isinstance(d, (bool, str)):
-                    return f"a numeric {rig} parameter ({key} is {type(d).__name__})"
-        return None
-    if head == "material":
-        if len(parts) != 3 or not all(parts):
-            return f"material.NAME.FIELD (one of {forms})"
-        if parts[2] not in MATERIAL_SCALARS:
-            return f"a material field: {', '.join(MATERIAL_SCALARS)}{did_you_mean(parts[2], MATERIAL_SCALARS)}"
-        return None
-    if head == "interaction":
-        if len(parts) != 4 or not all(parts):
-            return f"interaction.A.B.FIELD with two material names (one of {forms})"
-        if parts[3] not in scalars:
-            what = "a numeric interaction field" if factor else "an interaction field"
-            return f"{what}: {', '.join(scalars)}{did_you_mean(parts[3], scalars)}"
-        return None
-    if head == "run":
-        fields_ = _run_fields()
-        if len(parts) != 2 or parts[1] not in fields_:
-            return f"run.FIELD with FIELD one of {', '.join(fields_)}" + (
-                did_you_mean(parts[1], fields_) if len(parts) == 2 else ""
-            )
-        return None
-    if head in ("measure", "factory"):
-        if factor:
-            return f"a numeric scalar: {forms}"
-        if head == "measure" and (len(parts) != 2 or parts[1] not in _MEASURE_FIELDS):
-            return f"measure.FIELD with FIELD one of {', '.join(_MEASURE_FIELDS)}"
-        if head == "factory" and (len(parts) != 3 or not parts[1] or parts[2] not in _FACTORY_FIELDS):
-            return f"factory.NAME.FIELD with FIELD one of {', '.join(_FACTORY_FIELDS)}"
-        return None
-    return f"one of {forms}" + did_you_mean(head, ("material", "interaction", "run", "measure", "factory"))
+@functools.cache
+def _grammar(rig: str | None, factor: bool) -> KeyGrammar:
+    """The override keys of a study on ``rig`` (None: rig parameters not checked): the scene's
+    (:data:`warpdem.scene.stage.OVERRIDES`) and the rig's parameters; for a ``factor`` only numbers: material
+    and numeric interaction fields, run settings and numeric rig parameters."""
+    from warpdem.scene.stage import OVERRIDES
+
+    fields = dict(OVERRIDES.fields)
+    labels = {}
+    if factor:
+        fields = {k: fields[k] for k in ("material", "run")} | {"interaction": INTERACTION_SCALARS}
+        labels["interaction"] = "a numeric interaction field"
+    fields["rig"] = None
+    if rig is not None:
+        rf = _rig_fields(rig)
+        words = [k for k, f in rf.items() if isinstance(f.default, (bool, str))]
+        fields["rig"] = tuple(k for k in rf if not (factor and k in words))
+        labels["rig"] = (
+            f"a numeric {rig} parameter ({', '.join(words)} are not numbers)" if factor else f"a {rig} parameter"
+        )
+    return KeyGrammar(fields, labels)
 
 
 def is_rig_key(key: str) -> bool:
@@ -338,12 +304,7 @@ def is_rig_key(key: str) -> bool:
 def varies_per_world(key: str) -> bool:
     """True when override ``key`` can differ between the batched worlds of one launch: a
     ``material.NAME.FIELD`` or ``interaction.A.B.FIELD`` scalar (:meth:`ModelBuilder.vary`)."""
-    parts = key.split(".")
-    if parts[0] == "material":
-        return len(parts) == 3 and parts[2] in MATERIAL_SCALARS
-    if parts[0] == "interaction":
-        return len(parts) == 4 and parts[3] in INTERACTION_SCALARS
-    return False
+    return PER_WORLD.accepts(key)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -374,9 +335,7 @@ class FactorSpec:
                 self.name,
                 f"a name that is not a design-table column ({', '.join(sorted(_RESERVED))}, *_actual)",
             )
-        problem = _key_problem(self.parameter, None, factor=True)
-        if problem:
-            raise _bad(where, "parameter", self.parameter, problem)
+        _grammar(None, True).parse(self.parameter, where, "parameter", error=StudyError)
         low = _number(where, "low", self.low)
         high = _number(where, "high", self.high)
         if low == high:
@@ -669,9 +628,7 @@ class StudySpec:
         if not isinstance(self.fixed, Mapping):
             raise _bad("[fixed]", "fixed", self.fixed, "a table of overrides")
         for k, v in self.fixed.items():
-            problem = _key_problem(k, self.rig, factor=False)
-            if problem:
-                raise _bad("[fixed]", "key", k, problem)
+            _grammar(self.rig, False).parse(k, "[fixed]", error=StudyError)
             if not isinstance(v, (str, bool, int, float)) or (is_number(v) and not math.isfinite(v)):
                 raise _bad("[fixed]", k, v, "a string, a boolean or a finite number")
         set_("fixed", FrozenMap(self.fixed))
@@ -694,9 +651,7 @@ class StudySpec:
                     f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; factor "
                     f"{other!r} already sets it, expected one factor per parameter"
                 )
-            problem = _key_problem(f.parameter, self.rig, factor=True)
-            if problem:
-                raise _bad(f"[[factors]] {f.name!r}", "parameter", f.parameter, problem)
+            _grammar(self.rig, True).parse(f.parameter, f"[[factors]] {f.name!r}", "parameter", error=StudyError)
             if f.parameter in self.fixed:
                 raise StudyError(
                     f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; [fixed] sets "
