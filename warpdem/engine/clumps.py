@@ -692,18 +692,7 @@ class ClumpTemplate:
         return cls(name, body, r, volume, moments, volume_target, error, rot, com)
 
     @classmethod
-    def from_box(
-        cls,
-        name: str,
-        size,
-        *,
-        cells=30,
-        min_radius: float | None = None,
-        smoothing: float = 1.0,
-        overlap: float | None = None,
-        sphere_count: int | None = None,
-        resolution: int = 8,
-    ) -> ClumpTemplate:
+    def from_box(cls, name: str, size, **fill) -> ClumpTemplate:
         """Auto-fill a box of edge lengths ``size`` = (a, b, c) [m], centred at the origin, with spheres.
 
         Algorithm (after EDEM's "generate particle from template": spheres on a grid, then an
@@ -735,6 +724,8 @@ class ClumpTemplate:
         Args:
             name: template name.
             size: box edge lengths (a, b, c) [m], each > 0.
+
+        Keyword arguments (``fill``, the same for :meth:`from_mesh`):
             cells: grid cells per axis, an int or three ints, each >= 4.
             min_radius: smallest sphere radius [m]; default: the smallest cell edge.
             smoothing: tolerance depth in half cells, > 0 (see step 3).
@@ -749,34 +740,18 @@ class ClumpTemplate:
         allowed = "three finite edge lengths > 0 m"
         size_a = float_array(where, "size", size, allowed).reshape(-1)
         check(size_a.shape == (3,) and np.all(np.isfinite(size_a)) and np.all(size_a > 0), where, "size", size, allowed)
-        cells_a = _cells(cells, where)
-        fld = _box_field(size_a, cells_a)
-        return cls._fill(
-            name, fld, float(np.prod(size_a)), min_radius, smoothing, overlap, sphere_count, resolution, where
-        )
+        return cls._fill(name, where, lambda cells: _box_field(size_a, cells), float(np.prod(size_a)), **fill)
 
     @classmethod
-    def from_mesh(
-        cls,
-        name: str,
-        vertices,
-        faces,
-        *,
-        cells=30,
-        min_radius: float | None = None,
-        smoothing: float = 1.0,
-        overlap: float | None = None,
-        sphere_count: int | None = None,
-        resolution: int = 8,
-    ) -> ClumpTemplate:
+    def from_mesh(cls, name: str, vertices, faces, **fill) -> ClumpTemplate:
         """Auto-fill a closed triangle mesh with spheres (an STL or CAD particle template).
 
         The mesh must be closed: every edge shared by exactly two triangles, consistently oriented
         (either way round: inward normals are flipped). Inside means a generalised winding number
         above 1/2; depth is the exact point-triangle distance (both vectorised, O(cells^3 x F), in
-        bounded chunks). The fill is that of :meth:`from_box` (same arguments); ``volume_target``
-        is the mesh's enclosed volume and the result is in the principal frame of the union, with
-        ``body_from_input`` and ``input_com`` relating it to the mesh's frame.
+        bounded chunks). The fill is that of :meth:`from_box` (the same keyword arguments ``fill``);
+        ``volume_target`` is the mesh's enclosed volume and the result is in the principal frame of the
+        union, with ``body_from_input`` and ``input_com`` relating it to the mesh's frame.
 
         Args:
             name: template name.
@@ -785,12 +760,26 @@ class ClumpTemplate:
         """
         where = f"ClumpTemplate.from_mesh {name!r}"
         v, f = _validate_mesh(vertices, faces, where)
-        cells_a = _cells(cells, where)
-        fld = _mesh_field(v, f, cells_a)
-        return cls._fill(name, fld, _mesh_volume(v, f), min_radius, smoothing, overlap, sphere_count, resolution, where)
+        return cls._fill(name, where, lambda cells: _mesh_field(v, f, cells), _mesh_volume(v, f), **fill)
 
     @classmethod
-    def _fill(cls, name, fld, volume_target, min_radius, smoothing, overlap, sphere_count, resolution, where):
+    def _fill(
+        cls,
+        name: str,
+        where: str,
+        field_of,
+        volume_target: float,
+        *,
+        cells=30,
+        min_radius: float | None = None,
+        smoothing: float = 1.0,
+        overlap: float | None = None,
+        sphere_count: int | None = None,
+        resolution: int = 8,
+    ) -> ClumpTemplate:
+        """The auto-fill of :meth:`from_box` and :meth:`from_mesh` (their keyword arguments): ``field_of(cells)``
+        samples the shape on the grid, ``volume_target`` [m^3] is the shape's volume."""
+        fld = field_of(_cells(cells, where))
         h = float(fld.cell.min())
         if min_radius is None:
             min_radius = h
