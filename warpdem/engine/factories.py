@@ -651,6 +651,14 @@ class _Frustum:
     base_center: tuple
     axis: tuple
 
+    def _check_frame(self) -> str:
+        """Check and normalise ``base_center``, ``axis`` and ``height``; returns the class name for messages."""
+        where = type(self).__name__
+        object.__setattr__(self, "base_center", vec3(where, "base_center", self.base_center))
+        object.__setattr__(self, "axis", _unit_axis(where, self.axis))
+        object.__setattr__(self, "height", positive(where, "height", self.height, "a height > 0 m"))
+        return where
+
     def _radii_height(self) -> tuple[float, float, float]:
         raise NotImplementedError  # pragma: no cover
 
@@ -763,11 +771,8 @@ class Cylinder(_Frustum):
     height: float
 
     def __post_init__(self):
-        where = "Cylinder"
-        object.__setattr__(self, "base_center", vec3(where, "base_center", self.base_center))
-        object.__setattr__(self, "axis", _unit_axis(where, self.axis))
+        where = self._check_frame()
         object.__setattr__(self, "radius", positive(where, "radius", self.radius, "a radius > 0 m"))
-        object.__setattr__(self, "height", positive(where, "height", self.height, "a height > 0 m"))
 
     def _radii_height(self):
         return self.radius, self.radius, self.height
@@ -802,9 +807,7 @@ class Cone(_Frustum):
     height: float
 
     def __post_init__(self):
-        where = "Cone"
-        object.__setattr__(self, "base_center", vec3(where, "base_center", self.base_center))
-        object.__setattr__(self, "axis", _unit_axis(where, self.axis))
+        where = self._check_frame()
         for name in ("base_radius", "top_radius"):
             value = getattr(self, name)
             check_number(where, name, value, lambda v: v >= 0.0, "a radius >= 0 m")
@@ -816,7 +819,6 @@ class Cone(_Frustum):
             self.top_radius,
             "a radius > 0 m when base_radius is 0",
         )
-        object.__setattr__(self, "height", positive(where, "height", self.height, "a height > 0 m"))
 
     def _radii_height(self):
         return self.base_radius, self.top_radius, self.height
