@@ -26,35 +26,38 @@ from dataclasses import dataclass, field
 from .checks import did_you_mean, fail
 from .materials import INTERACTION_SCALARS, MATERIAL_SCALARS
 
-FORMS = {
-    "material": "material.NAME.FIELD",
-    "interaction": "interaction.A.B.FIELD",
-    "run": "run.FIELD",
-    "measure": "measure.FIELD",
-    "factory": "factory.NAME.FIELD",
-    "gravity": "gravity",
-    "rig": "a rig parameter",
+
+@dataclass(frozen=True)
+class KeyKind:
+    """One kind of key: how it is written (``form``), what messages call its FIELDs (``label``) and what
+    its NAME parts name (``names``: "material", "factory"; none for most kinds)."""
+
+    form: str
+    label: str = ""
+    names: tuple[str, ...] = ()
+
+    @property
+    def dotted(self) -> bool:
+        return "." in self.form
+
+
+KINDS = {
+    "material": KeyKind("material.NAME.FIELD", "a material field", ("material",)),
+    "interaction": KeyKind("interaction.A.B.FIELD", "an interaction field", ("material", "material")),
+    "run": KeyKind("run.FIELD", "a run setting"),
+    "measure": KeyKind("measure.FIELD", "a measurement setting"),
+    "factory": KeyKind("factory.NAME.FIELD", "a factory setting", ("factory",)),
+    "gravity": KeyKind("gravity"),
+    "rig": KeyKind("a rig parameter", "a rig parameter"),
 }
-"""Every kind of key and how it is written, in the order messages list them."""
+"""Every kind of key, in the order messages list them."""
 
-NAMES = {"material": ("material",), "interaction": ("material", "material"), "factory": ("factory",)}
-"""What the NAME parts of a dotted key name, per kind (the other kinds have none)."""
-
-_DOTTED = ("material", "interaction", "run", "measure", "factory")
-
-_LABELS = {
-    "material": "a material field",
-    "interaction": "an interaction field",
-    "run": "a run setting",
-    "measure": "a measurement setting",
-    "factory": "a factory setting",
-    "rig": "a rig parameter",
-}
+_DOTTED = tuple(k for k, kind in KINDS.items() if kind.dotted)
 
 
 @dataclass(frozen=True)
 class OverrideKey:
-    """A key read by :meth:`KeyGrammar.parse`: its ``kind`` (a key of :data:`FORMS`), the ``names`` it
+    """A key read by :meth:`KeyGrammar.parse`: its ``kind`` (a key of :data:`KINDS`), the ``names`` it
     addresses (one material, two materials, a factory, or none) and the ``field`` it sets (the parameter for
     a rig key, "" for gravity). ``str()`` gives the key back."""
 
@@ -75,7 +78,7 @@ class KeyGrammar:
     """The keys one caller takes.
 
     Attributes:
-        fields: kind (a key of :data:`FORMS`) -> the FIELDs allowed for it; for "rig" the parameter names,
+        fields: kind (a key of :data:`KINDS`) -> the FIELDs allowed for it; for "rig" the parameter names,
             or None to take any word without a dot (a rig not known yet); for "gravity" an empty tuple.
             Kinds not in it are refused.
         labels: what a message calls the FIELDs of a kind, where the default ("an interaction field", ...)
@@ -108,7 +111,7 @@ class KeyGrammar:
 
     def forms(self, kinds=None) -> str:
         """How the keys of ``kinds`` (default: all this grammar takes) are written, "a, b or c"."""
-        words = [FORMS[k] for k in FORMS if k in self.fields and (kinds is None or k in kinds)]
+        words = [kind.form for k, kind in KINDS.items() if k in self.fields and (kinds is None or k in kinds)]
         return ", ".join(words[:-1]) + " or " + words[-1] if len(words) > 1 else "".join(words)
 
     def _read(self, key, defined) -> tuple[OverrideKey | None, str]:
@@ -124,10 +127,10 @@ class KeyGrammar:
             return None, f"one of {self.forms()}{did_you_mean(key, [k for k in self.fields if k not in _DOTTED])}"
         if head not in _DOTTED or head not in self.fields:
             return None, f"one of {self.forms()}{did_you_mean(head, [k for k in _DOTTED if k in self.fields])}"
-        kinds = NAMES.get(head, ())
-        if len(rest) != len(kinds) + 1 or not all(rest):
-            return None, f"{FORMS[head]} (one of {self.forms()})"
-        for kind, word in zip(kinds, rest):
+        named = KINDS[head].names
+        if len(rest) != len(named) + 1 or not all(rest):
+            return None, f"{KINDS[head].form} (one of {self.forms()})"
+        for kind, word in zip(named, rest):
             known = defined.get(kind)
             if known is not None and word not in known:
                 return None, (
@@ -140,7 +143,7 @@ class KeyGrammar:
         allowed = self.fields[kind]
         if allowed is None or word in allowed:
             return OverrideKey(kind, names, word), ""
-        text = f"{self.labels.get(kind, _LABELS[kind])}: {', '.join(allowed)}{did_you_mean(word, allowed)}"
+        text = f"{self.labels.get(kind, KINDS[kind].label)}: {', '.join(allowed)}{did_you_mean(word, allowed)}"
         if kind == "rig":
             text += f"; or one of {self.forms(_DOTTED)}"
         return None, text
