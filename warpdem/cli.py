@@ -284,6 +284,10 @@ def _add_wall_time_options(parser, checkpoint: str, stop_after: str) -> None:
 
 
 def main(argv=None) -> int:
+    from .engine.keys import KeyGrammar
+    from .scene import rigs
+    from .scene.stage import OVERRIDES
+
     p = argparse.ArgumentParser(prog="warpdem", description="DEM on NVIDIA Warp")
     sub = p.add_subparsers(dest="command", required=True)
     v = sub.add_parser("verify", help="run the analytic verification cases")
@@ -310,8 +314,8 @@ def main(argv=None) -> int:
         "--set",
         action="append",
         metavar="NAME=VALUE",
-        help="override: material.NAME.FIELD, interaction.A.B.FIELD, run.FIELD, measure.FIELD, "
-        "factory.NAME.FIELD, or a rig parameter (regenerates the scene)",
+        help=f"override: {KeyGrammar({**OVERRIDES.fields, 'rig': None}).forms()} (a rig parameter regenerates "
+        "the scene)",
     )
     r.add_argument("--device", default="cpu")
     r.add_argument("--out", help="output folder (default runs/RIG)")
@@ -348,7 +352,7 @@ def main(argv=None) -> int:
     sc = sub.add_parser("scene", help="author scenes")
     scs = sc.add_subparsers(dest="scene_command", required=True)
     sn = scs.add_parser("new", help="write a rig's stage from parameters")
-    sn.add_argument("rig", choices=["funnel", "lifting_cylinder", "die_press", "truck_tipper"])
+    sn.add_argument("rig", choices=list(rigs.RIGS))
     sn.add_argument("--set", action="append", metavar="NAME=VALUE", help="rig parameter")
     sn.add_argument("--smoke", action="store_true", help="start from the CPU smoke-test size")
     sn.add_argument("-o", "--output", required=True)
