@@ -82,6 +82,14 @@ def positive(where: str, name: str, value, allowed: str = "a finite value > 0") 
     return check_number(where, name, value, lambda v: v > 0.0, allowed)
 
 
+def integer(where: str, name: str, value, minimum: int, allowed: str = "") -> int:
+    """``int(value)``, refused unless ``value`` is an integer (not a bool) >= ``minimum``; ``allowed``
+    defaults to "an integer >= minimum"."""
+    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= minimum
+    check(ok, where, name, value, allowed or f"an integer >= {minimum}")
+    return int(value)
+
+
 def finite_number(
     where: str, name: str, value, allowed: str = "a finite number", error: type[ValueError] = ValueError
 ) -> float:

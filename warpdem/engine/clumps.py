@@ -24,9 +24,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .checks import check, check_number, fail, float_array, positive, readonly
+from .checks import check, check_number, fail, float_array, integer, positive, readonly
 
 _FOUR_THIRDS_PI = 4.0 * math.pi / 3.0
+_RESOLUTION = "an integer >= 2 (grid cells per smallest radius)"
 
 
 def _as_spheres(
@@ -129,20 +130,8 @@ def union_volume_properties(
     """
     where = "union_volume_properties"
     c, r = _as_spheres(offsets, radii, where, "offsets", "radii")
-    check(
-        isinstance(resolution, (int, np.integer)) and resolution >= 2,
-        where,
-        "resolution",
-        resolution,
-        "an integer >= 2 (grid cells per smallest radius)",
-    )
-    check(
-        isinstance(max_intervals, (int, np.integer)) and max_intervals >= 1000,
-        where,
-        "max_intervals",
-        max_intervals,
-        "an integer >= 1000",
-    )
+    integer(where, "resolution", resolution, 2, _RESOLUTION)
+    integer(where, "max_intervals", max_intervals, 1000)
     if len(r) == 1:
         volume = _FOUR_THIRDS_PI * r[0] ** 3
         return float(volume), c[0].copy(), 0.4 * volume * r[0] ** 2 * np.eye(3)
@@ -790,20 +779,8 @@ class ClumpTemplate:
             allowed = f"None or a reach in grid cells > -min_radius / (2 h) = {least:.6g}"
             overlap = check_number(where, "overlap", overlap, lambda v: v > least, allowed)
         if sphere_count is not None:
-            check(
-                isinstance(sphere_count, (int, np.integer)) and sphere_count >= 1,
-                where,
-                "sphere_count",
-                sphere_count,
-                "None or an integer >= 1",
-            )
-        check(
-            isinstance(resolution, (int, np.integer)) and resolution >= 2,
-            where,
-            "resolution",
-            resolution,
-            "an integer >= 2 (grid cells per smallest radius)",
-        )
+            integer(where, "sphere_count", sphere_count, 1, "None or an integer >= 1")
+        integer(where, "resolution", resolution, 2, _RESOLUTION)
         centre, inscribed, reach, h = _autofill(fld, min_radius, smoothing, overlap, sphere_count, where)
         if overlap is None:
             reach, props = _match_volume(centre, inscribed, reach, volume_target, resolution, h)

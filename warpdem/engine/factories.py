@@ -26,7 +26,7 @@ import numpy as np
 from scipy import special, stats
 from scipy.spatial import cKDTree
 
-from .checks import check, check_number, enum_value, float_array, is_finite, positive, vec3
+from .checks import check, check_number, enum_value, float_array, integer, is_finite, positive, vec3
 
 RSA_SATURATION = 0.38
 """Jamming volume fraction of random sequential addition of equal spheres in bulk [-] (0.3841,
@@ -45,9 +45,7 @@ def _rng(rng) -> np.random.Generator:
 
 
 def _count(where: str, name: str, value) -> int:
-    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool) and int(value) >= 0
-    check(ok, where, name, value, "an integer >= 0")
-    return int(value)
+    return integer(where, name, value, 0)
 
 
 def _points(points) -> np.ndarray:
@@ -1129,14 +1127,8 @@ def fill_region(
     """
     where = "fill_region"
     _check_region_sizes(where, region, sizes)
-    check(isinstance(rng_seed, (int, np.integer)) and rng_seed >= 0, where, "rng_seed", rng_seed, "an integer >= 0")
-    check(
-        isinstance(max_attempts, (int, np.integer)) and max_attempts >= 1,
-        where,
-        "max_attempts",
-        max_attempts,
-        "an integer >= 1",
-    )
+    integer(where, "rng_seed", rng_seed, 0)
+    integer(where, "max_attempts", max_attempts, 1)
     check_number(where, "bounding_ratio", bounding_ratio, lambda v: v >= 1.0, "a ratio >= 1")
     ex_x, ex_r = _check_existing(where, existing_x, existing_r)
     r = _sizes_for(where, sizes, _stream(rng_seed, _SIZES), count, mass, density)
@@ -1239,16 +1231,10 @@ class DynamicFactory:
         elif self.density is not None:
             object.__setattr__(self, "density", positive(where, "density", self.density, "a density > 0 kg/m^3"))
         check_number(where, "start_time", self.start_time, lambda v: v >= 0.0, "a time >= 0 s")
-        check(isinstance(self.seed, (int, np.integer)) and self.seed >= 0, where, "seed", self.seed, "an integer >= 0")
+        integer(where, "seed", self.seed, 0)
         object.__setattr__(self, "initial_velocity", vec3(where, "initial_velocity", self.initial_velocity))
         check_number(where, "bounding_ratio", self.bounding_ratio, lambda v: v >= 1.0, "a ratio >= 1")
-        check(
-            isinstance(self.max_attempts, (int, np.integer)) and self.max_attempts >= 1,
-            where,
-            "max_attempts",
-            self.max_attempts,
-            "an integer >= 1",
-        )
+        integer(where, "max_attempts", self.max_attempts, 1)
         radii = _sizes_for(where, self.sizes, _stream(self.seed, _SIZES), self.count, self.mass, self.density)
         radii.setflags(write=False)
         _check_fits(where, self.region, self.bounding_ratio * radii)
