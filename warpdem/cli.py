@@ -276,7 +276,18 @@ def cmd_scene(args) -> int:
     return 0
 
 
+def _add_wall_time_options(parser, checkpoint: str, stop_after: str) -> None:
+    """--checkpoint (default every 60 s of wall time) and --stop-after (default no limit), in seconds, with the
+    command's own help texts."""
+    parser.add_argument("--checkpoint", type=float, default=60.0, metavar="SECONDS", help=checkpoint)
+    parser.add_argument("--stop-after", type=float, default=0.0, metavar="SECONDS", help=stop_after)
+
+
 def main(argv=None) -> int:
+    from .engine.keys import KeyGrammar
+    from .scene import rigs
+    from .scene.stage import OVERRIDES
+
     p = argparse.ArgumentParser(prog="warpdem", description="DEM on NVIDIA Warp")
     sub = p.add_subparsers(dest="command", required=True)
     v = sub.add_parser("verify", help="run the analytic verification cases")
@@ -303,26 +314,17 @@ def main(argv=None) -> int:
         "--set",
         action="append",
         metavar="NAME=VALUE",
-        help="override: material.NAME.FIELD, interaction.A.B.FIELD, run.FIELD, measure.FIELD, "
-        "factory.NAME.FIELD, or a rig parameter (regenerates the scene)",
+        help=f"override: {KeyGrammar({**OVERRIDES.fields, 'rig': None}).forms()} (a rig parameter regenerates "
+        "the scene)",
     )
     r.add_argument("--device", default="cpu")
     r.add_argument("--out", help="output folder (default runs/RIG)")
     r.add_argument("--no-frames", action="store_true", help="skip the time-sampled USD and VTK")
-    r.add_argument(
-        "--checkpoint",
-        type=float,
-        default=60.0,
-        metavar="SECONDS",
-        help="with --no-frames: save the run's state every SECONDS of wall time to DIR/checkpoint.npz; "
+    _add_wall_time_options(
+        r,
+        checkpoint="with --no-frames: save the run's state every SECONDS of wall time to DIR/checkpoint.npz; "
         "the same command resumes from it (default 60, 0: never)",
-    )
-    r.add_argument(
-        "--stop-after",
-        type=float,
-        default=0.0,
-        metavar="SECONDS",
-        help="with --no-frames: stop by itself after SECONDS of wall time, saving a checkpoint "
+        stop_after="with --no-frames: stop by itself after SECONDS of wall time, saving a checkpoint "
         "(exit code 3); the same command resumes (0: no limit)",
     )
     r.set_defaults(fn=cmd_run)
@@ -337,19 +339,10 @@ def main(argv=None) -> int:
     st.add_argument("--out", help="output folder (default runs/NAME); rerunning resumes it")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
     st.add_argument("--no-verify", action="store_true", help="skip the verification runs at the optimum")
-    st.add_argument(
-        "--checkpoint",
-        type=float,
-        default=60.0,
-        metavar="SECONDS",
-        help="save each launch's state every SECONDS of wall time (0: never); a rerun resumes from it",
-    )
-    st.add_argument(
-        "--stop-after",
-        type=float,
-        default=0.0,
-        metavar="SECONDS",
-        help="stop by itself after SECONDS of wall time, saving the running launch's checkpoint "
+    _add_wall_time_options(
+        st,
+        checkpoint="save each launch's state every SECONDS of wall time (0: never); a rerun resumes from it",
+        stop_after="stop by itself after SECONDS of wall time, saving the running launch's checkpoint "
         "(exit code 3); the same command resumes (0: no limit)",
     )
     st.set_defaults(fn=cmd_study)
@@ -359,7 +352,7 @@ def main(argv=None) -> int:
     sc = sub.add_parser("scene", help="author scenes")
     scs = sc.add_subparsers(dest="scene_command", required=True)
     sn = scs.add_parser("new", help="write a rig's stage from parameters")
-    sn.add_argument("rig", choices=["funnel", "lifting_cylinder", "die_press", "truck_tipper"])
+    sn.add_argument("rig", choices=list(rigs.RIGS))
     sn.add_argument("--set", action="append", metavar="NAME=VALUE", help="rig parameter")
     sn.add_argument("--smoke", action="store_true", help="start from the CPU smoke-test size")
     sn.add_argument("-o", "--output", required=True)

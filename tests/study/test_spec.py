@@ -354,6 +354,19 @@ replicates = 0
 
 _PB = 'kind = "plackett_burman"\nruns = 12'
 _FAC_B = 'name = "B"\nparameter = "interaction.grain.steel.static_friction"\nlow = 0.3\nhigh = 0.6'
+_FIXED = '"interaction.grain.grain.restitution" = 0.3'
+_B_PARAMETER = '"interaction.grain.steel.static_friction"\nlow = 0.3'
+
+
+def _fixed(case, line, *needles):
+    """A case replacing BASE's [fixed] override by ``line``; the message must name [fixed] and ``needles``."""
+    return (case, _FIXED, line, ["[fixed]", *needles])
+
+
+def _parameter_b(case, key, *needles):
+    """A case giving factor B the parameter ``key``; the message must name the factor and ``needles``."""
+    return (case, _B_PARAMETER, f'"{key}"\nlow = 0.3', ["[[factors]] 'B'", *needles])
+
 
 BAD = [
     # (id, old, new, substrings the message must contain)
@@ -366,54 +379,21 @@ BAD = [
     ("rig-and-scene", "smoke = true", 'smoke = true\nscene = "x.usda"', ["exactly one of rig"]),
     ("missing-scene", 'rig = "funnel"\nsmoke = true', 'scene = "nowhere/funnel.usda"', ["scene =", "does not exist"]),
     ("negative-seed", "seed = 1", "seed = -1", ["seed = -1", "integer >= 0"]),
-    (
-        "fixed-unknown-field",
-        '"interaction.grain.grain.restitution"',
-        '"interaction.grain.grain.restitutoin"',
-        ["[fixed]", "restitutoin", "did you mean 'restitution'"],
+    _fixed(
+        "fixed-unknown-field", _FIXED.replace("restitution", "restitutoin"), "restitutoin", "did you mean 'restitution'"
     ),
-    (
-        "fixed-unknown-rig-param",
-        '"interaction.grain.grain.restitution" = 0.3',
-        "partcle_radius = 0.003",
-        ["[fixed]", "partcle_radius", "did you mean 'particle_radius'"],
-    ),
-    (
+    _fixed("fixed-unknown-rig-param", "partcle_radius = 0.003", "partcle_radius", "did you mean 'particle_radius'"),
+    _fixed(
         "fixed-unknown-material",
-        '"interaction.grain.grain.restitution"',
-        '"interaction.grian.grain.restitution"',
-        ["[fixed]", "interaction.grian.grain.restitution", "material 'grian'"],
+        _FIXED.replace("grain.grain", "grian.grain"),
+        "interaction.grian.grain.restitution",
+        "material 'grian'",
     ),
-    (
-        "fixed-value-refused",
-        '"interaction.grain.grain.restitution" = 0.3',
-        '"interaction.grain.grain.restitution" = 1.5',
-        ["[fixed]", "restitution = 1.5", "(0, 1]"],
-    ),
-    (
-        "fixed-rig-value-refused",
-        '"interaction.grain.grain.restitution" = 0.3',
-        'material = "wood"',
-        ["[fixed]", "material = 'wood'", "pellet or feed"],
-    ),
-    (
-        "factor-key-form",
-        '"interaction.grain.steel.static_friction"\nlow = 0.3',
-        '"interaction.grain.static_friction"\nlow = 0.3',
-        ["[[factors]] 'B'", "parameter", "interaction.A.B.FIELD"],
-    ),
-    (
-        "factor-not-numeric",
-        '"interaction.grain.steel.static_friction"\nlow = 0.3',
-        '"interaction.grain.steel.law"\nlow = 0.3',
-        ["[[factors]] 'B'", "parameter", "numeric interaction field"],
-    ),
-    (
-        "factor-bool-rig-param",
-        '"interaction.grain.steel.static_friction"\nlow = 0.3',
-        '"particle"\nlow = 0.3',
-        ["[[factors]] 'B'", "numeric funnel parameter"],
-    ),
+    _fixed("fixed-value-refused", _FIXED.replace("0.3", "1.5"), "restitution = 1.5", "(0, 1]"),
+    _fixed("fixed-rig-value-refused", 'material = "wood"', "material = 'wood'", "pellet or feed"),
+    _parameter_b("factor-key-form", "interaction.grain.static_friction", "parameter", "interaction.A.B.FIELD"),
+    _parameter_b("factor-not-numeric", "interaction.grain.steel.law", "parameter", "numeric interaction field"),
+    _parameter_b("factor-bool-rig-param", "particle", "numeric funnel parameter"),
     (
         "factor-missing-key",
         _FAC_B,
@@ -422,15 +402,10 @@ BAD = [
     ),
     ("factor-unknown-key", _FAC_B, _FAC_B + '\nunits = "-"', ["[[factors]] #2 'B'", "did you mean 'unit'"]),
     ("duplicate-factor", 'name = "B"', 'name = "A"', ["[[factors]] 'A'", "unique factor names"]),
-    (
-        "duplicate-parameter",
-        '"interaction.grain.steel.static_friction"',
-        '"interaction.grain.grain.static_friction"',
-        ["[[factors]] 'B'", "already sets it"],
-    ),
+    _parameter_b("duplicate-parameter", "interaction.grain.grain.static_friction", "already sets it"),
     (
         "factor-also-fixed",
-        '"interaction.grain.grain.restitution" = 0.3',
+        _FIXED,
         '"interaction.grain.steel.static_friction" = 0.3',
         ["[[factors]] 'B'", "[fixed] sets it too"],
     ),

@@ -11,35 +11,17 @@ import warp as wp
 from warpdem.kernels.params import PairParams
 
 from . import analytic
+from .checks import vec3
+from .keys import VARY, OverrideKey
 from .materials import Interaction, InteractionTable, Material, pair_table
 from .motion import WallMotion
 from .types import ContactLaw, Model
 
+_GRAVITY = OverrideKey("gravity")
+
 GLUED_VOLUME = 1.0e12
 """Body volume [m^3] of a sphere glued to a wall: its mass exceeds any particle's by > 1e10, so a contact's
 reduced mass is the particle's to float32 precision, while products of masses stay finite in float32."""
-
-
-INTERACTION_SCALARS = (
-    "restitution",
-    "static_friction",
-    "rolling_friction",
-    "rolling_damping",
-    "surface_energy",
-    "pull_off_force",
-    "slope_exponent",
-    "plasticity_ratio",
-    "tensile_exponent",
-    "tangential_stiffness_multiplier",
-)
-"""Interaction fields that :meth:`ModelBuilder.vary` can set per world."""
-
-
-def _vec3(value, where: str, name: str) -> np.ndarray:
-    a = np.asarray(value, dtype=np.float64).reshape(-1)
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"{where}: {name} = {value!r} is not allowed; expected three finite numbers")
-    return a
 
 
 class ModelBuilder:
@@ -56,7 +38,7 @@ class ModelBuilder:
     """
 
     def __init__(self, gravity=(0.0, 0.0, -9.81)):
-        self.gravity = _vec3(gravity, "ModelBuilder", "gravity")
+        self.gravity = np.array(vec3("ModelBuilder", "gravity", gravity))
         self.materials: list[Material] = []
         self.interactions = InteractionTable()
         self._x, self._r, self._mat, self._v, self._w = [], [], [], [], []
@@ -427,8 +409,8 @@ class ModelBuilder:
 
     def add_plane(self, point, normal, material, world: int = -1) -> int:
         """Add an infinite plane through ``point`` [m] whose ``normal`` points to the particle side."""
-        p = _vec3(point, "add_plane", "point")
-        nrm = _vec3(normal, "add_plane", "normal")
+        p = np.array(vec3("add_plane", "point", point))
+        nrm = np.array(vec3("add_plane", "normal", normal))
         length = np.linalg.norm(nrm)
         if length == 0:
             raise ValueError("add_plane: normal = (0, 0, 0) is not allowed; expected a non-zero vector")
@@ -469,7 +451,7 @@ class ModelBuilder:
         """Simulation domain: the box from ``low`` to ``high`` ((x, y, z) [m]), the same in every world. A body
         (clump or free sphere) whose centre leaves it is removed at the next list rebuild and counted in
         ``State.world_removed``. Without a domain nothing is removed."""
-        lo, hi = _vec3(low, "set_domain", "low"), _vec3(high, "set_domain", "high")
+        lo, hi = np.array(vec3("set_domain", "low", low)), np.array(vec3("set_domain", "high", high))
         if not np.all(lo < hi):
             raise ValueError(
                 f"set_domain: low = {tuple(lo.tolist())} and high = {tuple(hi.tolist())} are not "
@@ -486,29 +468,15 @@ class ModelBuilder:
     def vary(self, target: str, values) -> None:
         """Give a scalar parameter one value per world.
 
-        ``target`` is ``material.NAME.FIELD`` (density, youngs_modulus, shear_modulus, poisson_ratio),
-        ``interaction.A.B.FIELD`` (any of ``INTERACTION_SCALARS``)
-        or ``gravity`` (values shape (world_count, 3)). Call after :meth:`replicate`.
+        ``target`` is ``material.NAME.FIELD`` (any of ``MATERIAL_SCALARS``), ``interaction.A.B.FIELD`` (any of
+        ``INTERACTION_SCALARS``) or ``gravity`` (values shape (world_count, 3)); see
+        :mod:`warpdem.engine.keys`. Call after :meth:`replicate`.
         """
         vals = list(values)
         if len(vals) != self.world_count:
             raise ValueError(f"vary {target!r}: {len(vals)} values given; expected world_count = {self.world_count}")
-        parts = target.split(".")
-        if parts[0] == "material" and len(parts) == 3:
-            self.material_index(parts[1])
-            if parts[2] not in ("density", "youngs_modulus", "shear_modulus", "poisson_ratio"):
-                raise ValueError(f"vary {target!r}: field {parts[2]!r} is not a material scalar")
-        elif parts[0] == "interaction" and len(parts) == 4:
-            self.material_index(parts[1])
-            self.material_index(parts[2])
-            if parts[3] not in INTERACTION_SCALARS:
-                raise ValueError(f"vary {target!r}: field {parts[3]!r} is not an interaction scalar")
-        elif parts != ["gravity"]:
-            raise ValueError(
-                f"vary: target = {target!r} is not allowed; expected material.NAME.FIELD, "
-                "interaction.A.B.FIELD or gravity"
-            )
-        self._variations[target] = vals
+        key = VARY.parse(target, "vary", "target", defined={"material": [m.name for m in self.materials]})
+        self._variations[key] = vals
 
     def seed_worlds(self, seeds) -> None:
         """Give each world its own placement seed for the dynamic factories (integers >= 0, one per world;
@@ -524,30 +492,20 @@ class ModelBuilder:
 
     def _world_tables(self):
         """Materials and interaction tables per world (length 1 when nothing varies)."""
-        varied = [t for t in self._variations if t != "gravity"]
+        varied = [key for key in self._variations if key != _GRAVITY]
         count = self.world_count if varied else 1
         mats_w, tables_w = [], []
         for w in range(count):
             mats = list(self.materials)
             table = InteractionTable(self.interactions.default, dict(self.interactions.pairs))
-            for target in varied:
-                parts = target.split(".")
-                value = float(self._variations[target][w])
-                if parts[0] == "material":
-                    k = self.material_index(parts[1])
-                    m = mats[k]
-                    changes = {parts[2]: value}
-                    # E and G are tied through nu: varying one re-derives the other
-                    if parts[2] == "youngs_modulus":
-                        changes["shear_modulus"] = None
-                    elif parts[2] == "shear_modulus":
-                        changes["youngs_modulus"] = None
-                    elif parts[2] == "poisson_ratio":
-                        changes["youngs_modulus"] = None
-                    mats[k] = dataclasses.replace(m, **changes)
+            for key in varied:
+                value = float(self._variations[key][w])
+                if key.kind == "material":
+                    k = self.material_index(key.names[0])
+                    mats[k] = mats[k].with_value(key.field, value)
                 else:
-                    a, b = parts[1], parts[2]
-                    table.set(a, b, table.get(a, b), **{parts[3]: value})
+                    a, b = key.names
+                    table.set(a, b, table.get(a, b), **{key.field: value})
             mats_w.append(mats)
             tables_w.append(table)
         return mats_w, tables_w
@@ -574,8 +532,8 @@ class ModelBuilder:
         mats_w, tables_w = self._world_tables()
         params = pair_table(mats_w, tables_w)
         density = np.array([[m.density for m in mats] for mats in mats_w], dtype=np.float32)
-        if "gravity" in self._variations:
-            gravity = np.asarray(self._variations["gravity"], dtype=np.float32).reshape(W, 3)
+        if _GRAVITY in self._variations:
+            gravity = np.asarray(self._variations[_GRAVITY], dtype=np.float32).reshape(W, 3)
         else:
             gravity = self.gravity.astype(np.float32).reshape(1, 3)
 

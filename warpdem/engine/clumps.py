@@ -24,40 +24,30 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .materials import _check, _finite
+from .checks import check, check_number, fail, float_array, integer, positive, readonly
 
 _FOUR_THIRDS_PI = 4.0 * math.pi / 3.0
-
-
-def _short(a: np.ndarray) -> str:
-    """A compact repr for error messages (arrays can be long)."""
-    return np.array2string(np.asarray(a), precision=6, threshold=12, separator=", ")
+_RESOLUTION = "an integer >= 2 (grid cells per smallest radius)"
 
 
 def _as_spheres(
     offsets, radii, where: str, offsets_name: str = "sphere_offset", radii_name: str = "sphere_radius"
 ) -> tuple[np.ndarray, np.ndarray]:
     """Validated float64 copies of sphere centres (n, 3) [m] and radii (n,) [m], n >= 1."""
-    try:
-        c = np.array(offsets, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{where}: {offsets_name} = {offsets!r} is not allowed; expected an (n, 3) array of numbers")
-    try:
-        r = np.array(radii, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{where}: {radii_name} = {radii!r} is not allowed; expected an (n,) array of numbers")
+    c = float_array(where, offsets_name, offsets, "an (n, 3) array of numbers")
+    r = float_array(where, radii_name, radii, "an (n,) array of numbers")
     if c.ndim == 1 and c.shape == (3,):
         c = c[None, :]
     r = np.atleast_1d(r)
-    _check(
+    check(
         c.ndim == 2 and c.shape[1] == 3 and c.shape[0] >= 1,
         where,
         offsets_name + ".shape",
         c.shape,
         "(n, 3) with n >= 1",
     )
-    _check(r.ndim == 1, where, radii_name + ".shape", r.shape, f"(n,) with n = {c.shape[0]} (one radius per sphere)")
-    _check(
+    check(r.ndim == 1, where, radii_name + ".shape", r.shape, f"(n,) with n = {c.shape[0]} (one radius per sphere)")
+    check(
         r.shape[0] == c.shape[0],
         where,
         radii_name + ".shape",
@@ -66,21 +56,11 @@ def _as_spheres(
     )
     bad = np.flatnonzero(~np.isfinite(c).all(axis=1))
     if bad.size:
-        raise ValueError(
-            f"{where}: {offsets_name}[{bad[0]}] = {_short(c[bad[0]])} is not allowed; expected finite coordinates in m"
-        )
+        fail(where, f"{offsets_name}[{bad[0]}]", c[bad[0]], "finite coordinates in m")
     bad = np.flatnonzero(~(np.isfinite(r) & (r > 0)))
     if bad.size:
-        raise ValueError(
-            f"{where}: {radii_name}[{bad[0]}] = {float(r[bad[0]])!r} is not allowed; expected a finite radius > 0 m"
-        )
+        fail(where, f"{radii_name}[{bad[0]}]", float(r[bad[0]]), "a finite radius > 0 m")
     return c, r
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, dtype=np.float64)
-    a.setflags(write=False)
-    return a
 
 
 # ---------------------------------------------------------------------------------------------
@@ -150,20 +130,8 @@ def union_volume_properties(
     """
     where = "union_volume_properties"
     c, r = _as_spheres(offsets, radii, where, "offsets", "radii")
-    _check(
-        isinstance(resolution, (int, np.integer)) and resolution >= 2,
-        where,
-        "resolution",
-        resolution,
-        "an integer >= 2 (grid cells per smallest radius)",
-    )
-    _check(
-        isinstance(max_intervals, (int, np.integer)) and max_intervals >= 1000,
-        where,
-        "max_intervals",
-        max_intervals,
-        "an integer >= 1000",
-    )
+    integer(where, "resolution", resolution, 2, _RESOLUTION)
+    integer(where, "max_intervals", max_intervals, 1000)
     if len(r) == 1:
         volume = _FOUR_THIRDS_PI * r[0] ** 3
         return float(volume), c[0].copy(), 0.4 * volume * r[0] ** 2 * np.eye(3)
@@ -305,31 +273,24 @@ def _box_field(size: np.ndarray, cells: np.ndarray) -> _Field:
 
 
 def _validate_mesh(vertices, faces, where: str) -> tuple[np.ndarray, np.ndarray]:
-    try:
-        v = np.array(vertices, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{where}: vertices = {vertices!r} is not allowed; expected a (V, 3) array of numbers")
-    _check(v.ndim == 2 and v.shape[1] == 3 and v.shape[0] >= 4, where, "vertices.shape", v.shape, "(V, 3) with V >= 4")
+    v = float_array(where, "vertices", vertices, "a (V, 3) array of numbers")
+    check(v.ndim == 2 and v.shape[1] == 3 and v.shape[0] >= 4, where, "vertices.shape", v.shape, "(V, 3) with V >= 4")
     bad = np.flatnonzero(~np.isfinite(v).all(axis=1))
     if bad.size:
-        raise ValueError(
-            f"{where}: vertices[{bad[0]}] = {_short(v[bad[0]])} is not allowed; expected finite coordinates in m"
-        )
+        fail(where, f"vertices[{bad[0]}]", v[bad[0]], "finite coordinates in m")
     f_in = np.asarray(faces)
-    _check(
+    check(
         f_in.ndim == 2 and f_in.shape[1] == 3 and f_in.shape[0] >= 4,
         where,
         "faces.shape",
         f_in.shape,
         "(F, 3) with F >= 4 (triangles)",
     )
-    _check(np.issubdtype(f_in.dtype, np.integer), where, "faces.dtype", f_in.dtype, "an integer dtype")
+    check(np.issubdtype(f_in.dtype, np.integer), where, "faces.dtype", f_in.dtype, "an integer dtype")
     f = f_in.astype(np.int64)
     bad = np.flatnonzero(((f < 0) | (f >= len(v))).any(axis=1))
     if bad.size:
-        raise ValueError(
-            f"{where}: faces[{bad[0]}] = {f[bad[0]].tolist()} is not allowed; expected vertex indices in [0, {len(v)})"
-        )
+        fail(where, f"faces[{bad[0]}]", f[bad[0]].tolist(), f"vertex indices in [0, {len(v)})")
     area2 = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
     scale = np.ptp(v, axis=0).max()
     bad = np.flatnonzero(area2 <= 1e-12 * scale * scale)
@@ -630,53 +591,40 @@ class ClumpTemplate:
 
     def __post_init__(self):
         where = f"ClumpTemplate {self.name!r}"
-        _check(isinstance(self.name, str) and self.name != "", where, "name", self.name, "a non-empty string")
+        check(isinstance(self.name, str) and self.name != "", where, "name", self.name, "a non-empty string")
         c, r = _as_spheres(self.sphere_offset, self.sphere_radius, where)
-        object.__setattr__(self, "sphere_offset", _readonly(c))
-        object.__setattr__(self, "sphere_radius", _readonly(r))
-        _check(_finite(self.volume) and float(self.volume) > 0, where, "volume", self.volume, "a volume > 0 m^3")
-        object.__setattr__(self, "volume", float(self.volume))
-        try:
-            inertia = np.array(self.inertia_unit, dtype=np.float64).reshape(-1)
-        except (TypeError, ValueError):
-            inertia = np.array([np.nan])
-        _check(
+        object.__setattr__(self, "sphere_offset", readonly(c))
+        object.__setattr__(self, "sphere_radius", readonly(r))
+        object.__setattr__(self, "volume", positive(where, "volume", self.volume, "a volume > 0 m^3"))
+        allowed = "three finite principal moments > 0 m^5"
+        inertia = float_array(where, "inertia_unit", self.inertia_unit, allowed).reshape(-1)
+        check(
             inertia.shape == (3,) and np.all(np.isfinite(inertia)) and np.all(inertia > 0),
             where,
             "inertia_unit",
             self.inertia_unit,
-            "three finite principal moments > 0 m^5",
+            allowed,
         )
-        _check(np.all(np.diff(inertia) >= 0), where, "inertia_unit", self.inertia_unit, "ascending moments")
+        check(np.all(np.diff(inertia) >= 0), where, "inertia_unit", self.inertia_unit, "ascending moments")
         # Any rigid body: each principal moment is at most the sum of the other two.
-        _check(
+        check(
             inertia[2] <= (inertia[0] + inertia[1]) * (1 + 1e-9),
             where,
             "inertia_unit",
             self.inertia_unit,
             "moments obeying the triangle inequality I3 <= I1 + I2",
         )
-        object.__setattr__(self, "inertia_unit", _readonly(inertia))
+        object.__setattr__(self, "inertia_unit", readonly(inertia))
         if self.volume_target is not None:
-            _check(
-                _finite(self.volume_target) and float(self.volume_target) > 0,
-                where,
-                "volume_target",
-                self.volume_target,
-                "a volume > 0 m^3 or None",
-            )
-            object.__setattr__(self, "volume_target", float(self.volume_target))
+            volume_target = positive(where, "volume_target", self.volume_target, "a volume > 0 m^3 or None")
+            object.__setattr__(self, "volume_target", volume_target)
         if self.volume_error is not None:
-            _check(
-                _finite(self.volume_error) and float(self.volume_error) > -1,
-                where,
-                "volume_error",
-                self.volume_error,
-                "a relative error > -1 or None",
+            error = check_number(
+                where, "volume_error", self.volume_error, lambda v: v > -1, "a relative error > -1 or None"
             )
-            object.__setattr__(self, "volume_error", float(self.volume_error))
+            object.__setattr__(self, "volume_error", error)
         rot = np.array(self.body_from_input, dtype=np.float64)
-        _check(
+        check(
             rot.shape == (3, 3)
             and np.all(np.isfinite(rot))
             and np.allclose(rot @ rot.T, np.eye(3), atol=1e-9)
@@ -686,16 +634,16 @@ class ClumpTemplate:
             self.body_from_input,
             "a proper rotation matrix, shape (3, 3)",
         )
-        object.__setattr__(self, "body_from_input", _readonly(rot))
+        object.__setattr__(self, "body_from_input", readonly(rot))
         com = np.array(self.input_com, dtype=np.float64).reshape(-1)
-        _check(
+        check(
             com.shape == (3,) and np.all(np.isfinite(com)),
             where,
             "input_com",
             self.input_com,
             "three finite coordinates in m",
         )
-        object.__setattr__(self, "input_com", _readonly(com))
+        object.__setattr__(self, "input_com", readonly(com))
 
     # -- construction -------------------------------------------------------------------------
     @classmethod
@@ -733,18 +681,7 @@ class ClumpTemplate:
         return cls(name, body, r, volume, moments, volume_target, error, rot, com)
 
     @classmethod
-    def from_box(
-        cls,
-        name: str,
-        size,
-        *,
-        cells=30,
-        min_radius: float | None = None,
-        smoothing: float = 1.0,
-        overlap: float | None = None,
-        sphere_count: int | None = None,
-        resolution: int = 8,
-    ) -> ClumpTemplate:
+    def from_box(cls, name: str, size, **fill) -> ClumpTemplate:
         """Auto-fill a box of edge lengths ``size`` = (a, b, c) [m], centred at the origin, with spheres.
 
         Algorithm (after EDEM's "generate particle from template": spheres on a grid, then an
@@ -776,6 +713,8 @@ class ClumpTemplate:
         Args:
             name: template name.
             size: box edge lengths (a, b, c) [m], each > 0.
+
+        Keyword arguments (``fill``, the same for :meth:`from_mesh`):
             cells: grid cells per axis, an int or three ints, each >= 4.
             min_radius: smallest sphere radius [m]; default: the smallest cell edge.
             smoothing: tolerance depth in half cells, > 0 (see step 3).
@@ -787,45 +726,21 @@ class ClumpTemplate:
                 the integration error (about 0.1 %) below that of the fill itself.
         """
         where = f"ClumpTemplate.from_box {name!r}"
-        try:
-            size_a = np.array(size, dtype=np.float64).reshape(-1)
-        except (TypeError, ValueError):
-            size_a = np.array([np.nan])
-        _check(
-            size_a.shape == (3,) and np.all(np.isfinite(size_a)) and np.all(size_a > 0),
-            where,
-            "size",
-            size,
-            "three finite edge lengths > 0 m",
-        )
-        cells_a = _cells(cells, where)
-        fld = _box_field(size_a, cells_a)
-        return cls._fill(
-            name, fld, float(np.prod(size_a)), min_radius, smoothing, overlap, sphere_count, resolution, where
-        )
+        allowed = "three finite edge lengths > 0 m"
+        size_a = float_array(where, "size", size, allowed).reshape(-1)
+        check(size_a.shape == (3,) and np.all(np.isfinite(size_a)) and np.all(size_a > 0), where, "size", size, allowed)
+        return cls._fill(name, where, lambda cells: _box_field(size_a, cells), float(np.prod(size_a)), **fill)
 
     @classmethod
-    def from_mesh(
-        cls,
-        name: str,
-        vertices,
-        faces,
-        *,
-        cells=30,
-        min_radius: float | None = None,
-        smoothing: float = 1.0,
-        overlap: float | None = None,
-        sphere_count: int | None = None,
-        resolution: int = 8,
-    ) -> ClumpTemplate:
+    def from_mesh(cls, name: str, vertices, faces, **fill) -> ClumpTemplate:
         """Auto-fill a closed triangle mesh with spheres (an STL or CAD particle template).
 
         The mesh must be closed: every edge shared by exactly two triangles, consistently oriented
         (either way round: inward normals are flipped). Inside means a generalised winding number
         above 1/2; depth is the exact point-triangle distance (both vectorised, O(cells^3 x F), in
-        bounded chunks). The fill is that of :meth:`from_box` (same arguments); ``volume_target``
-        is the mesh's enclosed volume and the result is in the principal frame of the union, with
-        ``body_from_input`` and ``input_com`` relating it to the mesh's frame.
+        bounded chunks). The fill is that of :meth:`from_box` (the same keyword arguments ``fill``);
+        ``volume_target`` is the mesh's enclosed volume and the result is in the principal frame of the
+        union, with ``body_from_input`` and ``input_com`` relating it to the mesh's frame.
 
         Args:
             name: template name.
@@ -834,49 +749,39 @@ class ClumpTemplate:
         """
         where = f"ClumpTemplate.from_mesh {name!r}"
         v, f = _validate_mesh(vertices, faces, where)
-        cells_a = _cells(cells, where)
-        fld = _mesh_field(v, f, cells_a)
-        return cls._fill(name, fld, _mesh_volume(v, f), min_radius, smoothing, overlap, sphere_count, resolution, where)
+        return cls._fill(name, where, lambda cells: _mesh_field(v, f, cells), _mesh_volume(v, f), **fill)
 
     @classmethod
-    def _fill(cls, name, fld, volume_target, min_radius, smoothing, overlap, sphere_count, resolution, where):
+    def _fill(
+        cls,
+        name: str,
+        where: str,
+        field_of,
+        volume_target: float,
+        *,
+        cells=30,
+        min_radius: float | None = None,
+        smoothing: float = 1.0,
+        overlap: float | None = None,
+        sphere_count: int | None = None,
+        resolution: int = 8,
+    ) -> ClumpTemplate:
+        """The auto-fill of :meth:`from_box` and :meth:`from_mesh` (their keyword arguments): ``field_of(cells)``
+        samples the shape on the grid, ``volume_target`` [m^3] is the shape's volume."""
+        fld = field_of(_cells(cells, where))
         h = float(fld.cell.min())
         if min_radius is None:
             min_radius = h
-        _check(_finite(min_radius) and float(min_radius) > 0, where, "min_radius", min_radius, "a radius > 0 m or None")
-        _check(
-            _finite(smoothing) and float(smoothing) > 0,
-            where,
-            "smoothing",
-            smoothing,
-            "a tolerance > 0 (in half grid cells)",
-        )
+        min_radius = positive(where, "min_radius", min_radius, "a radius > 0 m or None")
+        smoothing = positive(where, "smoothing", smoothing, "a tolerance > 0 (in half grid cells)")
         if overlap is not None:
-            _check(
-                _finite(overlap) and float(overlap) > -0.5 * float(min_radius) / h,
-                where,
-                "overlap",
-                overlap,
-                f"None or a reach in grid cells > -min_radius / (2 h) = {-0.5 * float(min_radius) / h:.6g}",
-            )
+            least = -0.5 * min_radius / h
+            allowed = f"None or a reach in grid cells > -min_radius / (2 h) = {least:.6g}"
+            overlap = check_number(where, "overlap", overlap, lambda v: v > least, allowed)
         if sphere_count is not None:
-            _check(
-                isinstance(sphere_count, (int, np.integer)) and sphere_count >= 1,
-                where,
-                "sphere_count",
-                sphere_count,
-                "None or an integer >= 1",
-            )
-        _check(
-            isinstance(resolution, (int, np.integer)) and resolution >= 2,
-            where,
-            "resolution",
-            resolution,
-            "an integer >= 2 (grid cells per smallest radius)",
-        )
-        centre, inscribed, reach, h = _autofill(
-            fld, float(min_radius), float(smoothing), None if overlap is None else float(overlap), sphere_count, where
-        )
+            integer(where, "sphere_count", sphere_count, 1, "None or an integer >= 1")
+        integer(where, "resolution", resolution, 2, _RESOLUTION)
+        centre, inscribed, reach, h = _autofill(fld, min_radius, smoothing, overlap, sphere_count, where)
         if overlap is None:
             reach, props = _match_volume(centre, inscribed, reach, volume_target, resolution, h)
         else:
@@ -911,38 +816,20 @@ class ClumpTemplate:
             self.sphere_offset - self.sphere_radius[:, None]
         ).min(axis=0)
 
+    def _density(self, density) -> float:
+        return positive(f"ClumpTemplate {self.name!r}", "density", density, "a density > 0 kg/m^3")
+
     def mass(self, density: float) -> float:
         """Mass [kg] of the union at particle density ``density`` [kg/m^3]."""
-        _check(
-            _finite(density) and float(density) > 0,
-            f"ClumpTemplate {self.name!r}",
-            "density",
-            density,
-            "a density > 0 kg/m^3",
-        )
-        return float(density) * self.volume
+        return self._density(density) * self.volume
 
     def inertia(self, density: float) -> np.ndarray:
         """Principal moments of inertia [kg m^2], shape (3,), at density ``density`` [kg/m^3]."""
-        _check(
-            _finite(density) and float(density) > 0,
-            f"ClumpTemplate {self.name!r}",
-            "density",
-            density,
-            "a density > 0 kg/m^3",
-        )
-        return float(density) * np.array(self.inertia_unit)
+        return self._density(density) * np.array(self.inertia_unit)
 
     def scaled(self, factor: float, name: str | None = None) -> ClumpTemplate:
         """The same shape scaled by ``factor`` > 0: lengths x s, volumes x s^3, inertia per density x s^5."""
-        _check(
-            _finite(factor) and float(factor) > 0,
-            f"ClumpTemplate {self.name!r}",
-            "factor",
-            factor,
-            "a scale factor > 0",
-        )
-        s = float(factor)
+        s = positive(f"ClumpTemplate {self.name!r}", "factor", factor, "a scale factor > 0")
         return ClumpTemplate(
             name or self.name,
             self.sphere_offset * s,
@@ -960,7 +847,7 @@ def _cells(cells, where: str) -> np.ndarray:
     a = np.asarray(cells)
     if a.ndim == 0:
         a = np.full(3, a)
-    _check(
+    check(
         a.shape == (3,) and np.issubdtype(a.dtype, np.integer) and np.all(a >= 4),
         where,
         "cells",

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .materials import _check, _finite
+from .checks import check, check_number, enum_value, float_array, integer, is_finite, positive, vec3
 
 RSA_SATURATION = 0.38
 """Jamming volume fraction of random sequential addition of equal spheres in bulk [-] (0.3841,
@@ -42,30 +42,8 @@ def _rng(rng) -> np.random.Generator:
     return np.random.default_rng(rng)
 
 
-def _positive(where: str, name: str, value, allowed: str = "a finite value > 0") -> float:
-    _check(_finite(value) and float(value) > 0.0, where, name, value, allowed)
-    return float(value)
-
-
-def _vec3(where: str, name: str, value) -> tuple[float, float, float]:
-    try:
-        a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        a = None
-    _check(
-        a is not None and a.shape == (3,) and bool(np.all(np.isfinite(a))),
-        where,
-        name,
-        value,
-        "3 finite numbers, shape (3,)",
-    )
-    return (float(a[0]), float(a[1]), float(a[2]))
-
-
 def _count(where: str, name: str, value) -> int:
-    ok = isinstance(value, (int, np.integer)) and not isinstance(value, bool) and int(value) >= 0
-    _check(ok, where, name, value, "an integer >= 0")
-    return int(value)
+    return integer(where, name, value, 0)
 
 
 def _points(points) -> np.ndarray:
@@ -79,7 +57,7 @@ def _points(points) -> np.ndarray:
 
 def _margins(where: str, margin, n: int) -> np.ndarray:
     m = np.asarray(margin, dtype=float)
-    _check(bool(np.all(np.isfinite(m))) and bool(np.all(m >= 0.0)), where, "margin", margin, "finite values >= 0 [m]")
+    check(bool(np.all(np.isfinite(m))) and bool(np.all(m >= 0.0)), where, "margin", margin, "finite values >= 0 [m]")
     return np.broadcast_to(m, (n,))
 
 
@@ -143,7 +121,7 @@ class FixedSize(_Moments):
     radius: float
 
     def __post_init__(self):
-        object.__setattr__(self, "radius", _positive("FixedSize", "radius", self.radius, "a radius > 0 m"))
+        object.__setattr__(self, "radius", positive("FixedSize", "radius", self.radius, "a radius > 0 m"))
 
     def sample(self, rng, count: int) -> np.ndarray:
         """Radii [m], shape (count,)."""
@@ -174,12 +152,12 @@ class TruncatedNormal(_Moments):
 
     def __post_init__(self):
         where = "TruncatedNormal"
-        _check(_finite(self.mean), where, "mean", self.mean, "a finite radius [m]")
-        _check(_finite(self.std) and self.std >= 0.0, where, "std", self.std, "a standard deviation >= 0 m")
-        low = _positive(where, "low", self.low, "a radius > 0 m (radii must be positive)")
-        _check(_finite(self.high) and self.high > low, where, "high", self.high, f"a radius > low = {low!r} m")
+        check(is_finite(self.mean), where, "mean", self.mean, "a finite radius [m]")
+        check_number(where, "std", self.std, lambda v: v >= 0.0, "a standard deviation >= 0 m")
+        low = positive(where, "low", self.low, "a radius > 0 m (radii must be positive)")
+        check_number(where, "high", self.high, lambda v: v > low, f"a radius > low = {low!r} m")
         if self.std == 0.0:
-            _check(
+            check(
                 low <= self.mean <= self.high,
                 where,
                 "mean",
@@ -228,24 +206,18 @@ class LogNormal(_Moments):
 
     def __post_init__(self):
         where = "LogNormal"
-        object.__setattr__(self, "median", _positive(where, "median", self.median, "a radius > 0 m"))
-        _check(
-            _finite(self.sigma_log) and self.sigma_log >= 0.0,
-            where,
-            "sigma_log",
-            self.sigma_log,
-            "a standard deviation of ln r >= 0",
-        )
+        object.__setattr__(self, "median", positive(where, "median", self.median, "a radius > 0 m"))
+        check_number(where, "sigma_log", self.sigma_log, lambda v: v >= 0.0, "a standard deviation of ln r >= 0")
         object.__setattr__(self, "sigma_log", float(self.sigma_log))
         if self.low is not None:
-            object.__setattr__(self, "low", _positive(where, "low", self.low, "a radius > 0 m or None"))
+            object.__setattr__(self, "low", positive(where, "low", self.low, "a radius > 0 m or None"))
         if self.high is not None:
             lo = self.low if self.low is not None else 0.0
-            _check(_finite(self.high) and self.high > lo, where, "high", self.high, f"a radius > {lo!r} m or None")
+            check_number(where, "high", self.high, lambda v: v > lo, f"a radius > {lo!r} m or None")
             object.__setattr__(self, "high", float(self.high))
         lo, hi = self.radius_range()
         if self.sigma_log == 0.0:
-            _check(
+            check(
                 lo <= self.median <= hi,
                 where,
                 "median",
@@ -253,7 +225,7 @@ class LogNormal(_Moments):
                 f"a radius in [low, high] = [{self.low!r}, {self.high!r}] m when sigma_log = 0",
             )
         else:
-            _check(
+            check(
                 float(_norm_interval(*self._z_bounds())) > 0.0,
                 where,
                 "sigma_log",
@@ -307,16 +279,6 @@ class SizeSpread(enum.Enum):
     """ln(diameter) uniform between the class edges: sieve series are geometric, so this is the default."""
 
 
-def _spread(value, where: str) -> SizeSpread:
-    if isinstance(value, SizeSpread):
-        return value
-    if isinstance(value, str):
-        key = value.strip().upper().replace("-", "_").replace(" ", "_")
-        if key in SizeSpread.__members__:
-            return SizeSpread[key]
-    raise ValueError(f"{where}: spread = {value!r} is not allowed; expected one of {', '.join(SizeSpread.__members__)}")
-
-
 @dataclass(frozen=True)
 class SieveTable(_Moments):
     """Sieve analysis: the fraction of MASS in each size class between sieve apertures.
@@ -338,19 +300,11 @@ class SieveTable(_Moments):
 
     def __post_init__(self):
         where = "SieveTable"
-        try:
-            d = np.asarray(self.sizes, dtype=float).ravel()
-        except (TypeError, ValueError):
-            d = np.array([np.nan])
-        _check(
-            d.size >= 2 and bool(np.all(np.isfinite(d))),
-            where,
-            "sizes",
-            self.sizes,
-            "at least 2 finite class edges (diameters [m])",
-        )
+        allowed = "at least 2 finite class edges (diameters [m])"
+        d = float_array(where, "sizes", self.sizes, allowed).ravel()
+        check(d.size >= 2 and bool(np.all(np.isfinite(d))), where, "sizes", self.sizes, allowed)
         bad = np.flatnonzero(d <= 0.0)
-        _check(
+        check(
             bad.size == 0,
             where,
             f"sizes[{bad[0] if bad.size else 0}]",
@@ -358,26 +312,18 @@ class SieveTable(_Moments):
             "a diameter > 0 m (give the pan class a positive lower edge)",
         )
         steps = np.flatnonzero(np.diff(d) <= 0.0)
-        _check(
+        check(
             steps.size == 0,
             where,
             f"sizes[{steps[0] + 1 if steps.size else 0}]",
             float(d[steps[0] + 1]) if steps.size else None,
             f"strictly increasing edges (> {float(d[steps[0]]) if steps.size else 0.0!r} m)",
         )
-        try:
-            f = np.asarray(self.mass_fractions, dtype=float).ravel()
-        except (TypeError, ValueError):
-            f = np.array([np.nan])
-        _check(
-            f.size == d.size - 1,
-            where,
-            "mass_fractions",
-            self.mass_fractions,
-            f"{d.size - 1} values, one per class between the {d.size} edges",
-        )
+        allowed = f"{d.size - 1} values, one per class between the {d.size} edges"
+        f = float_array(where, "mass_fractions", self.mass_fractions, allowed).ravel()
+        check(f.size == d.size - 1, where, "mass_fractions", self.mass_fractions, allowed)
         bad = np.flatnonzero(~np.isfinite(f) | (f < 0.0))
-        _check(
+        check(
             bad.size == 0,
             where,
             f"mass_fractions[{bad[0] if bad.size else 0}]",
@@ -393,7 +339,7 @@ class SieveTable(_Moments):
             )
         object.__setattr__(self, "sizes", tuple(float(x) for x in d))
         object.__setattr__(self, "mass_fractions", tuple(float(x) for x in f / total))
-        object.__setattr__(self, "spread", _spread(self.spread, where))
+        object.__setattr__(self, "spread", enum_value(SizeSpread, where, "spread", self.spread))
 
     @classmethod
     def normalised(cls, sizes, mass_fractions, spread=SizeSpread.LOG_UNIFORM) -> SieveTable:
@@ -404,7 +350,7 @@ class SieveTable(_Moments):
         """
         f = np.asarray(mass_fractions, dtype=float)
         total = float(f.sum()) if f.size else 0.0
-        _check(
+        check(
             np.isfinite(total) and total > 0.0,
             "SieveTable.normalised",
             "mass_fractions",
@@ -516,22 +462,18 @@ class SieveTable(_Moments):
             )
         if top_size is None:
             top_size = sieves[0] ** 2 / sieves[1]
-        _check(
-            _finite(top_size) and top_size > sieves[0],
-            where,
-            "top_size",
-            top_size,
-            f"a diameter > the coarsest sieve {sieves[0]!r} m",
+        check_number(
+            where, "top_size", top_size, lambda v: v > sieves[0], f"a diameter > the coarsest sieve {sieves[0]!r} m"
         )
         edges = [float(top_size), *sieves]
         if has_pan:
             if pan_size is None:
                 pan_size = sieves[-1] ** 2 / sieves[-2]
-            _check(
-                _finite(pan_size) and 0.0 < pan_size < sieves[-1],
+            check_number(
                 where,
                 "pan_size",
                 pan_size,
+                lambda v: 0.0 < v < sieves[-1],
                 f"a diameter in (0, {sieves[-1]!r}) m, below the finest sieve",
             )
             edges.append(float(pan_size))
@@ -632,8 +574,8 @@ class Box:
 
     def __post_init__(self):
         where = "Box"
-        lo, hi = _vec3(where, "lo", self.lo), _vec3(where, "hi", self.hi)
-        _check(all(h > l for l, h in zip(lo, hi)), where, "hi", self.hi, f"every component > lo = {lo}")
+        lo, hi = vec3(where, "lo", self.lo), vec3(where, "hi", self.hi)
+        check(all(b > a for a, b in zip(lo, hi)), where, "hi", self.hi, f"every component > lo = {lo}")
         object.__setattr__(self, "lo", lo)
         object.__setattr__(self, "hi", hi)
 
@@ -660,13 +602,7 @@ class Box:
 
     def inset(self, margin: float) -> Box:
         """The box shrunk by ``margin`` [m] on every side."""
-        _check(
-            _finite(margin) and 0.0 <= margin < self.inradius,
-            "Box.inset",
-            "margin",
-            margin,
-            f"a margin in [0, {self.inradius!r}) m (half the smallest side)",
-        )
+        margin = _inset_margin(self, margin, "half the smallest side")
         return Box(np.add(self.lo, margin), np.subtract(self.hi, margin))
 
     def sample_uniform(self, rng, n: int) -> np.ndarray:
@@ -683,10 +619,18 @@ class Box:
         return lo + rng.random((len(m), 3)) * (hi - lo)
 
 
+def _inset_margin(region, margin, inradius_is: str) -> float:
+    """``margin`` [m] of ``region.inset``: at least 0 and below the region's inradius (``inradius_is`` says
+    what that is for this kind of region)."""
+    inradius = region.inradius
+    allowed = f"a margin in [0, {inradius!r}) m ({inradius_is})"
+    return check_number(f"{type(region).__name__}.inset", "margin", margin, lambda v: 0.0 <= v < inradius, allowed)
+
+
 def _unit_axis(where: str, value) -> tuple[float, float, float]:
-    a = np.asarray(_vec3(where, "axis", value))
+    a = np.asarray(vec3(where, "axis", value))
     n = float(np.linalg.norm(a))
-    _check(n > 0.0, where, "axis", value, "a non-zero direction (normalised on construction)")
+    check(n > 0.0, where, "axis", value, "a non-zero direction (normalised on construction)")
     return tuple(float(x) for x in a / n)
 
 
@@ -708,6 +652,14 @@ class _Frustum:
 
     base_center: tuple
     axis: tuple
+
+    def _check_frame(self) -> str:
+        """Check and normalise ``base_center``, ``axis`` and ``height``; returns the class name for messages."""
+        where = type(self).__name__
+        object.__setattr__(self, "base_center", vec3(where, "base_center", self.base_center))
+        object.__setattr__(self, "axis", _unit_axis(where, self.axis))
+        object.__setattr__(self, "height", positive(where, "height", self.height, "a height > 0 m"))
+        return where
 
     def _radii_height(self) -> tuple[float, float, float]:
         raise NotImplementedError  # pragma: no cover
@@ -821,24 +773,15 @@ class Cylinder(_Frustum):
     height: float
 
     def __post_init__(self):
-        where = "Cylinder"
-        object.__setattr__(self, "base_center", _vec3(where, "base_center", self.base_center))
-        object.__setattr__(self, "axis", _unit_axis(where, self.axis))
-        object.__setattr__(self, "radius", _positive(where, "radius", self.radius, "a radius > 0 m"))
-        object.__setattr__(self, "height", _positive(where, "height", self.height, "a height > 0 m"))
+        where = self._check_frame()
+        object.__setattr__(self, "radius", positive(where, "radius", self.radius, "a radius > 0 m"))
 
     def _radii_height(self):
         return self.radius, self.radius, self.height
 
     def inset(self, margin: float) -> Cylinder:
         """The cylinder shrunk by ``margin`` [m] on its side and both ends."""
-        _check(
-            _finite(margin) and 0.0 <= margin < self.inradius,
-            "Cylinder.inset",
-            "margin",
-            margin,
-            f"a margin in [0, {self.inradius!r}) m (min(radius, height / 2))",
-        )
+        margin = _inset_margin(self, margin, "min(radius, height / 2)")
         return Cylinder(
             np.asarray(self.base_center) + margin * np.asarray(self.axis),
             self.axis,
@@ -866,35 +809,26 @@ class Cone(_Frustum):
     height: float
 
     def __post_init__(self):
-        where = "Cone"
-        object.__setattr__(self, "base_center", _vec3(where, "base_center", self.base_center))
-        object.__setattr__(self, "axis", _unit_axis(where, self.axis))
+        where = self._check_frame()
         for name in ("base_radius", "top_radius"):
             value = getattr(self, name)
-            _check(_finite(value) and value >= 0.0, where, name, value, "a radius >= 0 m")
+            check_number(where, name, value, lambda v: v >= 0.0, "a radius >= 0 m")
             object.__setattr__(self, name, float(value))
-        _check(
+        check(
             self.base_radius > 0.0 or self.top_radius > 0.0,
             where,
             "top_radius",
             self.top_radius,
             "a radius > 0 m when base_radius is 0",
         )
-        object.__setattr__(self, "height", _positive(where, "height", self.height, "a height > 0 m"))
 
     def _radii_height(self):
         return self.base_radius, self.top_radius, self.height
 
     def inset(self, margin: float) -> Cone:
         """The frustum of centres of spheres of radius ``margin`` [m] that fit (cut at an apex if needed)."""
-        _check(
-            _finite(margin) and 0.0 <= margin < self.inradius,
-            "Cone.inset",
-            "margin",
-            margin,
-            f"a margin in [0, {self.inradius!r}) m (the largest sphere that fits)",
-        )
-        h0, h1, r0, r1, _ = (float(v) for v in self._inset_params(float(margin)))
+        margin = _inset_margin(self, margin, "the largest sphere that fits")
+        h0, h1, r0, r1, _ = (float(v) for v in self._inset_params(margin))
         return Cone(np.asarray(self.base_center) + h0 * np.asarray(self.axis), self.axis, r0, r1, h1 - h0)
 
 
@@ -1005,9 +939,9 @@ def _check_existing(where: str, existing_x, existing_r) -> tuple[np.ndarray, np.
         raise ValueError(f"{where}: give existing_x and existing_r together (one of them is None)")
     x = np.asarray(existing_x, dtype=float).reshape(-1, 3) if np.size(existing_x) else np.zeros((0, 3))
     r = np.asarray(existing_r, dtype=float).ravel()
-    _check(len(x) == len(r), where, "existing_r", f"shape {r.shape}", f"shape ({len(x)},) to match existing_x")
-    _check(bool(np.all(np.isfinite(x))), where, "existing_x", "non-finite entries", "finite positions [m]")
-    _check(
+    check(len(x) == len(r), where, "existing_r", f"shape {r.shape}", f"shape ({len(x)},) to match existing_x")
+    check(bool(np.all(np.isfinite(x))), where, "existing_x", "non-finite entries", "finite positions [m]")
+    check(
         bool(np.all(np.isfinite(r) & (r >= 0.0))),
         where,
         "existing_r",
@@ -1106,17 +1040,11 @@ def _rsa(
 
 def _sizes_for(where: str, sizes, rng: np.random.Generator, count, mass, density) -> np.ndarray:
     """Draw exactly ``count`` sizes, or the fewest whose mass (density * 4/3 pi r^3) reaches ``mass``."""
-    _check((count is None) != (mass is None), where, "count/mass", (count, mass), "exactly one of count or mass")
+    check((count is None) != (mass is None), where, "count/mass", (count, mass), "exactly one of count or mass")
     if count is not None:
         return np.asarray(sizes.sample(rng, _count(where, "count", count)), dtype=float)
-    _check(_finite(mass) and mass > 0.0, where, "mass", mass, "a mass > 0 kg")
-    _check(
-        density is not None and _finite(density) and density > 0.0,
-        where,
-        "density",
-        density,
-        "a density > 0 kg/m^3 (needed for a mass target)",
-    )
+    check_number(where, "mass", mass, lambda v: v > 0.0, "a mass > 0 kg")
+    check_number(where, "density", density, lambda v: v > 0.0, "a density > 0 kg/m^3 (needed for a mass target)")
     mean_mass = sizes.mean_mass(density)
     chunk = int(min(max(1.1 * mass / mean_mass + 16, 16), 1e8)) if mean_mass > 0 else 1024
     drawn, total = [], 0.0
@@ -1134,8 +1062,8 @@ def _sizes_for(where: str, sizes, rng: np.random.Generator, count, mass, density
 
 
 def _check_region_sizes(where: str, region, sizes) -> None:
-    _check(isinstance(region, (Box, Cylinder, Cone)), where, "region", region, "a Box, Cylinder or Cone")
-    _check(
+    check(isinstance(region, (Box, Cylinder, Cone)), where, "region", region, "a Box, Cylinder or Cone")
+    check(
         isinstance(sizes, (FixedSize, TruncatedNormal, LogNormal, SieveTable)),
         where,
         "sizes",
@@ -1207,15 +1135,9 @@ def fill_region(
     """
     where = "fill_region"
     _check_region_sizes(where, region, sizes)
-    _check(isinstance(rng_seed, (int, np.integer)) and rng_seed >= 0, where, "rng_seed", rng_seed, "an integer >= 0")
-    _check(
-        isinstance(max_attempts, (int, np.integer)) and max_attempts >= 1,
-        where,
-        "max_attempts",
-        max_attempts,
-        "an integer >= 1",
-    )
-    _check(_finite(bounding_ratio) and bounding_ratio >= 1.0, where, "bounding_ratio", bounding_ratio, "a ratio >= 1")
+    integer(where, "rng_seed", rng_seed, 0)
+    integer(where, "max_attempts", max_attempts, 1)
+    check_number(where, "bounding_ratio", bounding_ratio, lambda v: v >= 1.0, "a ratio >= 1")
     ex_x, ex_r = _check_existing(where, existing_x, existing_r)
     r = _sizes_for(where, sizes, _stream(rng_seed, _SIZES), count, mass, density)
     bound = bounding_ratio * r
@@ -1297,7 +1219,7 @@ class DynamicFactory:
     def __post_init__(self):
         where = "DynamicFactory"
         _check_region_sizes(where, self.region, self.sizes)
-        _check(
+        check(
             (self.rate is None) != (self.mass_rate is None),
             where,
             "rate/mass_rate",
@@ -1305,36 +1227,22 @@ class DynamicFactory:
             "exactly one of rate [particles/s] or mass_rate [kg/s]",
         )
         if self.rate is not None:
-            object.__setattr__(self, "rate", _positive(where, "rate", self.rate, "a rate > 0 particles/s"))
+            object.__setattr__(self, "rate", positive(where, "rate", self.rate, "a rate > 0 particles/s"))
         if self.mass_rate is not None:
-            object.__setattr__(self, "mass_rate", _positive(where, "mass_rate", self.mass_rate, "a rate > 0 kg/s"))
+            object.__setattr__(self, "mass_rate", positive(where, "mass_rate", self.mass_rate, "a rate > 0 kg/s"))
         if self.mass_rate is not None or self.mass is not None:
             object.__setattr__(
                 self,
                 "density",
-                _positive(where, "density", self.density, "a density > 0 kg/m^3 (needed for mass or mass_rate)"),
+                positive(where, "density", self.density, "a density > 0 kg/m^3 (needed for mass or mass_rate)"),
             )
         elif self.density is not None:
-            object.__setattr__(self, "density", _positive(where, "density", self.density, "a density > 0 kg/m^3"))
-        _check(
-            _finite(self.start_time) and self.start_time >= 0.0, where, "start_time", self.start_time, "a time >= 0 s"
-        )
-        _check(isinstance(self.seed, (int, np.integer)) and self.seed >= 0, where, "seed", self.seed, "an integer >= 0")
-        object.__setattr__(self, "initial_velocity", _vec3(where, "initial_velocity", self.initial_velocity))
-        _check(
-            _finite(self.bounding_ratio) and self.bounding_ratio >= 1.0,
-            where,
-            "bounding_ratio",
-            self.bounding_ratio,
-            "a ratio >= 1",
-        )
-        _check(
-            isinstance(self.max_attempts, (int, np.integer)) and self.max_attempts >= 1,
-            where,
-            "max_attempts",
-            self.max_attempts,
-            "an integer >= 1",
-        )
+            object.__setattr__(self, "density", positive(where, "density", self.density, "a density > 0 kg/m^3"))
+        check_number(where, "start_time", self.start_time, lambda v: v >= 0.0, "a time >= 0 s")
+        integer(where, "seed", self.seed, 0)
+        object.__setattr__(self, "initial_velocity", vec3(where, "initial_velocity", self.initial_velocity))
+        check_number(where, "bounding_ratio", self.bounding_ratio, lambda v: v >= 1.0, "a ratio >= 1")
+        integer(where, "max_attempts", self.max_attempts, 1)
         radii = _sizes_for(where, self.sizes, _stream(self.seed, _SIZES), self.count, self.mass, self.density)
         radii.setflags(write=False)
         _check_fits(where, self.region, self.bounding_ratio * radii)
@@ -1352,7 +1260,7 @@ class DynamicFactory:
                 interval = float(self.masses.max()) / self.mass_rate if len(radii) else 1.0
             object.__setattr__(self, "interval", interval)
         else:
-            object.__setattr__(self, "interval", _positive(where, "interval", self.interval, "an interval > 0 s"))
+            object.__setattr__(self, "interval", positive(where, "interval", self.interval, "an interval > 0 s"))
 
     # -- what the engine preallocates and reads
 
@@ -1368,7 +1276,7 @@ class DynamicFactory:
     @property
     def masses(self) -> np.ndarray:
         """Particle masses density * 4/3 pi r^3 [kg], shape (capacity,) (needs ``density``)."""
-        _check(
+        check(
             self.density is not None,
             "DynamicFactory",
             "density",
@@ -1436,7 +1344,7 @@ class DynamicFactory:
         where = "DynamicFactory.place"
         first = _count(where, "first", first)
         count = _count(where, "count", count)
-        _check(
+        check(
             first + count <= self.capacity(),
             where,
             "count",

@@ -10,24 +10,27 @@ dense per-world device arrays by :func:`pair_table`.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from warpdem.kernels.params import PairParams
+
+from .checks import check, check_number, enum_value, number_fields
 from .types import ContactLaw, RollingModel
 
 
-def _check(cond: bool, where: str, field_name: str, value, allowed: str) -> None:
-    if not cond:
-        raise ValueError(f"{where}: {field_name} = {value!r} is not allowed; expected {allowed}")
-
-
-def _finite(x) -> bool:
-    try:
-        return math.isfinite(float(x))
-    except (TypeError, ValueError):
-        return False
+def elastic_moduli(poisson_ratio: float, youngs_modulus=None, shear_modulus=None) -> tuple[float, float]:
+    """(E, G) [Pa] of an isotropic elastic solid from Poisson's ratio nu [-] and one of E and G [Pa]:
+    G = E / (2 (1 + nu)), E = 2 G (1 + nu). Given both, G follows from E."""
+    nu = float(poisson_ratio)
+    if youngs_modulus is None:
+        g = float(shear_modulus)
+        return 2.0 * g * (1.0 + nu), g
+    e = float(youngs_modulus)
+    return e, e / (2.0 * (1.0 + nu))
 
 
 @dataclass(frozen=True)
@@ -53,46 +56,27 @@ class Material:
 
     def __post_init__(self):
         where = f"Material {self.name!r}"
-        _check(isinstance(self.name, str) and self.name != "", where, "name", self.name, "a non-empty string")
-        _check(_finite(self.density) and self.density > 0, where, "density", self.density, "a density > 0 kg/m^3")
-        _check(
-            _finite(self.poisson_ratio) and -1.0 < self.poisson_ratio < 0.5,
-            where,
-            "poisson_ratio",
-            self.poisson_ratio,
-            "a value in (-1, 0.5)",
-        )
+        check(isinstance(self.name, str) and self.name != "", where, "name", self.name, "a non-empty string")
+        check_number(where, "density", self.density, lambda v: v > 0, "a density > 0 kg/m^3")
+        check_number(where, "poisson_ratio", self.poisson_ratio, lambda v: -1.0 < v < 0.5, "a value in (-1, 0.5)")
         if self.youngs_modulus is None and self.shear_modulus is None:
             raise ValueError(f"{where}: give youngs_modulus or shear_modulus (neither was given)")
         nu = float(self.poisson_ratio)
-        if self.youngs_modulus is not None:
-            _check(
-                _finite(self.youngs_modulus) and self.youngs_modulus > 0,
-                where,
-                "youngs_modulus",
-                self.youngs_modulus,
-                "a modulus > 0 Pa",
-            )
-        if self.shear_modulus is not None:
-            _check(
-                _finite(self.shear_modulus) and self.shear_modulus > 0,
-                where,
-                "shear_modulus",
-                self.shear_modulus,
-                "a modulus > 0 Pa",
-            )
+        for name in ("youngs_modulus", "shear_modulus"):
+            if getattr(self, name) is not None:
+                check_number(where, name, getattr(self, name), lambda v: v > 0, "a modulus > 0 Pa")
         if self.youngs_modulus is not None and self.shear_modulus is not None:
             e, g = float(self.youngs_modulus), float(self.shear_modulus)
             if nu >= 0.0:
-                _check(
+                check(
                     g <= 0.5 * e * (1 + 1e-9),
                     where,
                     "shear_modulus",
                     g,
                     f"at most E/2 = {0.5 * e:.6g} Pa for a non-negative Poisson's ratio",
                 )
-            implied = 0.5 * e / (1.0 + nu)
-            _check(
+            implied = elastic_moduli(nu, youngs_modulus=e)[1]
+            check(
                 abs(g - implied) <= 0.01 * implied,
                 where,
                 "shear_modulus",
@@ -100,9 +84,19 @@ class Material:
                 f"E/(2(1+nu)) = {implied:.6g} Pa within 1% (E = {e:.6g} Pa, nu = {nu})",
             )
         elif self.youngs_modulus is None:
-            object.__setattr__(self, "youngs_modulus", 2.0 * float(self.shear_modulus) * (1.0 + nu))
+            object.__setattr__(self, "youngs_modulus", elastic_moduli(nu, shear_modulus=self.shear_modulus)[0])
         else:
-            object.__setattr__(self, "shear_modulus", float(self.youngs_modulus) / (2.0 * (1.0 + nu)))
+            object.__setattr__(self, "shear_modulus", elastic_moduli(nu, youngs_modulus=self.youngs_modulus)[1])
+
+    def with_value(self, name: str, value: float) -> Material:
+        """A copy with the numeric field ``name`` (one of :data:`MATERIAL_SCALARS`) set to ``value``. E and G
+        are tied through nu: a new E re-derives G; a new G or a new nu keeps G and re-derives E."""
+        changes = {name: value}
+        if name == "youngs_modulus":
+            changes["shear_modulus"] = None
+        elif name in ("shear_modulus", "poisson_ratio"):
+            changes["youngs_modulus"] = None
+        return dataclasses.replace(self, **changes)
 
     @property
     def E(self) -> float:  # noqa: N802 - the physics symbol
@@ -115,6 +109,28 @@ class Material:
     def rayleigh_time(self, radius: float) -> float:
         """Rayleigh wave time step T_R = pi R sqrt(rho/G) / (0.1631 nu + 0.8766) [s] for a sphere of ``radius`` [m]."""
         return math.pi * radius * math.sqrt(self.density / self.G) / (0.1631 * self.poisson_ratio + 0.8766)
+
+
+_ENUM_ALIASES = {
+    "A": "CONSTANT_TORQUE",
+    "TYPE_A": "CONSTANT_TORQUE",
+    "STANDARD": "CONSTANT_TORQUE",
+    "C": "EPSD",
+    "TYPE_C": "EPSD",
+    "HM": "HERTZ_MINDLIN",
+    "HM_JKR": "JKR",
+    "HERTZ_MINDLIN_JKR": "JKR",
+    "HERTZ_MINDLIN_WITH_JKR": "JKR",
+}
+"""EDEM's names of the rolling models and contact laws (upper case, ``_`` for spaces) -> member names."""
+
+
+def _param(default, pair: str, ok=None, allowed: str = ""):
+    """A contact parameter: its default, the PairParams field it fills (``warpdem.kernels.params``) and,
+    for a number, the test ``ok(value)`` a value must pass and the words for what passes. Everything else
+    follows from the Interaction fields: their checks, the per-world scalars, the stage attributes, the
+    override keys; a new parameter needs only its field here and its PairParams field."""
+    return field(default=default, metadata={"pair": pair, "ok": ok, "allowed": allowed})
 
 
 @dataclass(frozen=True)
@@ -137,94 +153,34 @@ class Interaction:
         tangential_stiffness_multiplier: EEPA k_t factor [-], > 0.
     """
 
-    restitution: float = 0.5
-    static_friction: float = 0.5
-    rolling_friction: float = 0.0
-    rolling_model: RollingModel = RollingModel.CONSTANT_TORQUE
-    rolling_damping: float = 0.3
-    law: ContactLaw = ContactLaw.HERTZ_MINDLIN
-    surface_energy: float = 0.0
-    pull_off_force: float = 0.0
-    slope_exponent: float = 1.5
-    plasticity_ratio: float = 0.5
-    tensile_exponent: float = 1.5
-    tangential_stiffness_multiplier: float = 1.0
+    # restitution fills PairParams.beta through the property beta
+    restitution: float = _param(0.5, "beta", lambda v: 0.0 < v <= 1.0, "a coefficient of restitution in (0, 1]")
+    static_friction: float = _param(0.5, "mu_s", lambda v: v >= 0.0, "a friction coefficient >= 0")
+    rolling_friction: float = _param(0.0, "mu_r", lambda v: v >= 0.0, "a rolling friction coefficient >= 0")
+    rolling_model: RollingModel = _param(RollingModel.CONSTANT_TORQUE, "rolling_model")
+    rolling_damping: float = _param(0.3, "rolling_damping", lambda v: v >= 0.0, "a damping ratio >= 0")
+    law: ContactLaw = _param(ContactLaw.HERTZ_MINDLIN, "law")
+    surface_energy: float = _param(0.0, "gamma", lambda v: v >= 0.0, "a surface energy >= 0 J/m^2")
+    pull_off_force: float = _param(0.0, "f0", lambda v: v <= 0.0, "a constant pull-off force <= 0 N (attractive)")
+    slope_exponent: float = _param(1.5, "eepa_n", lambda v: 1.0 <= v <= 2.0, "an exponent in [1, 2]")
+    plasticity_ratio: float = _param(0.5, "lambda_p", lambda v: 0.0 <= v < 1.0, "a ratio in [0, 1)")
+    tensile_exponent: float = _param(1.5, "chi", lambda v: 0.0 < v <= 3.0, "an exponent in (0, 3]")
+    tangential_stiffness_multiplier: float = _param(1.0, "ks_fac", lambda v: v > 0.0, "a factor > 0")
 
     def __post_init__(self):
         where = "Interaction"
-        _check(
-            _finite(self.restitution) and 0.0 < self.restitution <= 1.0,
-            where,
-            "restitution",
-            self.restitution,
-            "a coefficient of restitution in (0, 1]",
-        )
-        _check(
-            _finite(self.static_friction) and self.static_friction >= 0.0,
-            where,
-            "static_friction",
-            self.static_friction,
-            "a friction coefficient >= 0",
-        )
-        _check(
-            _finite(self.rolling_friction) and self.rolling_friction >= 0.0,
-            where,
-            "rolling_friction",
-            self.rolling_friction,
-            "a rolling friction coefficient >= 0",
-        )
-        _check(
-            _finite(self.rolling_damping) and self.rolling_damping >= 0.0,
-            where,
-            "rolling_damping",
-            self.rolling_damping,
-            "a damping ratio >= 0",
-        )
-        _check(
-            _finite(self.surface_energy) and self.surface_energy >= 0.0,
-            where,
-            "surface_energy",
-            self.surface_energy,
-            "a surface energy >= 0 J/m^2",
-        )
-        _check(
-            _finite(self.pull_off_force) and self.pull_off_force <= 0.0,
-            where,
-            "pull_off_force",
-            self.pull_off_force,
-            "a constant pull-off force <= 0 N (attractive)",
-        )
-        _check(
-            _finite(self.slope_exponent) and 1.0 <= self.slope_exponent <= 2.0,
-            where,
-            "slope_exponent",
-            self.slope_exponent,
-            "an exponent in [1, 2]",
-        )
-        _check(
-            _finite(self.plasticity_ratio) and 0.0 <= self.plasticity_ratio < 1.0,
-            where,
-            "plasticity_ratio",
-            self.plasticity_ratio,
-            "a ratio in [0, 1)",
-        )
-        _check(
-            _finite(self.tensile_exponent) and 0.0 < self.tensile_exponent <= 3.0,
-            where,
-            "tensile_exponent",
-            self.tensile_exponent,
-            "an exponent in (0, 3]",
-        )
-        _check(
-            _finite(self.tangential_stiffness_multiplier) and self.tangential_stiffness_multiplier > 0.0,
-            where,
-            "tangential_stiffness_multiplier",
-            self.tangential_stiffness_multiplier,
-            "a factor > 0",
-        )
-        object.__setattr__(self, "rolling_model", _enum(RollingModel, self.rolling_model, where, "rolling_model"))
-        object.__setattr__(self, "law", _enum(ContactLaw, self.law, where, "law"))
-        _check(self.law != ContactLaw.NONE, where, "law", self.law, "a contact law other than NONE")
+        for f in dataclasses.fields(self):
+            if f.name not in INTERACTION_ENUMS:
+                check_number(where, f.name, getattr(self, f.name), f.metadata["ok"], f.metadata["allowed"])
+        for name, cls in INTERACTION_ENUMS.items():
+            object.__setattr__(self, name, enum_value(cls, where, name, getattr(self, name), _ENUM_ALIASES))
+        check(self.law != ContactLaw.NONE, where, "law", self.law, "a contact law other than NONE")
+
+    def pair_fields(self) -> dict:
+        """The PairParams fields this interaction fills, by PairParams name (enums as their integers)."""
+        out = {f.metadata["pair"]: getattr(self, f.name) for f in dataclasses.fields(self)}
+        out["beta"] = self.beta
+        return {k: int(v) if isinstance(v, enum.Enum) else v for k, v in out.items()}
 
     @property
     def beta(self) -> float:
@@ -233,28 +189,16 @@ class Interaction:
         return le / math.sqrt(le * le + math.pi * math.pi)
 
 
-def _enum(cls, value, where, name):
-    if isinstance(value, cls):
-        return value
-    if isinstance(value, str):
-        key = value.strip().upper().replace("-", "_").replace(" ", "_")
-        aliases = {
-            "A": "CONSTANT_TORQUE",
-            "TYPE_A": "CONSTANT_TORQUE",
-            "STANDARD": "CONSTANT_TORQUE",
-            "C": "EPSD",
-            "TYPE_C": "EPSD",
-            "HM": "HERTZ_MINDLIN",
-            "HM_JKR": "JKR",
-            "HERTZ_MINDLIN_JKR": "JKR",
-            "HERTZ_MINDLIN_WITH_JKR": "JKR",
-        }
-        key = aliases.get(key, key)
-        if key in cls.__members__:
-            return cls[key]
-    elif isinstance(value, (int, np.integer)) and int(value) in {m.value for m in cls}:
-        return cls(int(value))
-    raise ValueError(f"{where}: {name} = {value!r} is not allowed; expected one of {', '.join(cls.__members__)}")
+INTERACTION_FIELDS = tuple(f.name for f in dataclasses.fields(Interaction))
+"""Every Interaction field, in order (the stage's pair attributes and the override keys follow it)."""
+INTERACTION_ENUMS = {
+    f.name: type(f.default) for f in dataclasses.fields(Interaction) if isinstance(f.default, enum.Enum)
+}
+"""Interaction fields holding an enum member -> the enum (a token on a stage)."""
+INTERACTION_SCALARS = tuple(number_fields(Interaction))
+"""The numeric Interaction fields: what :meth:`warpdem.engine.builder.ModelBuilder.vary` can set per world."""
+MATERIAL_SCALARS = tuple(number_fields(Material))
+"""The numeric Material fields: what an override (and a per-world variation) can set."""
 
 
 @dataclass
@@ -287,45 +231,13 @@ def effective_moduli(ma: Material, mb: Material) -> tuple[float, float]:
 def pair_table(materials_per_world: list[list[Material]], tables_per_world: list[InteractionTable]) -> np.ndarray:
     """Dense PairParams fields, shape (W, M, M), as a NumPy structured array (W = len of the lists, 1 or world_count)."""
     w_count, m_count = len(materials_per_world), len(materials_per_world[0])
-    dtype = np.dtype(
-        [
-            ("e_star", np.float32),
-            ("g_star", np.float32),
-            ("beta", np.float32),
-            ("mu_s", np.float32),
-            ("mu_r", np.float32),
-            ("rolling_model", np.int32),
-            ("rolling_damping", np.float32),
-            ("law", np.int32),
-            ("gamma", np.float32),
-            ("f0", np.float32),
-            ("eepa_n", np.float32),
-            ("lambda_p", np.float32),
-            ("chi", np.float32),
-            ("ks_fac", np.float32),
-        ]
-    )
+    dtype = np.dtype(PairParams.numpy_dtype())
     out = np.zeros((w_count, m_count, m_count), dtype=dtype)
     for w in range(w_count):
         mats, table = materials_per_world[w], tables_per_world[w]
         for a in range(m_count):
             for b in range(m_count):
-                ia = table.get(mats[a].name, mats[b].name)
                 e_star, g_star = effective_moduli(mats[a], mats[b])
-                out[w, a, b] = (
-                    e_star,
-                    g_star,
-                    ia.beta,
-                    ia.static_friction,
-                    ia.rolling_friction,
-                    int(ia.rolling_model),
-                    ia.rolling_damping,
-                    int(ia.law),
-                    ia.surface_energy,
-                    ia.pull_off_force,
-                    ia.slope_exponent,
-                    ia.plasticity_ratio,
-                    ia.tensile_exponent,
-                    ia.tangential_stiffness_multiplier,
-                )
+                fields = {"e_star": e_star, "g_star": g_star, **table.get(mats[a].name, mats[b].name).pair_fields()}
+                out[w, a, b] = tuple(fields[name] for name in dtype.names)
     return out

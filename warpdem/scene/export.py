@@ -43,21 +43,12 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from warpdem.engine.checks import fail, is_finite, readonly
+
 __all__ = ["ResultWriter", "ShapeGeometry", "WallGeometry", "expand_clumps", "quat_to_matrix", "side_view_png"]
 
 
 # -- validation helpers -----------------------------------------------------------------------------------------
-
-
-def _short(a) -> str:
-    """A compact repr for error messages (arrays can be long)."""
-    if isinstance(a, np.ndarray):
-        return np.array2string(a, precision=6, threshold=12, separator=", ")
-    return repr(a)
-
-
-def _fail(where: str, name: str, value, allowed: str):
-    raise ValueError(f"{where}: {name} = {_short(value)} is not allowed; expected {allowed}")
 
 
 def _shape_ok(shape: tuple, want: tuple) -> bool:
@@ -71,18 +62,18 @@ def _floats(
     try:
         a = np.array(value, dtype=np.float64)
     except (TypeError, ValueError):
-        _fail(where, name, value, allowed)
+        fail(where, name, value, allowed)
     if not _shape_ok(a.shape, want):
-        _fail(where, f"{name}.shape", a.shape, allowed)
+        fail(where, f"{name}.shape", a.shape, allowed)
     bad = ~np.isfinite(a)
     if positive:
         bad |= ~(a > 0)
     if bad.any():
         what = ("finite values > 0" if positive else "finite values") + (f" in {unit}" if unit else "")
         if a.ndim == 0:
-            _fail(where, name, a, what)
+            fail(where, name, a, what)
         i = int(np.flatnonzero(bad.reshape(a.shape[0], -1).any(axis=1))[0])
-        _fail(where, f"{name}[{i}]", a[i], what)
+        fail(where, f"{name}[{i}]", a[i], what)
     return a
 
 
@@ -92,10 +83,10 @@ def _ints(
     """``value`` as an int64 array of shape ``want``, entries in [lo, hi) where given."""
     a = np.asarray(value)
     if a.dtype.kind not in "iu" and not (a.size == 0 and a.dtype.kind == "f"):
-        _fail(where, f"{name}.dtype", a.dtype, f"an integer array, {allowed}")
+        fail(where, f"{name}.dtype", a.dtype, f"an integer array, {allowed}")
     a = a.astype(np.int64)
     if not _shape_ok(a.shape, want):
-        _fail(where, f"{name}.shape", a.shape, allowed)
+        fail(where, f"{name}.shape", a.shape, allowed)
     bad = np.zeros(a.shape, bool)
     if lo is not None:
         bad |= a < lo
@@ -104,9 +95,9 @@ def _ints(
     if bad.any():
         rng = f"integers in [{lo}, {hi})" if hi is not None else f"integers >= {lo}"
         if a.ndim == 0:
-            _fail(where, name, int(a), rng)
+            fail(where, name, int(a), rng)
         i = int(np.flatnonzero(bad.reshape(a.shape[0], -1).any(axis=1))[0])
-        _fail(where, f"{name}[{i}]", a[i] if a.ndim > 1 else int(a[i]), rng)
+        fail(where, f"{name}[{i}]", a[i] if a.ndim > 1 else int(a[i]), rng)
     return a
 
 
@@ -116,7 +107,7 @@ def _quats(value, where: str, name: str, k: int, allowed: str) -> np.ndarray:
     norm = np.linalg.norm(q, axis=1)
     bad = np.flatnonzero(~(norm > 1e-12))
     if bad.size:
-        _fail(where, f"{name}[{bad[0]}]", q[bad[0]], "a non-zero quaternion (x, y, z, w)")
+        fail(where, f"{name}[{bad[0]}]", q[bad[0]], "a non-zero quaternion (x, y, z, w)")
     return q / norm[:, None]
 
 
@@ -125,19 +116,13 @@ def _all_or_none(where: str, group: dict) -> bool:
     given = [k for k, v in group.items() if v is not None]
     if given and len(given) < len(group):
         missing = [k for k in group if k not in given][0]
-        _fail(
+        fail(
             where,
             missing,
             None,
             f"an array, since {given[0]} is given ({', '.join(group)} are all given or all None)",
         )
     return bool(given)
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a = np.ascontiguousarray(a)
-    a.setflags(write=False)
-    return a
 
 
 _IDENT_BAD = re.compile(r"[^A-Za-z0-9_]")
@@ -167,7 +152,7 @@ def _rows3(value, where: str, name: str, n: str, low: int, what: str) -> np.ndar
     the row count's letter in messages)."""
     a = _floats(value, where, name, (None, 3), f"an ({n}, 3) array of {what} in m, {n} >= {low}", unit="m")
     if a.shape[0] < low:
-        _fail(where, f"{name}.shape", a.shape, f"({n}, 3) with {n} >= {low}")
+        fail(where, f"{name}.shape", a.shape, f"({n}, 3) with {n} >= {low}")
     return a
 
 
@@ -181,9 +166,9 @@ class _NamedGeometry:
     def __post_init__(self):
         where = f"{type(self).__name__} {self.name!r}"
         if not isinstance(self.name, str) or not self.name:
-            _fail(where, "name", self.name, "a non-empty string")
+            fail(where, "name", self.name, "a non-empty string")
         for field_name, a in self._arrays(where).items():
-            object.__setattr__(self, field_name, _readonly(a))
+            object.__setattr__(self, field_name, readonly(a))
 
     def _arrays(self, where: str) -> dict:
         raise NotImplementedError
@@ -207,7 +192,7 @@ class WallGeometry(_NamedGeometry):
         n = len(v)
         t = _ints(self.triangles, where, "triangles", (None, 3), f"an (F, 3) array of vertex indices in [0, {n})", 0, n)
         if t.shape[0] < 1:
-            _fail(where, "triangles.shape", t.shape, "(F, 3) with F >= 1")
+            fail(where, "triangles.shape", t.shape, "(F, 3) with F >= 1")
         return {"vertices": v, "triangles": t}
 
     @property
@@ -289,10 +274,10 @@ def _shape_list(shapes, where: str) -> list:
     try:
         shapes = list(shapes)
     except TypeError:
-        _fail(where, "shapes", shapes, "a list of ShapeGeometry")
+        fail(where, "shapes", shapes, "a list of ShapeGeometry")
     for i, sh in enumerate(shapes):
         if not (hasattr(sh, "sphere_offset") and hasattr(sh, "sphere_radius")):
-            _fail(where, f"shapes[{i}]", sh, "a ShapeGeometry (or ClumpTemplate)")
+            fail(where, f"shapes[{i}]", sh, "a ShapeGeometry (or ClumpTemplate)")
     return shapes
 
 
@@ -397,10 +382,10 @@ class ResultWriter:
         try:
             walls = list(walls)
         except TypeError:
-            _fail(where, "walls", walls, "a list of WallGeometry")
+            fail(where, "walls", walls, "a list of WallGeometry")
         for i, wall in enumerate(walls):
             if not isinstance(wall, WallGeometry):
-                _fail(where, f"walls[{i}]", wall, "a WallGeometry")
+                fail(where, f"walls[{i}]", wall, "a WallGeometry")
         shapes = _shape_list(shapes, where)
         shapes = [sh if isinstance(sh, ShapeGeometry) else ShapeGeometry.from_template(sh) for sh in shapes]
         if (
@@ -408,15 +393,15 @@ class ResultWriter:
             or os.path.basename(usd_name) != usd_name
             or os.path.splitext(usd_name)[1].lower() not in (".usd", ".usdc", ".usda")
         ):
-            _fail(where, "usd_name", usd_name, "a file name (no directory) ending in .usdc, .usd or .usda")
-        if frames_per_second is not None and not (_finite(frames_per_second) and frames_per_second > 0):
-            _fail(where, "frames_per_second", frames_per_second, "None or a rate > 0 per second")
+            fail(where, "usd_name", usd_name, "a file name (no directory) ending in .usdc, .usd or .usda")
+        if frames_per_second is not None and not (is_finite(frames_per_second) and frames_per_second > 0):
+            fail(where, "frames_per_second", frames_per_second, "None or a rate > 0 per second")
         if not isinstance(up_axis, str) or up_axis.upper() not in ("Y", "Z"):
-            _fail(where, "up_axis", up_axis, '"Z" or "Y"')
-        if not (_finite(meters_per_unit) and meters_per_unit > 0):
-            _fail(where, "meters_per_unit", meters_per_unit, "a length > 0 m")
+            fail(where, "up_axis", up_axis, '"Z" or "Y"')
+        if not (is_finite(meters_per_unit) and meters_per_unit > 0):
+            fail(where, "meters_per_unit", meters_per_unit, "a length > 0 m")
         if isinstance(flush_every, bool) or not isinstance(flush_every, (int, np.integer)) or flush_every < 0:
-            _fail(where, "flush_every", flush_every, "an integer >= 0 (0: save only at close)")
+            fail(where, "flush_every", flush_every, "an integer >= 0 (0: save only at close)")
 
         from pxr import Sdf, Usd, UsdGeom  # here, not at module level: pictures and expand_clumps need no pxr
 
@@ -435,7 +420,7 @@ class ResultWriter:
         self._result: dict | None = None
 
         if Sdf.Layer.Find(str(self.usd_path)):
-            _fail(
+            fail(
                 where,
                 "usd_name",
                 usd_name,
@@ -579,11 +564,11 @@ class ResultWriter:
             raise RuntimeError(f"ResultWriter.add_frame: the writer of {self.usd_path} is closed")
         # every input is checked (and converted) before anything is written, so a bad frame leaves no trace
         where = "ResultWriter.add_frame"
-        if not _finite(time):
-            _fail(where, "time", time, "a finite time in s")
+        if not is_finite(time):
+            fail(where, "time", time, "a finite time in s")
         time = float(time)
         if self._times and not time > self._times[-1]:
-            _fail(where, "time", time, f"a time > {self._times[-1]!r} s (the previous frame's)")
+            fail(where, "time", time, f"a time > {self._times[-1]!r} s (the previous frame's)")
 
         if _all_or_none(where, {"sphere_x": sphere_x, "sphere_r": sphere_r, "sphere_id": sphere_id}):
             sx = _floats(sphere_x, where, "sphere_x", (None, 3), "an (n, 3) array of sphere centres in m", unit="m")
@@ -615,7 +600,7 @@ class ResultWriter:
             cid = _ints(clump_id, where, "clump_id", (k,), f"({k},): one id per row of clump_x (shape {cx.shape})")
         else:
             if clump_scale is not None and np.size(clump_scale) != 0:
-                _fail(where, "clump_scale", clump_scale, "None when clump_x is None")
+                fail(where, "clump_scale", clump_scale, "None when clump_x is None")
             k = 0
             cx, cq, cs = np.zeros((0, 3)), np.zeros((0, 4)), np.zeros(0, np.int64)
             cscale, cid = np.zeros(0), np.zeros(0, np.int64)
@@ -668,7 +653,7 @@ class ResultWriter:
         if isinstance(value, np.ndarray) and value.dtype != object:
             value = list(value) if value.ndim == 2 else [value]
         if not isinstance(value, (list, tuple)) or len(value) != w:
-            _fail(where, name, value, f"None or a list of {w} arrays, one per wall")
+            fail(where, name, value, f"None or a list of {w} arrays, one per wall")
         out = []
         for i, (a, wall) in enumerate(zip(value, self.walls)):
             fw = wall.face_count
@@ -868,13 +853,6 @@ class ResultWriter:
         self.close()
 
 
-def _finite(x) -> bool:
-    try:
-        return math.isfinite(float(x))
-    except (TypeError, ValueError):
-        return False
-
-
 # -- pictures ---------------------------------------------------------------------------------------------------
 
 # axis -> (horizontal, vertical, sign): screen right x screen up points at the viewer, so no picture is
@@ -959,7 +937,7 @@ def side_view_png(
     """
     where = "side_view_png"
     if axis not in _VIEWS:
-        _fail(where, "axis", axis, '"x", "y" or "z"')
+        fail(where, "axis", axis, '"x", "y" or "z"')
     x = _floats(sphere_x, where, "sphere_x", (None, 3), "an (n, 3) array of sphere centres in m")
     n = x.shape[0]
     r = _floats(
@@ -971,10 +949,10 @@ def side_view_png(
     walls = []
     if walls_world is not None:
         if not isinstance(walls_world, (list, tuple)):
-            _fail(where, "walls_world", walls_world, "None or a list of (vertices (V, 3), triangles (F, 3))")
+            fail(where, "walls_world", walls_world, "None or a list of (vertices (V, 3), triangles (F, 3))")
         for i, item in enumerate(walls_world):
             if not isinstance(item, (list, tuple)) or len(item) != 2:
-                _fail(where, f"walls_world[{i}]", item, "a pair (vertices (V, 3), triangles (F, 3))")
+                fail(where, f"walls_world[{i}]", item, "a pair (vertices (V, 3), triangles (F, 3))")
             v = _floats(item[0], where, f"walls_world[{i}][0]", (None, 3), "a (V, 3) array of vertices in m")
             t = _ints(
                 item[1],
@@ -987,7 +965,7 @@ def side_view_png(
             )
             walls.append((v, t))
     if not isinstance(dpi, (int, np.integer)) or isinstance(dpi, bool) or not 10 <= dpi <= 2000:
-        _fail(where, "dpi", dpi, "an integer in [10, 2000]")
+        fail(where, "dpi", dpi, "an integer in [10, 2000]")
 
     import matplotlib
 

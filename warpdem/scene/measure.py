@@ -28,6 +28,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from warpdem.engine.checks import fail, finite_number, short
+
 __all__ = [
     "SettleMonitor",
     "angle_cone",
@@ -65,12 +67,7 @@ _LATTICE_TURN = math.atan(1.0 / ((1.0 + math.sqrt(5.0)) / 2.0) ** 2)
 
 
 def _bad(name: str, value, allowed: str):
-    raise ValueError(f"{name} = {value!r} is not allowed; expected {allowed}")
-
-
-def _short(a: np.ndarray) -> str:
-    """A short description of an array for error messages (the array itself may be huge)."""
-    return f"array of shape {a.shape}"
+    fail("", name, value, allowed)
 
 
 def _int_at_least(name: str, value, low: int) -> int:
@@ -85,29 +82,27 @@ def _positive(name: str, value, unit: str) -> float:
     return float(value)
 
 
-def _finite(name: str, value, unit: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        _bad(name, value, f"a finite number {unit}".rstrip())
-    return float(value)
+def _finite_number(name: str, value, unit: str) -> float:
+    return finite_number("", name, value, f"a finite number {unit}".rstrip())
 
 
 def _spheres(x, r) -> tuple[np.ndarray, np.ndarray]:
     x = np.asarray(x, dtype=float)
     r = np.asarray(r, dtype=float)
     if x.ndim != 2 or x.shape[1] != 3 or x.shape[0] == 0:
-        _bad("x", _short(x), "sphere centres [m] of shape (n, 3) with n >= 1")
+        _bad("x", x, "sphere centres [m] of shape (n, 3) with n >= 1")
     if r.shape != (x.shape[0],):
-        _bad("r", _short(r), f"radii [m] of shape ({x.shape[0]},), one per row of x")
+        _bad("r", r, f"radii [m] of shape ({x.shape[0]},), one per row of x")
     if not np.all(np.isfinite(x)):
-        _bad("x", _short(x), "finite coordinates (found NaN or inf)")
+        _bad("x", x, "finite coordinates (found NaN or inf)")
     if not np.all(np.isfinite(r) & (r > 0)):
-        _bad("r", _short(r), "finite radii > 0 m")
+        _bad("r", r, "finite radii > 0 m")
     return x, r
 
 
 def _zones(inner, outer) -> tuple[float, float]:
-    inner = _finite("inner", inner, "")
-    outer = _finite("outer", outer, "")
+    inner = _finite_number("inner", inner, "")
+    outer = _finite_number("outer", outer, "")
     if not 0 <= inner < 1:
         _bad("inner", inner, "a fraction of the pile extent in [0, 1)")
     if not inner < outer <= 1:
@@ -141,7 +136,7 @@ def _base_layer(x: np.ndarray, r: np.ndarray, base_z: float) -> np.ndarray:
     if not near.any():
         _bad(
             "x",
-            _short(x),
+            x,
             f"a pile with spheres on the base plane z = base_z = {base_z} m "
             f"(none has its centre within {BASE_LAYER_RADII} radii of it)",
         )
@@ -170,7 +165,7 @@ def pile_spheres(x, r, base_z: float = 0.0, gap: float = 0.1) -> np.ndarray:
     from scipy.spatial import cKDTree
 
     x, r = _spheres(x, r)
-    gap = _finite("gap", gap, "[-]")
+    gap = _finite_number("gap", gap, "[-]")
     n = len(r)
     pairs = cKDTree(x).query_pairs(2.0 * (1.0 + gap) * float(r.max()), output_type="ndarray")
     if len(pairs):
@@ -238,7 +233,7 @@ def angle_surface_fit(
     x, r = _spheres(x, r)
     slices = _int_at_least("slices", slices, 2)
     bins = _int_at_least("bins", bins, 3)
-    base_z = _finite("base_z", base_z, "m")
+    base_z = _finite_number("base_z", base_z, "m")
     inner, outer = _zones(inner, outer)
     cx, cy = _axis(x, r, center)
 
@@ -351,7 +346,7 @@ def angle_cone(x, r, base_z: float = 0.0, center=(0.0, 0.0), toe_correction: boo
         the angle in degrees.
     """
     x, r = _spheres(x, r)
-    base_z = _finite("base_z", base_z, "m")
+    base_z = _finite_number("base_z", base_z, "m")
     cx, cy = _axis(x, r, center)
     if not isinstance(toe_correction, (bool, np.bool_)):
         _bad("toe_correction", toe_correction, "True or False")
@@ -362,7 +357,7 @@ def angle_cone(x, r, base_z: float = 0.0, center=(0.0, 0.0), toe_correction: boo
         rb = float(np.percentile(rho, BASE_PERCENTILE))
         hb = h - 2.0 * float(r[base].mean())
         if rb <= 0 or hb <= 0:
-            _bad("x", _short(x), "a pile wider and higher than its bottom layer for toe_correction=True")
+            _bad("x", x, "a pile wider and higher than its bottom layer for toe_correction=True")
         return math.degrees(math.atan2(hb, rb))
     d = 2.0 * float(np.percentile(rho + r[base], BASE_PERCENTILE))
     return math.degrees(math.atan2(2.0 * h, d))
@@ -392,8 +387,8 @@ def silhouette(
         and ``center``.
     """
     x, r = _spheres(x, r)
-    az = _finite("azimuth_deg", azimuth_deg, "deg")
-    base_z = _finite("base_z", base_z, "m")
+    az = _finite_number("azimuth_deg", azimuth_deg, "deg")
+    base_z = _finite_number("base_z", base_z, "m")
     p = float(r.min()) / 4.0 if pixel is None else _positive("pixel", pixel, "m")
     cx, cy = _axis(x, r, center)
     t = math.radians(az)
@@ -492,7 +487,7 @@ def angle_image(
     """
     x, r = _spheres(x, r)
     views = _int_at_least("views", views, 1)
-    base_z = _finite("base_z", base_z, "m")
+    base_z = _finite_number("base_z", base_z, "m")
     inner, outer = _zones(inner, outer)
     p = float(r.min()) / 4.0 if pixel is None else _positive("pixel", pixel, "m")
     cx, cy = _axis(x, r, center)
@@ -580,15 +575,15 @@ def synthetic_cone(
     Returns:
         (x, r): centres [m], shape (n, 3), and radii [m], shape (n,).
     """
-    a = _finite("angle_deg", angle_deg, "deg")
+    a = _finite_number("angle_deg", angle_deg, "deg")
     if not 0 < a < 90:
         _bad("angle_deg", angle_deg, "a slope in (0, 90) deg")
     big_r = _positive("base_radius", base_radius, "m")
     r0 = _positive("sphere_radius", sphere_radius, "m")
-    pd = _finite("polydispersity", polydispersity, "")
+    pd = _finite_number("polydispersity", polydispersity, "")
     if not 0 <= pd < 1:
         _bad("polydispersity", polydispersity, "a fraction in [0, 1)")
-    base_z = _finite("base_z", base_z, "m")
+    base_z = _finite_number("base_z", base_z, "m")
     if center is None:
         _bad("center", center, "(cx, cy) in m")
     cx, cy = _axis(np.zeros((1, 3)), np.ones(1), center)
@@ -645,18 +640,18 @@ def _press_arrays(piston_z, piston_force) -> tuple[np.ndarray, np.ndarray]:
     z = np.asarray(piston_z, dtype=float)
     f = np.asarray(piston_force, dtype=float)
     if z.ndim != 1 or z.size < 2:
-        _bad("piston_z", _short(z), "piston face heights [m] of shape (k,) with k >= 2")
+        _bad("piston_z", z, "piston face heights [m] of shape (k,) with k >= 2")
     if f.shape != z.shape:
-        _bad("piston_force", _short(f), f"axial forces [N] of shape {z.shape}, one per piston_z sample")
+        _bad("piston_force", f, f"axial forces [N] of shape {z.shape}, one per piston_z sample")
     if not np.all(np.isfinite(z)):
-        _bad("piston_z", _short(z), "finite heights (found NaN or inf)")
+        _bad("piston_z", z, "finite heights (found NaN or inf)")
     if not np.all(np.isfinite(f)):
-        _bad("piston_force", _short(f), "finite forces (found NaN or inf)")
+        _bad("piston_force", f, "finite forces (found NaN or inf)")
     # the stroke is a loading curve: an upward step means unloading or mixed-up samples
     tol = 1e-9 * max(float(np.ptp(z)), 1e-300)
     up = np.flatnonzero(np.diff(z) > tol)
     if up.size:
-        _bad("piston_z", _short(z), f"a monotonic downward stroke (it rises after sample {int(up[0])})")
+        _bad("piston_z", z, f"a monotonic downward stroke (it rises after sample {int(up[0])})")
     return z, f
 
 
@@ -677,11 +672,11 @@ def press_curve(piston_z, piston_force, contact_z: float | None = None) -> dict:
     if contact_z is None:
         fmax = float(f.max())
         if fmax <= 0:
-            _bad("piston_force", _short(f), "some positive force (the piston never touched the bed); or give contact_z")
+            _bad("piston_force", f, "some positive force (the piston never touched the bed); or give contact_z")
         i0 = int(np.argmax(f > 0.01 * fmax))
         zc = float(z[i0])
     else:
-        zc = _finite("contact_z", contact_z, "m")
+        zc = _finite_number("contact_z", contact_z, "m")
         below = np.flatnonzero(z <= zc)
         if below.size == 0:
             _bad("contact_z", contact_z, f"a height reached by the piston (lowest piston_z = {z.min():.6g} m)")
@@ -713,7 +708,7 @@ def press_summary(
     """
     z, f = _press_arrays(piston_z, piston_force)
     fill = _positive("fill_height", fill_height, "m")
-    backstop_z = _finite("backstop_z", backstop_z, "m")
+    backstop_z = _finite_number("backstop_z", backstop_z, "m")
     reached = False
     if force_limit is None:
         z_end, f_max = float(z.min()), float(f.max())
@@ -749,29 +744,29 @@ def press_summary(
 def _impact_arrays(face_count, face_energy, face_max_speed, face_area):
     c = np.asarray(face_count)
     if c.ndim != 1 or c.size == 0:
-        _bad("face_count", _short(c), "impact counts of shape (F,) with F >= 1")
+        _bad("face_count", c, "impact counts of shape (F,) with F >= 1")
     if not (
         np.issubdtype(c.dtype, np.integer)
         or (np.issubdtype(c.dtype, np.floating) and np.all(np.isfinite(c)) and np.all(c == np.round(c)))
     ):
-        _bad("face_count", _short(c), "whole-number impact counts")
+        _bad("face_count", c, "whole-number impact counts")
     c = c.astype(np.int64)
     if np.any(c < 0):
-        _bad("face_count", _short(c), "counts >= 0")
+        _bad("face_count", c, "counts >= 0")
     e = np.asarray(face_energy, dtype=float)
     v = np.asarray(face_max_speed, dtype=float)
     for name, a, unit in (("face_energy", e, "J"), ("face_max_speed", v, "m/s")):
         if a.shape != c.shape:
-            _bad(name, _short(a), f"shape {c.shape} like face_count")
+            _bad(name, a, f"shape {c.shape} like face_count")
         if not np.all(np.isfinite(a) & (a >= 0)):
-            _bad(name, _short(a), f"finite values >= 0 {unit}")
+            _bad(name, a, f"finite values >= 0 {unit}")
     area = None
     if face_area is not None:
         area = np.asarray(face_area, dtype=float)
         if area.shape != c.shape:
-            _bad("face_area", _short(area), f"shape {c.shape} like face_count")
+            _bad("face_area", area, f"shape {c.shape} like face_count")
         if not np.all(np.isfinite(area) & (area > 0)):
-            _bad("face_area", _short(area), "finite face areas > 0 m^2")
+            _bad("face_area", area, "finite face areas > 0 m^2")
     return c, e, v, area
 
 
@@ -845,7 +840,7 @@ class SettleMonitor:
         A NaN energy (a world that blew up) is not below the threshold. Returns True when the last
         ``window`` samples were all below the threshold; a sample at or above it starts the count again.
         """
-        t = _finite("time", time, "s")
+        t = _finite_number("time", time, "s")
         ke = kinetic_energy_per_particle
         if np.ndim(ke) == 0:
             if isinstance(ke, bool) or not isinstance(ke, numbers.Real):
@@ -854,9 +849,9 @@ class SettleMonitor:
         else:
             ke = np.array(ke, dtype=float)
             if ke.ndim != 1 or ke.size == 0:
-                _bad("kinetic_energy_per_particle", _short(ke), "a number [J] or one per world, shape (W,)")
+                _bad("kinetic_energy_per_particle", short(ke), "a number [J] or one per world, shape (W,)")
         if np.any(ke < 0):
-            _bad("kinetic_energy_per_particle", ke if np.ndim(ke) == 0 else _short(ke), "energies >= 0 J")
+            _bad("kinetic_energy_per_particle", ke if np.ndim(ke) == 0 else short(ke), "energies >= 0 J")
         if self.history and t < self.history[-1][0]:
             _bad("time", time, f"a time >= the previous update's {self.history[-1][0]!r} s")
         self.history.append((t, ke))

@@ -30,16 +30,16 @@ Time codes: ``timeCodesPerSecond`` = :data:`TIME_CODES_PER_SECOND`, so time code
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import json
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from warpdem.engine.materials import Interaction, Material
+from warpdem.engine.checks import check, did_you_mean, enum_value, number_fields
+from warpdem.engine.keys import KeyGrammar
+from warpdem.engine.materials import INTERACTION_ENUMS, INTERACTION_FIELDS, MATERIAL_SCALARS, Interaction, Material
 from warpdem.engine.solver import CLUMP_CONTACT_MASSES
-from warpdem.engine.types import ContactLaw, RollingModel
 
 TIME_CODES_PER_SECOND = 100.0
 NS = "warpdem:"
@@ -191,21 +191,10 @@ def _camel(name: str) -> str:
     return head + "".join(p.capitalize() for p in rest)
 
 
-PAIR_FIELDS = [f.name for f in dataclasses.fields(Interaction)]
 RUN_FIELDS = [f.name for f in dataclasses.fields(RunSpec)]
 RUN_TOKENS = {"clump_contact_mass": CLUMP_CONTACT_MASSES}
 """Run settings that are words, with the words allowed (the others are numbers)."""
-MEASURE_SCALARS = [
-    "kind",
-    "base_height",
-    "center",
-    "piston",
-    "force_limit",
-    "backstop_height",
-    "walls",
-    "phase_names",
-    "phase_ends",
-]
+MEASURE_FIELDS = [f.name for f in dataclasses.fields(MeasureSpec)]
 FACTORY_FIELDS = [
     "mode",
     "material",
@@ -230,12 +219,28 @@ FACTORY_FIELDS = [
 ]
 COAT_FIELDS = ["radius", "material", "side", "seed", "spacing"]
 
+MEASURE_NUMBERS = number_fields(MeasureSpec)
+"""Measurement settings an override sets (the numbers), with their types."""
+FACTORY_NUMBERS = number_fields(FactorySpec)
+"""Factory settings an override sets (the numbers), with their types."""
+OVERRIDES = KeyGrammar(
+    {
+        "material": MATERIAL_SCALARS,
+        "interaction": INTERACTION_FIELDS,
+        "run": tuple(RUN_FIELDS),
+        "measure": tuple(MEASURE_NUMBERS),
+        "factory": tuple(FACTORY_NUMBERS),
+    }
+)
+"""The keys :func:`apply_overrides` takes (see :mod:`warpdem.engine.keys`); rig parameters are
+:func:`warpdem.scene.rigs.load`'s."""
+
 KNOWN = {
     "world": {NS + "rig", NS + "authoring", NS + "domainMin", NS + "domainMax"}
     | {NS + "run:" + _camel(f) for f in RUN_FIELDS}
-    | {NS + "measure:" + _camel(f) for f in MEASURE_SCALARS},
+    | {NS + "measure:" + _camel(f) for f in MEASURE_FIELDS},
     "material": {NS + "youngsModulus", NS + "shearModulus", NS + "poissonRatio"},
-    "pair": {NS + "pair:materials"} | {NS + "pair:" + _camel(f) for f in PAIR_FIELDS},
+    "pair": {NS + "pair:materials"} | {NS + "pair:" + _camel(f) for f in INTERACTION_FIELDS},
     "shape": {NS + "shape:kind"},
     "wall": {NS + "coat:" + _camel(f) for f in COAT_FIELDS},
     "factory": {NS + "factory:" + _camel(f) for f in FACTORY_FIELDS},
@@ -323,14 +328,10 @@ def write_stage(spec: SceneSpec, path=None):
         prim.CreateRelationship(NS + "pair:materials").SetTargets(
             [Sdf.Path(f"/World/Materials/{_ident(a)}"), Sdf.Path(f"/World/Materials/{_ident(b)}")]
         )
-        for f in PAIR_FIELDS:
+        for f in INTERACTION_FIELDS:
             v = getattr(ia, f)
-            if f == "law":
-                prim.CreateAttribute(NS + "pair:law", Sdf.ValueTypeNames.Token).Set(ContactLaw(v).name.lower())
-            elif f == "rolling_model":
-                prim.CreateAttribute(NS + "pair:rollingModel", Sdf.ValueTypeNames.Token).Set(
-                    RollingModel(v).name.lower()
-                )
+            if f in INTERACTION_ENUMS:
+                prim.CreateAttribute(NS + "pair:" + _camel(f), Sdf.ValueTypeNames.Token).Set(v.name.lower())
             else:
                 prim.CreateAttribute(NS + "pair:" + _camel(f), Sdf.ValueTypeNames.Double).Set(float(v))
 
@@ -405,20 +406,16 @@ def write_stage(spec: SceneSpec, path=None):
             g.AddTranslateOp().Set(Gf.Vec3d(base[0], base[1], base[2] + height / 2))
         g.CreatePurposeAttr(UsdGeom.Tokens.guide)
         prim = g.GetPrim()
-
-        def fa(name, tname, value):
-            prim.CreateAttribute(NS + "factory:" + name, getattr(Sdf.ValueTypeNames, tname)).Set(value)
-
-        fa("mode", "Token", fac.mode)
+        _factory_attr(prim, "mode", "Token", fac.mode)
         prim.CreateRelationship(NS + "factory:material").SetTargets(
             [Sdf.Path(f"/World/Materials/{_ident(fac.material)}")]
         )
         prim.CreateRelationship(NS + "factory:shape").SetTargets([Sdf.Path(f"/World/Shapes/{_ident(fac.shape)}")])
         if kind == "cylinder" and fac.region[4] is not None:
-            fa("topRadius", "Double", float(fac.region[4]))
+            _factory_attr(prim, "topRadius", "Double", float(fac.region[4]))
         for name, value in (("count", fac.count), ("seed", fac.seed)):
             if value is not None:
-                fa(name, "Int", int(value))
+                _factory_attr(prim, name, "Int", int(value))
         for name, value in (
             ("mass", fac.mass),
             ("rate", fac.rate),
@@ -427,15 +424,22 @@ def write_stage(spec: SceneSpec, path=None):
             ("interval", fac.interval),
         ):
             if value is not None:
-                fa(name, "Double", float(value))
-        fa("initialVelocity", "Double3", Gf.Vec3d(*map(float, fac.initial_velocity)))
+                _factory_attr(prim, name, "Double", float(value))
+        _factory_attr(prim, "initialVelocity", "Double3", Gf.Vec3d(*map(float, fac.initial_velocity)))
         sz = dict(fac.sizes)
-        fa("sizeDistribution", "Token", sz.pop("distribution"))
+        _factory_attr(prim, "sizeDistribution", "Token", sz.pop("distribution"))
         for k, v in sz.items():
-            fa("size" + k[0].upper() + _camel(k)[1:], "Double", float(v))
+            _factory_attr(prim, "size" + k[0].upper() + _camel(k)[1:], "Double", float(v))
     if path:
         stage.GetRootLayer().Save()
     return stage
+
+
+def _factory_attr(prim, name: str, type_name: str, value) -> None:
+    """Author ``warpdem:factory:<name>`` of Sdf value type ``type_name`` on ``prim``."""
+    from pxr import Sdf
+
+    prim.CreateAttribute(NS + "factory:" + name, getattr(Sdf.ValueTypeNames, type_name)).Set(value)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -458,8 +462,7 @@ class _Reader:
         for prop in prim.GetAuthoredProperties():
             name = prop.GetName()
             if name.startswith(NS) and name not in known:
-                near = difflib.get_close_matches(name, sorted(known), n=1)
-                hint = f"; did you mean {near[0]!r}?" if near else f"; known: {', '.join(sorted(known))}"
+                hint = f"{did_you_mean(name, known)}; known: {', '.join(sorted(known))}"
                 self.fail(prim, name, f"is not a warpdem attribute here{hint}")
 
     def get(self, prim, name: str, kind: str = "number", required: bool = True, default=None, time=None):
@@ -662,30 +665,17 @@ def read_stage(path_or_stage) -> SceneSpec:
                 f"has {len(mats)} targets; expected two materials (one for a material against itself)",
             )
         kw = {}
-        for f in PAIR_FIELDS:
+        for f in INTERACTION_FIELDS:
             name = NS + "pair:" + _camel(f)
-            if f == "law":
-                v = r.get(prim, name, "token", required=False)
-                if v is not None:
-                    try:
-                        kw[f] = ContactLaw[v.upper()]
-                    except KeyError:
-                        r.fail(prim, name, f"= {v!r} is not allowed; expected hertz_mindlin, jkr or eepa")
-            elif f == "rolling_model":
-                v = r.get(prim, name, "token", required=False)
-                if v is not None:
-                    try:
-                        kw[f] = RollingModel[v.upper()]
-                    except KeyError:
-                        r.fail(
-                            prim,
-                            name,
-                            f"= {v!r} is not allowed; expected " + ", ".join(m.name.lower() for m in RollingModel),
-                        )
-            else:
-                v = r.get(prim, name, required=False)
-                if v is not None:
-                    kw[f] = v
+            cls = INTERACTION_ENUMS.get(f)
+            v = r.get(prim, name, "number" if cls is None else "token", required=False)
+            if v is not None and cls is not None:
+                try:
+                    v = enum_value(cls, "", f, v)
+                except ValueError:
+                    r.fail(prim, name, f"= {v!r} is not allowed; expected " + ", ".join(m.name.lower() for m in cls))
+            if v is not None:
+                kw[f] = v
         try:
             ia = Interaction(**kw)
         except ValueError as e:
@@ -870,76 +860,38 @@ def _read_factory(r: _Reader, prim) -> FactorySpec:
 # overrides and building
 # ----------------------------------------------------------------------------------------------------
 def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
-    """Apply ``--set`` style overrides (values as strings or numbers) to a spec, in place:
-    ``material.NAME.FIELD``, ``interaction.A.B.FIELD``, ``run.FIELD``, ``measure.FIELD``,
-    ``factory.NAME.FIELD``. Rig parameters (any other key) are handled by :func:`warpdem.scene.rigs.load`."""
-    for key, raw in overrides.items():
-        parts = key.split(".")
+    """Apply ``--set`` style overrides (values as strings or numbers) to a spec, in place: the keys of
+    :data:`OVERRIDES` (``material.NAME.FIELD``, ``interaction.A.B.FIELD``, ``run.FIELD``, ``measure.FIELD``,
+    ``factory.NAME.FIELD``). Rig parameters (any other key) are handled by :func:`warpdem.scene.rigs.load`."""
+    defined = {"material": [m.name for m in spec.materials], "factory": [f.name for f in spec.factories]}
+    for text, raw in overrides.items():
+        key = OVERRIDES.parse(text, "--set", defined=defined, error=StageError)
         value = _parse(raw)
-        if parts[0] == "material" and len(parts) == 3:
-            m = spec.material(parts[1])
-            if parts[2] not in ("density", "youngs_modulus", "shear_modulus", "poisson_ratio"):
-                raise StageError(
-                    f"--set {key}: field {parts[2]!r} is not a material scalar; expected density, "
-                    "youngs_modulus, shear_modulus or poisson_ratio"
-                )
-            changes = {parts[2]: float(value)}
-            # E and G are tied through nu: a new E or nu re-derives G, a new G re-derives E
-            if parts[2] in ("youngs_modulus",):
-                changes["shear_modulus"] = None
-            elif parts[2] in ("shear_modulus", "poisson_ratio"):
-                changes["youngs_modulus"] = None
-            spec.materials[spec.materials.index(m)] = dataclasses.replace(m, **changes)
-        elif parts[0] == "interaction" and len(parts) == 4:
-            a, b, f = parts[1:]
-            spec.material(a), spec.material(b)
-            if f not in PAIR_FIELDS:
-                raise StageError(
-                    f"--set {key}: field {f!r} is not an interaction field; expected one of " + ", ".join(PAIR_FIELDS)
-                )
-            if f == "law":
-                value = ContactLaw[str(value).upper()]
-            elif f == "rolling_model":
-                value = RollingModel[str(value).upper()]
+        if key.kind == "material":
+            m = spec.material(key.names[0])
+            spec.materials[spec.materials.index(m)] = m.with_value(key.field, float(value))
+        elif key.kind == "interaction":
+            a, b = key.names
+            # an enum field takes the member's name: Interaction reads it
             for k, (pa, pb, ia) in enumerate(spec.pairs):
                 if {pa, pb} == {a, b}:
-                    spec.pairs[k] = (pa, pb, dataclasses.replace(ia, **{f: value}))
+                    spec.pairs[k] = (pa, pb, dataclasses.replace(ia, **{key.field: value}))
                     break
             else:
-                spec.pairs.append((a, b, Interaction(**{f: value})))
-        elif parts[0] == "run" and len(parts) == 2:
-            if parts[1] not in RUN_FIELDS:
-                raise StageError(
-                    f"--set {key}: {parts[1]!r} is not a run setting; expected one of {', '.join(RUN_FIELDS)}"
+                spec.pairs.append((a, b, Interaction(**{key.field: value})))
+        elif key.kind == "run":
+            if key.field in RUN_TOKENS:
+                check(
+                    value in RUN_TOKENS[key.field], "--set", text, value, " or ".join(RUN_TOKENS[key.field]), StageError
                 )
-            if parts[1] in RUN_TOKENS:
-                if value not in RUN_TOKENS[parts[1]]:
-                    raise StageError(
-                        f"--set {key}: {value!r} is not allowed; expected " + " or ".join(RUN_TOKENS[parts[1]])
-                    )
-                setattr(spec.run, parts[1], value)
+                setattr(spec.run, key.field, value)
             else:
-                setattr(spec.run, parts[1], float(value))
-        elif parts[0] == "measure" and len(parts) == 2:
-            if parts[1] not in ("base_height", "force_limit", "backstop_height"):
-                raise StageError(
-                    f"--set {key}: expected measure.base_height, measure.force_limit or measure.backstop_height"
-                )
-            setattr(spec.measure, parts[1], float(value))
-        elif parts[0] == "factory" and len(parts) == 3:
-            fac = next((f for f in spec.factories if f.name == parts[1]), None)
-            if fac is None:
-                raise StageError(
-                    f"--set {key}: no factory {parts[1]!r}; factories: " + ", ".join(f.name for f in spec.factories)
-                )
-            if parts[2] not in ("count", "mass", "rate", "mass_rate", "start_time", "seed", "interval"):
-                raise StageError(f"--set {key}: expected count, mass, rate, mass_rate, start_time, seed or interval")
-            setattr(fac, parts[2], int(value) if parts[2] in ("count", "seed") else float(value))
+                setattr(spec.run, key.field, float(value))
+        elif key.kind == "measure":
+            setattr(spec.measure, key.field, MEASURE_NUMBERS[key.field](value))
         else:
-            raise StageError(
-                f"--set {key}: unknown setting; expected material.NAME.FIELD, interaction.A.B.FIELD, "
-                "run.FIELD, measure.FIELD, factory.NAME.FIELD or a rig parameter"
-            )
+            fac = next(f for f in spec.factories if f.name == key.names[0])
+            setattr(fac, key.field, FACTORY_NUMBERS[key.field](value))
     return spec
 
 

@@ -68,10 +68,11 @@ Schema (``studies/*.toml``)::
     [verification]
     replicates = 0                  # verification runs at the chosen optimum, >= 0
 
-Override keys (``[fixed]`` keys and factor parameters) follow :func:`warpdem.scene.stage.apply_overrides`:
-``material.NAME.FIELD`` (density, youngs_modulus, shear_modulus, poisson_ratio),
+Override keys (``[fixed]`` keys and factor parameters) are read by the one grammar of
+:mod:`warpdem.engine.keys`, with the scene's fields of :data:`warpdem.scene.stage.OVERRIDES`:
+``material.NAME.FIELD`` (density, poisson_ratio, youngs_modulus, shear_modulus),
 ``interaction.A.B.FIELD`` (any :class:`~warpdem.engine.materials.Interaction` field; a factor only the numeric
-ones of ``builder.INTERACTION_SCALARS``), ``run.FIELD``, ``measure.FIELD`` and ``factory.NAME.FIELD``
+ones of ``materials.INTERACTION_SCALARS``), ``run.FIELD``, ``measure.FIELD`` and ``factory.NAME.FIELD``
 (``[fixed]`` only), and any other key is a rig parameter (with ``rig``, checked against the rig's
 parameters; a factor must name a numeric one). Only ``material.*`` and ``interaction.*`` scalars can
 differ between the batched worlds of one launch (:meth:`warpdem.engine.builder.ModelBuilder.vary`); a factor on
@@ -99,7 +100,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import difflib
+import functools
 import hashlib
 import json
 import math
@@ -116,6 +117,10 @@ try:  # Python >= 3.11
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli backport
     import tomli as tomllib
+
+from warpdem.engine.checks import did_you_mean, finite_number, is_number, not_allowed
+from warpdem.engine.keys import PER_WORLD, KeyGrammar
+from warpdem.engine.materials import INTERACTION_SCALARS
 
 from . import designs
 from .analysis import model_terms
@@ -175,11 +180,6 @@ MEASURES = (
 )
 """Scalar metric keys that :func:`warpdem.scene.runner.run_scene` writes per world (``metrics.json``)."""
 
-MATERIAL_SCALARS = ("density", "youngs_modulus", "shear_modulus", "poisson_ratio")
-"""Material fields an override (and a per-world variation) can set."""
-
-_MEASURE_FIELDS = ("base_height", "force_limit", "backstop_height")
-_FACTORY_FIELDS = ("count", "mass", "rate", "mass_rate", "start_time", "seed", "interval")
 _POINT_TYPE = {"factorial": "factorial", "axial": "axial", "center": "centre"}
 _RESERVED = {"run", "std_order", "point_type", "replicate", "world_seed", "point_id", "kind", "run_order"}
 _NAME_RE = re.compile(r"^[a-z0-9_]+$")
@@ -192,51 +192,22 @@ _DIGITS = 12  # significant digits of actual values in the table and in point id
 # --------------------------------------------------------------------------------------------------
 
 
-def _interaction_fields():
-    from warpdem.scene.stage import PAIR_FIELDS
-
-    return tuple(PAIR_FIELDS)
-
-
-def _interaction_scalars():
-    from warpdem.engine.builder import INTERACTION_SCALARS
-
-    return tuple(INTERACTION_SCALARS)
-
-
-def _run_fields():
-    from warpdem.scene.stage import RUN_FIELDS
-
-    return tuple(RUN_FIELDS)
-
-
 def _rigs():
     from warpdem.scene import rigs
 
     return rigs
 
 
-def _suggest(word: str, choices) -> str:
-    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
-    return f" (did you mean {close[0]!r}?)" if close else ""
-
-
 def _bad(where: str, key: str, value, expected: str) -> StudyError:
-    return StudyError(f"{where}: {key} = {value!r} is not allowed; expected {expected}")
+    return StudyError(not_allowed(where, key, value, expected))
 
 
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
-
-
-def _number(where: str, key: str, v, *, finite: bool = True) -> float:
-    if not _is_number(v) or (finite and not math.isfinite(float(v))):
-        raise _bad(where, key, v, "a finite number")
-    return float(v)
+def _number(where: str, key: str, v) -> float:
+    return finite_number(where, key, v, error=StudyError)
 
 
 def _integer(where: str, key: str, v, minimum: int) -> int:
-    if not _is_number(v) or float(v) != int(v) or int(v) < minimum:
+    if not is_number(v) or float(v) != int(v) or int(v) < minimum:
         raise _bad(where, key, v, f"an integer >= {minimum}")
     return int(v)
 
@@ -284,7 +255,7 @@ def _mapping(where: str, key: str, v, names: Sequence[str], need_all: bool) -> F
     if unknown:
         raise StudyError(
             f"{where}: {key} names factor {unknown[0]!r}, which is not a factor"
-            f"{_suggest(unknown[0], names)}; factors: {', '.join(names)}"
+            f"{did_you_mean(unknown[0], names)}; factors: {', '.join(names)}"
         )
     if need_all:
         missing = [n for n in names if n not in v]
@@ -302,56 +273,27 @@ def _rig_fields(rig: str | None) -> dict[str, dataclasses.Field]:
     return {f.name: f for f in dataclasses.fields(_rigs().RIGS[rig])}
 
 
-def _key_problem(key: str, rig: str | None, factor: bool) -> str | None:
-    """Why ``key`` is not an override key (None when it is one). ``factor``: it must be a numeric scalar."""
-    if not isinstance(key, str) or not key:
-        return "a non-empty string"
-    parts = key.split(".")
-    head = parts[0]
-    scalars = _interaction_scalars() if factor else _interaction_fields()
-    keyed = "material.NAME.FIELD, interaction.A.B.FIELD, run.FIELD" + (
-        "" if factor else ", measure.FIELD, factory.NAME.FIELD"
-    )
-    forms = keyed + " or a rig parameter"
-    if len(parts) == 1:
-        if rig is not None:
-            rf = _rig_fields(rig)
-            if key not in rf:
-                return f"a {rig} parameter{_suggest(key, rf)} ({', '.join(rf)}) or one of {keyed}"
-            if factor:
-                d = rf[key].default
-                if isinstance(d, (bool, str)):
-                    return f"a numeric {rig} parameter ({key} is {type(d).__name__})"
-        return None
-    if head == "material":
-        if len(parts) != 3 or not all(parts):
-            return f"material.NAME.FIELD (one of {forms})"
-        if parts[2] not in MATERIAL_SCALARS:
-            return f"a material field: {', '.join(MATERIAL_SCALARS)}{_suggest(parts[2], MATERIAL_SCALARS)}"
-        return None
-    if head == "interaction":
-        if len(parts) != 4 or not all(parts):
-            return f"interaction.A.B.FIELD with two material names (one of {forms})"
-        if parts[3] not in scalars:
-            what = "a numeric interaction field" if factor else "an interaction field"
-            return f"{what}: {', '.join(scalars)}{_suggest(parts[3], scalars)}"
-        return None
-    if head == "run":
-        fields_ = _run_fields()
-        if len(parts) != 2 or parts[1] not in fields_:
-            return f"run.FIELD with FIELD one of {', '.join(fields_)}" + (
-                _suggest(parts[1], fields_) if len(parts) == 2 else ""
-            )
-        return None
-    if head in ("measure", "factory"):
-        if factor:
-            return f"a numeric scalar: {forms}"
-        if head == "measure" and (len(parts) != 2 or parts[1] not in _MEASURE_FIELDS):
-            return f"measure.FIELD with FIELD one of {', '.join(_MEASURE_FIELDS)}"
-        if head == "factory" and (len(parts) != 3 or not parts[1] or parts[2] not in _FACTORY_FIELDS):
-            return f"factory.NAME.FIELD with FIELD one of {', '.join(_FACTORY_FIELDS)}"
-        return None
-    return f"one of {forms}" + _suggest(head, ("material", "interaction", "run", "measure", "factory"))
+@functools.cache
+def _grammar(rig: str | None, factor: bool) -> KeyGrammar:
+    """The override keys of a study on ``rig`` (None: rig parameters not checked): the scene's
+    (:data:`warpdem.scene.stage.OVERRIDES`) and the rig's parameters; for a ``factor`` only numbers: material
+    and numeric interaction fields, run settings and numeric rig parameters."""
+    from warpdem.scene.stage import OVERRIDES
+
+    fields = dict(OVERRIDES.fields)
+    labels = {}
+    if factor:
+        fields = {k: fields[k] for k in ("material", "run")} | {"interaction": INTERACTION_SCALARS}
+        labels["interaction"] = "a numeric interaction field"
+    fields["rig"] = None
+    if rig is not None:
+        rf = _rig_fields(rig)
+        words = [k for k, f in rf.items() if isinstance(f.default, (bool, str))]
+        fields["rig"] = tuple(k for k in rf if not (factor and k in words))
+        labels["rig"] = (
+            f"a numeric {rig} parameter ({', '.join(words)} are not numbers)" if factor else f"a {rig} parameter"
+        )
+    return KeyGrammar(fields, labels)
 
 
 def is_rig_key(key: str) -> bool:
@@ -362,12 +304,7 @@ def is_rig_key(key: str) -> bool:
 def varies_per_world(key: str) -> bool:
     """True when override ``key`` can differ between the batched worlds of one launch: a
     ``material.NAME.FIELD`` or ``interaction.A.B.FIELD`` scalar (:meth:`ModelBuilder.vary`)."""
-    parts = key.split(".")
-    if parts[0] == "material":
-        return len(parts) == 3 and parts[2] in MATERIAL_SCALARS
-    if parts[0] == "interaction":
-        return len(parts) == 4 and parts[3] in _interaction_scalars()
-    return False
+    return PER_WORLD.accepts(key)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -398,9 +335,7 @@ class FactorSpec:
                 self.name,
                 f"a name that is not a design-table column ({', '.join(sorted(_RESERVED))}, *_actual)",
             )
-        problem = _key_problem(self.parameter, None, factor=True)
-        if problem:
-            raise _bad(where, "parameter", self.parameter, problem)
+        _grammar(None, True).parse(self.parameter, where, "parameter", error=StudyError)
         low = _number(where, "low", self.low)
         high = _number(where, "high", self.high)
         if low == high:
@@ -471,7 +406,7 @@ class DesignSpec:
     def __post_init__(self):
         w = "[design]"
         if self.kind not in DESIGN_KINDS:
-            raise _bad(w, "kind", self.kind, f"one of {', '.join(DESIGN_KINDS)}{_suggest(self.kind, DESIGN_KINDS)}")
+            raise _bad(w, "kind", self.kind, f"one of {', '.join(DESIGN_KINDS)}{did_you_mean(self.kind, DESIGN_KINDS)}")
         for opt in _OPTIONS:
             if getattr(self, opt) is not None and opt not in _KIND_OPTIONS[self.kind]:
                 kinds = [k for k, o in _KIND_OPTIONS.items() if opt in o]
@@ -483,7 +418,7 @@ class DesignSpec:
         set_("replicates", _integer(w, "replicates", self.replicates, 1))
         set_("randomize", _boolean(w, "randomize", self.randomize))
         if self.runs is not None:
-            if not _is_number(self.runs) or self.runs not in (12, 20):
+            if not is_number(self.runs) or self.runs not in (12, 20):
                 raise _bad(w, "runs", self.runs, "12 or 20 (Plackett-Burman runs)")
             set_("runs", int(self.runs))
         if self.center_points is not None:
@@ -512,7 +447,7 @@ class DesignSpec:
                 if self.alpha.lower() not in ("rotatable", "orthogonal", "face"):
                     raise _bad(w, "alpha", self.alpha, 'a number > 0, "rotatable", "orthogonal" or "face"')
                 set_("alpha", self.alpha.lower())
-            elif not _is_number(self.alpha) or not (math.isfinite(self.alpha) and self.alpha > 0):
+            elif not is_number(self.alpha) or not (math.isfinite(self.alpha) and self.alpha > 0):
                 raise _bad(w, "alpha", self.alpha, 'a number > 0, "rotatable", "orthogonal" or "face"')
             else:
                 set_("alpha", float(self.alpha))
@@ -573,7 +508,7 @@ class ResponseSpec:
                 where,
                 "measure",
                 m,
-                f"a metric key: {', '.join(MEASURES)}{_suggest(m, MEASURES)}, or a dotted path into the metrics",
+                f"a metric key: {', '.join(MEASURES)}{did_you_mean(m, MEASURES)}, or a dotted path into the metrics",
             )
         _string(where, "unit", self.unit)
         if self.target is not None:
@@ -600,7 +535,7 @@ class AnalysisSpec:
                     "model",
                     m,
                     'linear, 2fi, quadratic, none or a list of terms such as ["A", "A*B", "A^2"]'
-                    + _suggest(m.lower(), ("linear", "2fi", "quadratic", "none")),
+                    + did_you_mean(m.lower(), ("linear", "2fi", "quadratic", "none")),
                 )
             object.__setattr__(self, "model", m.lower())
         elif m is not None:
@@ -670,7 +605,7 @@ class StudySpec:
                 f"({', '.join(rigs.RIGS)}) and scene (a stage path relative to the study file)"
             )
         if self.rig is not None and self.rig not in rigs.RIGS:
-            raise _bad(w, "rig", self.rig, f"one of {', '.join(rigs.RIGS)}{_suggest(self.rig, rigs.RIGS)}")
+            raise _bad(w, "rig", self.rig, f"one of {', '.join(rigs.RIGS)}{did_you_mean(self.rig, rigs.RIGS)}")
         set_("smoke", _boolean(w, "smoke", self.smoke))
         if self.path is not None:
             set_("path", Path(self.path))
@@ -693,10 +628,8 @@ class StudySpec:
         if not isinstance(self.fixed, Mapping):
             raise _bad("[fixed]", "fixed", self.fixed, "a table of overrides")
         for k, v in self.fixed.items():
-            problem = _key_problem(k, self.rig, factor=False)
-            if problem:
-                raise _bad("[fixed]", "key", k, problem)
-            if not isinstance(v, (str, bool, int, float)) or (_is_number(v) and not math.isfinite(v)):
+            _grammar(self.rig, False).parse(k, "[fixed]", error=StudyError)
+            if not isinstance(v, (str, bool, int, float)) or (is_number(v) and not math.isfinite(v)):
                 raise _bad("[fixed]", k, v, "a string, a boolean or a finite number")
         set_("fixed", FrozenMap(self.fixed))
 
@@ -718,9 +651,7 @@ class StudySpec:
                     f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; factor "
                     f"{other!r} already sets it, expected one factor per parameter"
                 )
-            problem = _key_problem(f.parameter, self.rig, factor=True)
-            if problem:
-                raise _bad(f"[[factors]] {f.name!r}", "parameter", f.parameter, problem)
+            _grammar(self.rig, True).parse(f.parameter, f"[[factors]] {f.name!r}", "parameter", error=StudyError)
             if f.parameter in self.fixed:
                 raise StudyError(
                     f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; [fixed] sets "
@@ -769,7 +700,7 @@ class StudySpec:
                 _mapping(w, "start", d.start, names, need_all=True)
             if d.base is not None:
                 if d.base not in names:
-                    raise _bad(w, "base", d.base, f"a factor name: {', '.join(names)}{_suggest(d.base, names)}")
+                    raise _bad(w, "base", d.base, f"a factor name: {', '.join(names)}{did_you_mean(d.base, names)}")
                 if d.coefficients[d.base] == 0:
                     raise _bad(w, f"coefficients.{d.base}", 0.0, "a non-zero coefficient for the base factor")
             if d.step is not None and all(v == 0 for v in d.step.values()):
@@ -875,7 +806,7 @@ def _check_keys(table: str, data, label: str) -> dict:
     for k in data:
         if k not in allowed:
             raise StudyError(
-                f"{label}: key {k!r} is not allowed{_suggest(k, allowed)}; expected one of {', '.join(allowed)}"
+                f"{label}: key {k!r} is not allowed{did_you_mean(k, allowed)}; expected one of {', '.join(allowed)}"
             )
     for k in _REQUIRED.get(table, ()):
         if k not in data:
@@ -901,7 +832,8 @@ def _from_dict(data: Mapping, path) -> StudySpec:
     for t in data:
         if t not in _TABLES:
             raise StudyError(
-                f"table [{t}] is not allowed{_suggest(t, _TABLES)}; expected " + ", ".join(f"[{x}]" for x in _TABLES)
+                f"table [{t}] is not allowed{did_you_mean(t, _TABLES)}; expected "
+                + ", ".join(f"[{x}]" for x in _TABLES)
             )
     for t in ("study", "factors", "design", "responses"):
         if t not in data:
@@ -1088,7 +1020,7 @@ def design_table(spec: StudySpec) -> pd.DataFrame:
 
 
 def _canon(v):
-    if _is_number(v):
+    if is_number(v):
         return _round(v)
     return v
 
