@@ -4,18 +4,18 @@ The law of a material pair (``PairParams.law``) picks the normal law; the tangen
 (Mindlin, Coulomb-capped) and the rolling resistance are shared. Each law decides when its contact
 exists (cohesive laws keep a contact alive into negative overlap) and what it keeps in the per-contact
 scalar history ``aux``.
+
+Adding a law: its file ``law_*.py`` of pure ``@wp.func``s, a ``ContactLaw`` member (kernels/enums.py), its
+branch in :func:`contact_force`, and its fields in ``PairParams`` (kernels/params.py).
 """
 
 import warp as wp
 
+from .enums import ContactLaw
 from .law_eepa import eepa_damping_coefficient, eepa_normal_force, eepa_tangential_stiffness
 from .law_hertz_mindlin import SQRT_5_6, hertz_mindlin, mindlin_tangential
 from .law_jkr import jkr_contact_radius, jkr_force_of_radius, jkr_friction_load, jkr_in_contact, jkr_stiffness
 from .params import PairParams
-
-LAW_HERTZ_MINDLIN = wp.constant(1)
-LAW_JKR = wp.constant(2)
-LAW_EEPA = wp.constant(3)
 
 
 @wp.func
@@ -46,7 +46,7 @@ def contact_force(
         updated aux, normal stiffness for the rolling spring [N/m]).
     """
     v_n = wp.dot(v_rel, n)
-    if p.law == LAW_JKR:
+    if p.law == ContactLaw.JKR:
         # aux: 1 while the pair is in contact (it persists into a gap down to the break overlap)
         if jkr_in_contact(overlap, int(aux > 0.5), r_star, p.e_star, p.gamma) == 0:
             return int(0), wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.vec3(0.0), 0.0, 0.0
@@ -60,7 +60,7 @@ def contact_force(
         return int(1), -f_n * n + f_t, load, f_t, xi, 1.0, (2.0 / 3.0) * s_n
     if overlap <= 0.0:
         return int(0), wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.vec3(0.0), 0.0, 0.0
-    if p.law == LAW_EEPA:
+    if p.law == ContactLaw.EEPA:
         # aux: the largest overlap of this contact (its plastic overlap follows from it)
         f_hys, d_max, k_damp, load = eepa_normal_force(
             overlap, aux, r_star, p.e_star, p.f0, p.eepa_n, p.lambda_p, p.chi, p.gamma

@@ -12,6 +12,7 @@ key up, by binary search, in the sphere's previous sorted list to inherit the sp
 
 import warp as wp
 
+from .enums import Overflow
 from .geometry import closest_point_triangle
 
 wp.set_module_options({"enable_backward": False})
@@ -195,7 +196,7 @@ def build_contacts(
                                     new_index[count, i] = j
                                     count += 1
                                 else:
-                                    wp.atomic_or(overflow_out, 0, 1)
+                                    wp.atomic_or(overflow_out, 0, Overflow.NEIGHBOR)
                     j = cell_next[j]
     sort_column(new_index, count, i)
     carry_history(
@@ -225,7 +226,7 @@ def build_contacts(
                     new_mesh_face[mcount, i] = wall_face_start[wall] + local
                     mcount += 1
                 else:
-                    wp.atomic_or(overflow_out, 0, 2)
+                    wp.atomic_or(overflow_out, 0, Overflow.MESH)
     sort_column(new_mesh_face, mcount, i)
     carry_history(
         old_mesh_face,

@@ -18,11 +18,11 @@ class PairParams:
     mu_r: float
     """Rolling friction coefficient [-] (dimensionless, torque = mu_r * R* * F_n)."""
     rolling_model: int
-    """RollingModel: 0 none, 1 constant torque (type A), 2 EPSD (type C)."""
+    """A ``RollingModel`` (kernels/enums.py)."""
     rolling_damping: float
     """EPSD viscous damping ratio eta_r [-] (Ai et al. 2011 use 0.3)."""
     law: int
-    """ContactLaw of the pair: 1 Hertz-Mindlin, 2 Hertz-Mindlin with JKR, 3 EEPA."""
+    """A ``ContactLaw`` (kernels/enums.py): the pair's normal law."""
     gamma: float
     """Surface energy gamma [J/m^2] (JKR, and EEPA's f_min = -1.5 pi gamma R*); work of adhesion W = 2 gamma."""
     f0: float

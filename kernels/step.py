@@ -14,9 +14,10 @@ per step (see warpdem/engine/motion.py), so no BVH refit is needed.
 
 import warp as wp
 
+from .enums import RollingModel
 from .geometry import FEATURE_FACE, closest_point_triangle
 from .law_contact import contact_force
-from .law_rolling import ROLLING_EPSD, rolling_resistance
+from .law_rolling import rolling_resistance
 from .params import PairParams
 
 wp.set_module_options({"enable_backward": False})
@@ -376,7 +377,7 @@ def step_spheres(
             partner_key_out, partner_count_out, tally, run_key, run_n, body_key(j, sphere_clump, clump_total)
         )
         i_roll = 0.0
-        if p.rolling_model == ROLLING_EPSD:
+        if p.rolling_model == RollingModel.EPSD:
             i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
         m_roll, roll = rolling_resistance(
             p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, neighbor_roll[k, i], dt

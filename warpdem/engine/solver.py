@@ -147,7 +147,7 @@ class Solver:
         """The wall motion used when run or step get no Control."""
         self._no_rebuild = wp.zeros(1, dtype=int, device=model.device)
         self._rebuild_count = wp.zeros(1, dtype=int, device=model.device)
-        self._blowup = wp.array([2**31 - 1, 2**31 - 1], dtype=int, device=model.device)
+        self._blowup = wp.array([_st.BLOWUP_NONE, _st.BLOWUP_NONE], dtype=int, device=model.device)
         self._spare: State | None = None
         # host copy of the rebuild flag, read between captured steps on CUDA (pinned: an async 4-byte copy)
         self._is_cuda = wp.get_device(model.device).is_cuda
@@ -843,7 +843,7 @@ class Solver:
             if flags & Overflow.MESH:
                 what.append(f"mesh_capacity = {contacts.mesh_capacity}")
             dropped = f"contact capacity exceeded ({', '.join(what)}): contacts were dropped; raise it in SolverOptions"
-        if blow[1] != 2**31 - 1:
+        if blow[1] != _st.BLOWUP_NONE:
             i = int(blow[0])
             world = int(self.model.sphere_world.numpy()[i])
             cause = f"; also {dropped}" if dropped else ""

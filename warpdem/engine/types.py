@@ -1,4 +1,4 @@
-"""Enums and the Model / State / Control / Contacts containers.
+"""The Model / State / Control / Contacts containers, and the enums (defined in ``warpdem.kernels.enums``).
 
 The split follows Newton (and the former ``warp.sim``): the Model is the static description on the
 device, a State is one instant of the time-varying quantities, Control holds what moves walls, and
@@ -8,42 +8,15 @@ writes another; nothing in a step synchronises with the host.
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 import warp as wp
 
+from warpdem.kernels.enums import ContactLaw, Overflow, RollingModel
 
-class RollingModel(enum.IntEnum):
-    """Rolling resistance model of a material pair."""
-
-    NONE = 0
-    CONSTANT_TORQUE = 1
-    """Type A (EDEM "standard rolling friction"): torque -mu_r * R* * F_n along the relative rolling direction."""
-    EPSD = 2
-    """Type C (elastic-plastic spring-dashpot, Ai et al. 2011): rolling spring capped at mu_r * R* * F_n, plus a dashpot."""
-
-
-class ContactLaw(enum.IntEnum):
-    """Normal contact law of a material pair."""
-
-    NONE = 0
-    HERTZ_MINDLIN = 1
-    """Hertz-Mindlin (no slip), EDEM's default."""
-    JKR = 2
-    """Hertz-Mindlin with JKR cohesion (EDEM "Hertz-Mindlin with JKR"), surface energy gamma."""
-    EEPA = 3
-    """Edinburgh Elasto-Plastic Adhesion (Morrissey 2013; Thakur et al. 2014)."""
-
-
-class Overflow(enum.IntFlag):
-    """Bits of ``Contacts.overflow``: which fixed capacity a rebuild ran out of."""
-
-    NONE = 0
-    NEIGHBOR = 1
-    MESH = 2
+__all__ = ["ContactLaw", "Contacts", "Control", "Model", "Overflow", "RollingModel", "State"]
 
 
 @dataclass
