@@ -14,6 +14,7 @@ import warp as wp
 
 from .enums import Overflow
 from .geometry import closest_point_triangle
+from .params import ContactHistory
 
 wp.set_module_options({"enable_backward": False})
 
@@ -92,27 +93,19 @@ def sort_column(keys: wp.array2d[int], count: int, col: int):
 def carry_history(
     old_keys: wp.array2d[int],
     old_count: int,
-    old_spring: wp.array2d[wp.vec3],
-    old_roll: wp.array2d[wp.vec3],
-    old_aux: wp.array2d[float],
+    old_history: wp.array2d[ContactHistory],
     new_keys: wp.array2d[int],
     new_count: int,
-    new_spring: wp.array2d[wp.vec3],
-    new_roll: wp.array2d[wp.vec3],
-    new_aux: wp.array2d[float],
+    new_history: wp.array2d[ContactHistory],
     col: int,
 ):
     """Give each new (sorted) entry of column ``col`` the history of the old entry with the same key, else zero."""
     for s in range(new_count):
         slot = find_sorted(old_keys, old_count, col, new_keys[s, col])
         if slot >= 0:
-            new_spring[s, col] = old_spring[slot, col]
-            new_roll[s, col] = old_roll[slot, col]
-            new_aux[s, col] = old_aux[slot, col]
+            new_history[s, col] = old_history[slot, col]
         else:
-            new_spring[s, col] = wp.vec3(0.0)
-            new_roll[s, col] = wp.vec3(0.0)
-            new_aux[s, col] = 0.0
+            new_history[s, col] = ContactHistory()
 
 
 @wp.kernel
@@ -138,25 +131,17 @@ def build_contacts(
     # Contacts in (previous lists):
     old_count: wp.array[int],
     old_index: wp.array2d[int],
-    old_spring: wp.array2d[wp.vec3],
-    old_roll: wp.array2d[wp.vec3],
-    old_aux: wp.array2d[float],
+    old_history: wp.array2d[ContactHistory],
     old_mesh_count: wp.array[int],
     old_mesh_face: wp.array2d[int],
-    old_mesh_spring: wp.array2d[wp.vec3],
-    old_mesh_roll: wp.array2d[wp.vec3],
-    old_mesh_aux: wp.array2d[float],
+    old_mesh_history: wp.array2d[ContactHistory],
     # Out:
     new_count: wp.array[int],
     new_index: wp.array2d[int],
-    new_spring: wp.array2d[wp.vec3],
-    new_roll: wp.array2d[wp.vec3],
-    new_aux: wp.array2d[float],
+    new_history: wp.array2d[ContactHistory],
     new_mesh_count: wp.array[int],
     new_mesh_face: wp.array2d[int],
-    new_mesh_spring: wp.array2d[wp.vec3],
-    new_mesh_roll: wp.array2d[wp.vec3],
-    new_mesh_aux: wp.array2d[float],
+    new_mesh_history: wp.array2d[ContactHistory],
     build_x_out: wp.array[wp.vec3],
     overflow_out: wp.array[int],
 ):
@@ -199,9 +184,7 @@ def build_contacts(
                                     wp.atomic_or(overflow_out, 0, Overflow.NEIGHBOR)
                     j = cell_next[j]
     sort_column(new_index, count, i)
-    carry_history(
-        old_index, old_count[i], old_spring, old_roll, old_aux, new_index, count, new_spring, new_roll, new_aux, i
-    )
+    carry_history(old_index, old_count[i], old_history, new_index, count, new_history, i)
     new_count[i] = count
 
     mesh_capacity = new_mesh_face.shape[0]
@@ -228,19 +211,7 @@ def build_contacts(
                 else:
                     wp.atomic_or(overflow_out, 0, Overflow.MESH)
     sort_column(new_mesh_face, mcount, i)
-    carry_history(
-        old_mesh_face,
-        old_mesh_count[i],
-        old_mesh_spring,
-        old_mesh_roll,
-        old_mesh_aux,
-        new_mesh_face,
-        mcount,
-        new_mesh_spring,
-        new_mesh_roll,
-        new_mesh_aux,
-        i,
-    )
+    carry_history(old_mesh_face, old_mesh_count[i], old_mesh_history, new_mesh_face, mcount, new_mesh_history, i)
     new_mesh_count[i] = mcount
 
 
@@ -249,25 +220,17 @@ def commit_contacts(
     # In (the lists build_contacts just wrote):
     new_count: wp.array[int],
     new_index: wp.array2d[int],
-    new_spring: wp.array2d[wp.vec3],
-    new_roll: wp.array2d[wp.vec3],
-    new_aux: wp.array2d[float],
+    new_history: wp.array2d[ContactHistory],
     new_mesh_count: wp.array[int],
     new_mesh_face: wp.array2d[int],
-    new_mesh_spring: wp.array2d[wp.vec3],
-    new_mesh_roll: wp.array2d[wp.vec3],
-    new_mesh_aux: wp.array2d[float],
+    new_mesh_history: wp.array2d[ContactHistory],
     # Out (the lists the step reads):
     count: wp.array[int],
     index: wp.array2d[int],
-    spring: wp.array2d[wp.vec3],
-    roll: wp.array2d[wp.vec3],
-    aux: wp.array2d[float],
+    history: wp.array2d[ContactHistory],
     mesh_count: wp.array[int],
     mesh_face: wp.array2d[int],
-    mesh_spring: wp.array2d[wp.vec3],
-    mesh_roll: wp.array2d[wp.vec3],
-    mesh_aux: wp.array2d[float],
+    mesh_history: wp.array2d[ContactHistory],
 ):
     """Copy each sphere's new lists over its old ones, only the slots in use: readers never look past a
     sphere's count, and a full-capacity copy moves several times the bytes (capacities of ~60 slots hold
@@ -277,13 +240,9 @@ def commit_contacts(
     count[i] = n
     for k in range(n):
         index[k, i] = new_index[k, i]
-        spring[k, i] = new_spring[k, i]
-        roll[k, i] = new_roll[k, i]
-        aux[k, i] = new_aux[k, i]
+        history[k, i] = new_history[k, i]
     nm = new_mesh_count[i]
     mesh_count[i] = nm
     for k in range(nm):
         mesh_face[k, i] = new_mesh_face[k, i]
-        mesh_spring[k, i] = new_mesh_spring[k, i]
-        mesh_roll[k, i] = new_mesh_roll[k, i]
-        mesh_aux[k, i] = new_mesh_aux[k, i]
+        mesh_history[k, i] = new_mesh_history[k, i]

@@ -1,4 +1,5 @@
-"""Per-pair contact parameters, derived on the host from materials and the interaction table."""
+"""The structs of the contact laws: per-pair parameters (derived on the host from the materials and the
+interaction table) and per-contact history (carried from step to step and across list rebuilds)."""
 
 import warp as wp
 
@@ -35,3 +36,21 @@ class PairParams:
     """EEPA adhesive branch exponent [-]."""
     ks_fac: float
     """EEPA tangential stiffness multiplier [-]."""
+
+
+@wp.struct
+class ContactHistory:
+    """What one contact remembers from the last step, seen from the pair's body a (the lower index of two
+    spheres, the sphere against a wall). A zero struct is a new contact; a contact that ends is zeroed.
+
+    A law that needs more history adds its field here: the lists, their rebuilds and checkpoints carry the
+    whole struct.
+    """
+
+    spring: wp.vec3
+    """Tangential spring displacement xi [m] (Mindlin), kept in the current tangent plane."""
+    roll: wp.vec3
+    """Rolling spring torque [N m] (EPSD; zero for the other rolling models)."""
+    aux: float
+    """The normal law's scalar history: JKR 1 while in contact (also in a gap down to the break overlap);
+    EEPA the largest overlap of the contact [m]; Hertz-Mindlin leaves it 0."""

@@ -18,7 +18,7 @@ from .enums import RollingModel
 from .geometry import FEATURE_FACE, closest_point_triangle
 from .law_contact import contact_force
 from .law_rolling import rolling_resistance
-from .params import PairParams
+from .params import ContactHistory, PairParams
 
 wp.set_module_options({"enable_backward": False})
 
@@ -105,9 +105,7 @@ def wall_contact(
     r_i: float,
     m_i: float,
     p: PairParams,
-    spring: wp.vec3,
-    roll: wp.vec3,
-    aux: float,
+    history: ContactHistory,
     dt: float,
 ):
     """A sphere against a wall (infinite radius and mass) along unit normal n (sphere -> wall).
@@ -115,18 +113,18 @@ def wall_contact(
     ``v_wall`` is the wall's velocity at the contact point [m/s].
 
     Returns:
-        (active, force on the sphere [N], torque on the sphere [N m], updated spring [m], updated rolling
-        spring [N m], updated aux).
+        (active, force on the sphere [N], torque on the sphere [N m], updated history (zero once the contact
+        ended)).
     """
     arm = r_i - 0.5 * overlap
     v_rel = v_i + wp.cross(w_i, arm * n) - v_wall
-    active, f_a, f_n, f_t, xi, aux_new, k_n = contact_force(overlap, n, v_rel, spring, aux, r_i, m_i, p, dt)
+    active, f_a, f_n, f_t, h, k_n = contact_force(overlap, n, v_rel, history, r_i, m_i, p, dt)
     if active == 0:
-        return int(0), wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), 0.0
-    m_roll, roll_new = rolling_resistance(
-        p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i, p.rolling_damping, roll, dt
+        return int(0), wp.vec3(0.0), wp.vec3(0.0), h
+    m_roll, roll = rolling_resistance(
+        p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i, p.rolling_damping, h.roll, dt
     )
-    return int(1), f_a, wp.cross(arm * n, f_t) + m_roll, xi, roll_new, aux_new
+    return int(1), f_a, wp.cross(arm * n, f_t) + m_roll, ContactHistory(h.spring, roll, h.aux)
 
 
 @wp.func
@@ -232,17 +230,11 @@ def step_spheres(
     # Contacts in/out (each thread owns its column):
     neighbor_count: wp.array[int],
     neighbor_index: wp.array2d[int],
-    neighbor_spring: wp.array2d[wp.vec3],
-    neighbor_roll: wp.array2d[wp.vec3],
-    neighbor_aux: wp.array2d[float],
-    plane_spring: wp.array2d[wp.vec3],
-    plane_roll: wp.array2d[wp.vec3],
-    plane_aux: wp.array2d[float],
+    neighbor_history: wp.array2d[ContactHistory],
+    plane_history: wp.array2d[ContactHistory],
     mesh_count: wp.array[int],
     mesh_face: wp.array2d[int],
-    mesh_spring: wp.array2d[wp.vec3],
-    mesh_roll: wp.array2d[wp.vec3],
-    mesh_aux: wp.array2d[float],
+    mesh_history: wp.array2d[ContactHistory],
     build_x: wp.array[wp.vec3],
     # State in:
     x_in: wp.array[wp.vec3],
@@ -320,9 +312,8 @@ def step_spheres(
         dist = wp.length(d)
         overlap = r_a + r_b - dist
         # apart and without history: no law acts (a JKR pair keeps aux = 1 while it hangs on in a gap)
-        if overlap <= 0.0 and neighbor_aux[k, i] == 0.0:
-            neighbor_spring[k, i] = wp.vec3(0.0)
-            neighbor_roll[k, i] = wp.vec3(0.0)
+        if overlap <= 0.0 and neighbor_history[k, i].aux == 0.0:
+            neighbor_history[k, i] = ContactHistory()
             # a contact due within one step counts already, so a clump's mass is shared from its first step
             if tally >= 0 and dist > 0.0 and overlap + dt * wp.dot(v_in[a] - v_in[b], d / dist) > 0.0:
                 run_key, run_n = partner_tally(
@@ -330,9 +321,7 @@ def step_spheres(
                 )
             continue
         if dist <= 0.0 or active_in[j] == 0:
-            neighbor_spring[k, i] = wp.vec3(0.0)
-            neighbor_roll[k, i] = wp.vec3(0.0)
-            neighbor_aux[k, i] = 0.0
+            neighbor_history[k, i] = ContactHistory()
             continue
         n = d / dist
         mat_a = sphere_material[a]
@@ -363,16 +352,10 @@ def step_spheres(
         w_b = w_in[b]
         v_rel = (v_in[a] + wp.cross(w_a, arm_a * n)) - (v_in[b] - wp.cross(w_b, arm_b * n))
         p = pair_params[pw, mat_a, mat_b]
-        active, f_a, f_n, f_t, xi, aux, k_n = contact_force(
-            overlap, n, v_rel, neighbor_spring[k, i], neighbor_aux[k, i], r_star, m_star, p, dt
-        )
+        active, f_a, f_n, f_t, h, k_n = contact_force(overlap, n, v_rel, neighbor_history[k, i], r_star, m_star, p, dt)
         if active == 0:
-            neighbor_spring[k, i] = wp.vec3(0.0)
-            neighbor_roll[k, i] = wp.vec3(0.0)
-            neighbor_aux[k, i] = 0.0
+            neighbor_history[k, i] = h
             continue
-        neighbor_spring[k, i] = xi
-        neighbor_aux[k, i] = aux
         run_key, run_n = partner_tally(
             partner_key_out, partner_count_out, tally, run_key, run_n, body_key(j, sphere_clump, clump_total)
         )
@@ -380,9 +363,9 @@ def step_spheres(
         if p.rolling_model == RollingModel.EPSD:
             i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
         m_roll, roll = rolling_resistance(
-            p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, neighbor_roll[k, i], dt
+            p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, h.roll, dt
         )
-        neighbor_roll[k, i] = roll
+        neighbor_history[k, i] = ContactHistory(h.spring, roll, h.aux)
         f_i = f_a
         if i == a:
             t += wp.cross(arm_a * n, f_t) + m_roll
@@ -408,23 +391,10 @@ def step_spheres(
         p = pair_params[pw, mat_i, plane_material[p_id]]
         key_w = wall_key0 + p_id
         mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
-        active, f_a, t_a, xi, roll, aux = wall_contact(
-            r_i - gap,
-            -n_p,
-            v_i,
-            w_i,
-            wp.vec3(0.0),
-            r_i,
-            mc_i,
-            p,
-            plane_spring[p_id, i],
-            plane_roll[p_id, i],
-            plane_aux[p_id, i],
-            dt,
+        active, f_a, t_a, h = wall_contact(
+            r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, plane_history[p_id, i], dt
         )
-        plane_spring[p_id, i] = xi
-        plane_roll[p_id, i] = roll
-        plane_aux[p_id, i] = aux
+        plane_history[p_id, i] = h
         if tally >= 0 and (active != 0 or r_i - gap - dt * wp.dot(v_i, n_p) > 0.0):
             run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
         if active != 0:
@@ -460,21 +430,15 @@ def step_spheres(
                 triangle_wall,
             )
         if skip:
-            mesh_spring[k, i] = wp.vec3(0.0)
-            mesh_roll[k, i] = wp.vec3(0.0)
-            mesh_aux[k, i] = 0.0
+            mesh_history[k, i] = ContactHistory()
             continue
         origin = wp.transform_get_translation(wall_pose[wall])
         v_wall = wall_v[wall] + wp.cross(wall_w[wall], q - origin)
         p = pair_params[pw, mat_i, wall_material[wall]]
         key_w = wall_key0 + plane_total + wall
         mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
-        active, f_a, t_a, xi, roll, aux = wall_contact(
-            r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, mesh_spring[k, i], mesh_roll[k, i], mesh_aux[k, i], dt
-        )
-        mesh_spring[k, i] = xi
-        mesh_roll[k, i] = roll
-        mesh_aux[k, i] = aux
+        active, f_a, t_a, h = wall_contact(r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, mesh_history[k, i], dt)
+        mesh_history[k, i] = h
         if tally >= 0 and (active != 0 or r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0):
             run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
         if active != 0:

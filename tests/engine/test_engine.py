@@ -103,7 +103,7 @@ def test_history_survives_rebuilds():
         m, s = _resting_pair(skin)
         st = s.run(m.state(), (c := s.contacts()), 400)
         res.append(st.sphere_x.numpy())
-        spring = c.neighbor_spring.numpy()[:, 0]
+        spring = c.neighbor_history.numpy()["spring"][:, 0]
         assert np.linalg.norm(spring[: c.neighbor_count.numpy()[0]]) > 0, "the pair's spring was never loaded"
     np.testing.assert_allclose(res[0], res[1], rtol=0, atol=1e-9)
 
@@ -113,7 +113,7 @@ def test_pair_history_identical_on_both_sides():
     m, s = _resting_pair(1e-3)
     c = s.contacts()
     s.run(m.state(), c, 200)
-    cnt, idx, spr = c.neighbor_count.numpy(), c.neighbor_index.numpy(), c.neighbor_spring.numpy()
+    cnt, idx, spr = c.neighbor_count.numpy(), c.neighbor_index.numpy(), c.neighbor_history.numpy()["spring"]
     k0 = list(idx[: cnt[0], 0]).index(1)
     k1 = list(idx[: cnt[1], 1]).index(0)
     assert np.array_equal(spr[k0, 0], spr[k1, 1]) and np.linalg.norm(spr[k0, 0]) > 0
