@@ -8,7 +8,12 @@ order does not matter because each sphere's candidates are sorted. Triangle cand
 mesh BVH.
 Each sphere's new candidate list is sorted by partner (or face) index and every new entry looks its
 key up, by binary search, in the sphere's previous sorted list to inherit the spring history.
+
+Each kernel has its launcher beside it (``launch_<kernel>``), as in step.py.
 """
+
+import math
+from typing import TYPE_CHECKING
 
 import warp as wp
 
@@ -16,7 +21,38 @@ from .enums import Overflow
 from .geometry import closest_point_triangle
 from .params import ContactHistory
 
+if TYPE_CHECKING:
+    from warpdem.engine.types import Contacts, Model, State
+
 wp.set_module_options({"enable_backward": False})
+
+CELLS_PER_REACH = 2.0
+"""Neighbour cells per longest reach (2 r_max + skin + cohesive reach): 2 makes the walked box of cells hug
+each sphere's own reach."""
+LIST_ARRAYS = (
+    "neighbor_count",
+    "neighbor_index",
+    "neighbor_history",
+    "mesh_count",
+    "mesh_face",
+    "mesh_history",
+)
+"""The Contacts arrays a rebuild writes (into ``Contacts.scratch``, then committed)."""
+
+
+def cell_grid(sphere_count: int, device) -> dict:
+    """An empty cell grid: ``head`` (bucket -> first sphere, -1 empty; a power-of-two length, about two
+    buckets per sphere, which keeps the lists short without a large table to clear) and ``next``."""
+    buckets = 1 << max(10, int(math.ceil(math.log2(max(2 * sphere_count, 1)))))
+    return {
+        "head": wp.full(buckets, -1, dtype=int, device=device),
+        "next": wp.full(sphere_count, -1, dtype=int, device=device),
+    }
+
+
+def cell_inverse_size(model: "Model", skin: float) -> float:
+    """1 / the cell edge [1/m] of a rebuild with Verlet skin ``skin`` [m]."""
+    return CELLS_PER_REACH / (2.0 * model.radius_max + skin + model.contact_reach)
 
 
 @wp.func
@@ -42,6 +78,12 @@ def clear_cells(cell_head: wp.array[int], rebuild_count: wp.array[int]):
         rebuild_count[0] = rebuild_count[0] + 1
 
 
+def launch_clear_cells(model: "Model", contacts: "Contacts", rebuild_count: wp.array) -> None:
+    """Empty the cell grid of ``contacts`` and count a rebuild in ``rebuild_count``."""
+    head = contacts.cells["head"]
+    wp.launch(clear_cells, dim=head.shape[0], inputs=[head, rebuild_count], device=model.device)
+
+
 @wp.kernel
 def bin_spheres(
     x: wp.array[wp.vec3],
@@ -58,6 +100,18 @@ def bin_spheres(
         return
     b = cell_bucket(cell_of(x[i], inv_cell), sphere_world[i], cell_head.shape[0] - 1)
     cell_next[i] = wp.atomic_exch(cell_head, b, i)
+
+
+def launch_bin_spheres(model: "Model", state: "State", contacts: "Contacts", inv_cell: float) -> None:
+    """Bin the active spheres of ``state`` into the cell grid of ``contacts`` (cells of edge 1 / ``inv_cell``)."""
+    m = model
+    wp.launch(
+        bin_spheres,
+        dim=m.sphere_count,
+        inputs=[state.sphere_x, state.sphere_active, m.sphere_world, inv_cell],
+        outputs=[contacts.cells["head"], contacts.cells["next"]],
+        device=m.device,
+    )
 
 
 @wp.func
@@ -215,6 +269,53 @@ def build_contacts(
     new_mesh_count[i] = mcount
 
 
+def launch_build_contacts(
+    model: "Model", state: "State", contacts: "Contacts", *, inv_cell: float, skin: float
+) -> None:
+    """New candidate lists from the binned spheres of ``state`` into ``contacts.scratch``, each entry with the
+    history of its key in the current lists; records the build positions and any overflow."""
+    m, c, s = model, contacts, contacts.scratch
+    wp.launch(
+        build_contacts,
+        dim=m.sphere_count,
+        inputs=[
+            c.cells["head"],
+            c.cells["next"],
+            inv_cell,
+            m.sphere_radius,
+            m.sphere_world,
+            m.sphere_clump,
+            m.sphere_wall,
+            m.radius_max,
+            m.wall_mesh,
+            m.wall_face_start,
+            m.wall_world,
+            state.sphere_x,
+            state.sphere_active,
+            state.wall_pose,
+            skin,
+            m.contact_reach,
+            c.neighbor_count,
+            c.neighbor_index,
+            c.neighbor_history,
+            c.mesh_count,
+            c.mesh_face,
+            c.mesh_history,
+        ],
+        outputs=[
+            s["neighbor_count"],
+            s["neighbor_index"],
+            s["neighbor_history"],
+            s["mesh_count"],
+            s["mesh_face"],
+            s["mesh_history"],
+            c.build_x,
+            c.overflow,
+        ],
+        device=m.device,
+    )
+
+
 @wp.kernel
 def commit_contacts(
     # In (the lists build_contacts just wrote):
@@ -246,3 +347,14 @@ def commit_contacts(
     for k in range(nm):
         mesh_face[k, i] = new_mesh_face[k, i]
         mesh_history[k, i] = new_mesh_history[k, i]
+
+
+def launch_commit_contacts(model: "Model", contacts: "Contacts") -> None:
+    """Make the lists :func:`launch_build_contacts` wrote the ones the step reads."""
+    wp.launch(
+        commit_contacts,
+        dim=model.sphere_count,
+        inputs=[contacts.scratch[k] for k in LIST_ARRAYS],
+        outputs=[getattr(contacts, k) for k in LIST_ARRAYS],
+        device=model.device,
+    )

@@ -10,8 +10,16 @@ Spheres that belong to a clump only gather forces here; :func:`integrate_clumps`
 to their clump (one thread per clump, fixed order), integrates the rigid body and places the
 component spheres. Mesh walls move rigidly: each keeps its triangles in its own frame and a pose
 per step (see warpdem/engine/motion.py), so no BVH refit is needed.
+
+Each kernel has its launcher beside it (``launch_<kernel>``), the only code that calls ``wp.launch``: it takes
+the Model, State, Control and Contacts (duck-typed; the kernels never import ``warpdem.engine``) and the
+solver's :class:`StepBuffers`, so the solver's step reads as a list of launcher calls.
 """
 
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
 import warp as wp
 
 from .enums import RollingModel
@@ -29,6 +37,62 @@ CLUMP_LANES = 32
 """Threads per clump in integrate_clumps on CUDA (a tiled launch; Warp runs a CPU tile as one thread)."""
 PARTNER_SLOTS = wp.constant(16)
 """Partner bodies a clump's table holds (a power of two): compact clumps touch at most about 14 bodies."""
+
+if TYPE_CHECKING:
+    from warpdem.engine.types import Contacts, Control, Model, State
+
+
+def partner_tables(clump_count: int, device) -> tuple[wp.array, wp.array]:
+    """Empty partner tables of ``PARTNER_SLOTS`` slots per clump: keys (-1: a free slot) and counts, int32."""
+    slots = max(clump_count, 1) * PARTNER_SLOTS
+    return wp.full(slots, -1, dtype=int, device=device), wp.zeros(slots, dtype=int, device=device)
+
+
+@dataclass
+class StepBuffers:
+    """A solver's own device arrays, which the launchers pass to the kernels besides the Model, State,
+    Control and Contacts (one set per solver, made by :meth:`zeros`)."""
+
+    clock: wp.array
+    """Steps taken on the device, shape (1,), int32 (a blow-up records the step it happened in)."""
+    time: wp.array
+    """Device time [s]: [0] the start of the step being taken, [1] its end (the time of state_out), shape (2,),
+    float64."""
+    wall_f_lanes: wp.array
+    """Partial force accumulators of each plane, then each mesh wall [N], shape (max(plane_count + wall_count,
+    1), WALL_LANES), vec3."""
+    wall_t_lanes: wp.array
+    """Partial torque accumulators [N m], same shape, vec3."""
+    partner_key_next: wp.array
+    """Partner tables the step being taken fills (``Contacts.partner_*`` hold the last step's), int32."""
+    partner_count_next: wp.array
+    """Their counts, int32."""
+    blowup: wp.array
+    """[0] the lowest sphere flagged in [1] the first step with a blow-up (``BLOWUP_NONE``: none), shape (2,),
+    int32."""
+    rebuild_count: wp.array
+    """Neighbour-list rebuilds made, shape (1,), int32."""
+    no_rebuild: wp.array
+    """A rebuild flag nothing reads (moving the walls to a fresh state's time must not flag one), shape (1,),
+    int32."""
+
+    @staticmethod
+    def zeros(model: "Model") -> "StepBuffers":
+        """The buffers of a solver of ``model``, at step 0 with nothing flagged."""
+        dev = model.device
+        lanes = wp.zeros((max(model.plane_count + model.wall_count, 1), WALL_LANES), dtype=wp.vec3, device=dev)
+        key_next, count_next = partner_tables(model.clump_count, dev)
+        return StepBuffers(
+            clock=wp.zeros(1, dtype=int, device=dev),
+            time=wp.zeros(2, dtype=wp.float64, device=dev),
+            wall_f_lanes=lanes,
+            wall_t_lanes=wp.zeros_like(lanes),
+            partner_key_next=key_next,
+            partner_count_next=count_next,
+            blowup=wp.array([BLOWUP_NONE, BLOWUP_NONE], dtype=int, device=dev),
+            rebuild_count=wp.zeros(1, dtype=int, device=dev),
+            no_rebuild=wp.zeros(1, dtype=int, device=dev),
+        )
 
 
 @wp.func
@@ -480,6 +544,92 @@ def step_spheres(
         rebuild_out[0] = 1
 
 
+def launch_step_spheres(
+    model: "Model",
+    contacts: "Contacts",
+    state_in: "State",
+    state_out: "State",
+    buffers: StepBuffers,
+    *,
+    dt: float,
+    kick: float,
+    skin: float,
+    velocity_limit: float,
+    impact_speed_min: float,
+    share_mass: bool,
+) -> None:
+    """Contact forces on every sphere and the leapfrog step of the free ones, ``state_in`` -> ``state_out``.
+
+    ``kick`` is the velocity step [s] (``dt``, or ``dt / 2`` on a fresh state's first step); the impact records
+    are ``state_in``'s (a solver's twin states share them); the partner counts go to ``buffers.partner_*_next``.
+    """
+    m, c, b = model, contacts, buffers
+    wp.launch(
+        step_spheres,
+        dim=m.sphere_count,
+        inputs=[
+            m.sphere_radius,
+            m.sphere_material,
+            m.sphere_world,
+            m.sphere_clump,
+            m.sphere_body_volume,
+            c.partner_key,
+            c.partner_count,
+            int(share_mass),
+            m.sphere_wall,
+            m.material_density,
+            m.pair_params,
+            m.world_gravity,
+            m.plane_point,
+            m.plane_normal,
+            m.plane_material,
+            m.plane_world,
+            m.wall_mesh,
+            m.wall_face_start,
+            m.triangle_wall,
+            m.wall_material,
+            c.neighbor_count,
+            c.neighbor_index,
+            c.neighbor_history,
+            c.plane_history,
+            c.mesh_count,
+            c.mesh_face,
+            c.mesh_history,
+            c.build_x,
+            state_in.sphere_x,
+            state_in.sphere_v,
+            state_in.sphere_w,
+            state_in.sphere_active,
+            state_in.wall_pose,
+            state_in.wall_v,
+            state_in.wall_w,
+            dt,
+            kick,
+            skin,
+            velocity_limit,
+            impact_speed_min,
+            b.clock,
+        ],
+        outputs=[
+            state_out.sphere_x,
+            state_out.sphere_v,
+            state_out.sphere_w,
+            state_out.sphere_f,
+            state_out.sphere_t,
+            b.wall_f_lanes,
+            b.wall_t_lanes,
+            state_in.face_impact_count,
+            state_in.face_impact_energy,
+            state_in.face_impact_speed,
+            b.partner_key_next,
+            b.partner_count_next,
+            c.rebuild,
+            b.blowup,
+        ],
+        device=m.device,
+    )
+
+
 @wp.func
 def body_angular_velocity(q: wp.quat, inertia: wp.vec3, angmom: wp.vec3):
     """World angular velocity R I^-1 R^T L of a body with principal moments ``inertia`` [kg m^2]."""
@@ -613,6 +763,69 @@ def integrate_clumps(
         rebuild_out[0] = 1
 
 
+def launch_integrate_clumps(
+    model: "Model",
+    contacts: "Contacts",
+    state_in: "State",
+    state_out: "State",
+    buffers: StepBuffers,
+    *,
+    dt: float,
+    kick: float,
+    skin: float,
+    velocity_limit: float,
+) -> None:
+    """Reduce the forces :func:`launch_step_spheres` left on the clumps' spheres and step the clumps, tiled
+    with ``CLUMP_LANES`` threads per clump on CUDA (one on CPU)."""
+    m, c, b = model, contacts, buffers
+    lanes = CLUMP_LANES if wp.get_device(m.device).is_cuda else 1
+    wp.launch_tiled(
+        integrate_clumps,
+        dim=[m.clump_count],
+        block_dim=lanes,
+        inputs=[
+            m.clump_sphere_start,
+            m.clump_sphere_end,
+            m.clump_material,
+            m.clump_world,
+            m.clump_volume,
+            m.clump_inertia,
+            m.sphere_offset,
+            m.material_density,
+            m.world_gravity,
+            c.build_x,
+            state_in.sphere_active,
+            state_out.sphere_f,
+            state_out.sphere_t,
+            state_in.clump_x,
+            state_in.clump_q,
+            state_in.clump_v,
+            state_in.clump_angmom,
+            dt,
+            kick,
+            skin,
+            velocity_limit,
+            b.clock,
+            lanes,
+        ],
+        outputs=[
+            state_out.clump_x,
+            state_out.clump_q,
+            state_out.clump_v,
+            state_out.clump_angmom,
+            state_out.clump_w,
+            state_out.clump_f,
+            state_out.clump_t,
+            state_out.sphere_x,
+            state_out.sphere_v,
+            state_out.sphere_w,
+            c.rebuild,
+            b.blowup,
+        ],
+        device=m.device,
+    )
+
+
 @wp.kernel
 def roll_partners(key_next: wp.array[int], count_next: wp.array[int], key: wp.array[int], count: wp.array[int]):
     """The partner tables just filled become the ones the next step reads; the fill tables are emptied."""
@@ -621,6 +834,18 @@ def roll_partners(key_next: wp.array[int], count_next: wp.array[int], key: wp.ar
     count[t] = count_next[t]
     key_next[t] = -1
     count_next[t] = 0
+
+
+def launch_roll_partners(model: "Model", contacts: "Contacts", buffers: StepBuffers) -> None:
+    """Hand the partner tables the step just filled to the next step."""
+    b = buffers
+    wp.launch(
+        roll_partners,
+        dim=b.partner_key_next.shape[0],
+        inputs=[b.partner_key_next, b.partner_count_next],
+        outputs=[contacts.partner_key, contacts.partner_count],
+        device=model.device,
+    )
 
 
 @wp.kernel
@@ -644,6 +869,26 @@ def init_clumps(
     inertia = rho * clump_inertia[c]
     wb = wp.quat_rotate_inv(q[c], w[c])
     angmom_out[c] = wp.quat_rotate(q[c], wp.vec3(wb[0] * inertia[0], wb[1] * inertia[1], wb[2] * inertia[2]))
+
+
+def launch_init_clumps(model: "Model", state: "State") -> None:
+    """The clumps' angular momenta from their angular velocities (a fresh state holds the latter)."""
+    m = model
+    wp.launch(
+        init_clumps,
+        dim=m.clump_count,
+        inputs=[
+            m.clump_material,
+            m.clump_world,
+            m.clump_volume,
+            m.clump_inertia,
+            m.material_density,
+            state.clump_q,
+            state.clump_w,
+        ],
+        outputs=[state.clump_angmom],
+        device=m.device,
+    )
 
 
 @wp.kernel
@@ -702,6 +947,41 @@ def move_walls(
         rebuild_out[0] = 1
 
 
+def launch_move_walls(
+    model: "Model",
+    control: "Control",
+    contacts: "Contacts",
+    state: "State",
+    buffers: StepBuffers,
+    *,
+    skin: float,
+    rebuild: wp.array,
+) -> None:
+    """The walls' poses and velocities at the device time ``buffers.time[1]`` into ``state``; ``rebuild`` is
+    flagged once a wall may have moved half the skin since the lists were built."""
+    m, ctl = model, control
+    wp.launch(
+        move_walls,
+        dim=m.wall_count,
+        inputs=[
+            ctl.segment_start,
+            ctl.segment_t0,
+            ctl.segment_t1,
+            ctl.segment_v,
+            ctl.segment_w,
+            ctl.segment_pivot,
+            ctl.segment_pose,
+            m.wall_radius,
+            contacts.wall_build_pose,
+            skin,
+            buffers.time,
+            1,
+        ],
+        outputs=[state.wall_pose, state.wall_v, state.wall_w, rebuild],
+        device=m.device,
+    )
+
+
 @wp.kernel
 def follow_walls(
     # Model:
@@ -734,6 +1014,29 @@ def follow_walls(
         rebuild_out[0] = 1
 
 
+def launch_follow_walls(
+    model: "Model", contacts: "Contacts", state: "State", *, skin: float, rebuild: wp.array
+) -> None:
+    """Place the spheres glued to walls at their walls' poses in ``state``; ``rebuild`` as for the walls."""
+    m = model
+    wp.launch(
+        follow_walls,
+        dim=m.attached_count,
+        inputs=[
+            m.attached_index,
+            m.sphere_wall,
+            m.sphere_offset,
+            state.wall_pose,
+            state.wall_v,
+            state.wall_w,
+            contacts.build_x,
+            skin,
+        ],
+        outputs=[state.sphere_x, state.sphere_v, state.sphere_w, rebuild],
+        device=m.device,
+    )
+
+
 @wp.kernel
 def begin_step(
     dt: wp.float64,
@@ -753,6 +1056,18 @@ def begin_step(
         t = time_out[1]
         time_out[0] = t
         time_out[1] = t + dt
+
+
+def launch_begin_step(model: "Model", buffers: StepBuffers, dt: float) -> None:
+    """Open a step of ``dt`` [s]: zero the wall accumulators, advance the device clock and time."""
+    b = buffers
+    wp.launch(
+        begin_step,
+        dim=b.wall_f_lanes.shape,
+        inputs=[wp.float64(dt)],
+        outputs=[b.wall_f_lanes, b.wall_t_lanes, b.clock, b.time],
+        device=model.device,
+    )
 
 
 @wp.kernel
@@ -777,6 +1092,20 @@ def sum_wall_forces(
     wall_f_out[wall] = f
     wall_t_out[wall] = t
     impulse_out[wall] = impulse_in[wall] + wp.vec3d(f) * dt
+
+
+def launch_sum_wall_forces(
+    model: "Model", state_in: "State", state_out: "State", buffers: StepBuffers, dt: float
+) -> None:
+    """Each surface's force and torque of the step into ``state_out``, its impulse summed on from ``state_in``."""
+    b = buffers
+    wp.launch(
+        sum_wall_forces,
+        dim=model.plane_count + model.wall_count,
+        inputs=[b.wall_f_lanes, b.wall_t_lanes, state_in.wall_impulse, wp.float64(dt)],
+        outputs=[state_out.wall_f, state_out.wall_t, state_out.wall_impulse],
+        device=model.device,
+    )
 
 
 @wp.kernel
@@ -827,6 +1156,64 @@ def place_bodies(
     rebuild_out[0] = 1
 
 
+def launch_place_bodies(
+    model: "Model",
+    contacts: "Contacts",
+    state: "State",
+    sphere_index,
+    sphere_x,
+    sphere_v,
+    clump_index,
+    clump_x,
+    clump_q,
+    clump_v,
+) -> None:
+    """Activate parked particles at the given places and flag a rebuild. Host arrays: spheres (n,), (n, 3), (n, 3)
+    [m, m/s]; clumps (k,), (k, 3), (k, 4) quaternions (x, y, z, w), (k, 3)."""
+    m, dev = model, model.device
+
+    def arr(a, dtype, width=None):
+        a = np.asarray(a, dtype=np.float32 if width else np.int32)
+        if width:
+            a = a.reshape(-1, width)
+        if len(a) == 0:
+            a = np.zeros((1, width) if width else 1, dtype=a.dtype)
+        return wp.array(a, dtype=dtype, device=dev)
+
+    n = len(sphere_index) + len(clump_index)
+    if n == 0:
+        return
+    wp.launch(
+        place_bodies,
+        dim=n,
+        inputs=[
+            # not padded: its length tells the kernel where the clumps begin
+            wp.array(np.asarray(sphere_index, dtype=np.int32), dtype=int, device=dev),
+            arr(sphere_x, wp.vec3, 3),
+            arr(sphere_v, wp.vec3, 3),
+            arr(clump_index, int),
+            arr(clump_x, wp.vec3, 3),
+            arr(clump_q, wp.quat, 4),
+            arr(clump_v, wp.vec3, 3),
+            m.clump_sphere_start,
+            m.clump_sphere_end,
+            m.sphere_offset,
+        ],
+        outputs=[
+            state.sphere_x,
+            state.sphere_v,
+            state.sphere_w,
+            state.sphere_active,
+            state.clump_x,
+            state.clump_q,
+            state.clump_v,
+            state.clump_angmom,
+            contacts.rebuild,
+        ],
+        device=dev,
+    )
+
+
 @wp.kernel
 def retire_escaped(
     # Model:
@@ -870,3 +1257,34 @@ def retire_escaped(
             clump_v[c] = wp.vec3(0.0)
             clump_angmom[c] = wp.vec3(0.0)
             clump_w[c] = wp.vec3(0.0)
+
+
+def launch_retire_escaped(model: "Model", state: "State") -> None:
+    """Remove the bodies whose centre left ``model.domain`` (a model without a domain keeps them all)."""
+    m = model
+    if m.domain is None:
+        return
+    wp.launch(
+        retire_escaped,
+        dim=m.sphere_count,
+        inputs=[
+            wp.vec3(*m.domain[0]),
+            wp.vec3(*m.domain[1]),
+            m.sphere_clump,
+            m.sphere_world,
+            m.sphere_wall,
+            m.clump_sphere_start,
+            state.sphere_x,
+            state.clump_x,
+        ],
+        outputs=[
+            state.sphere_active,
+            state.sphere_v,
+            state.sphere_w,
+            state.clump_v,
+            state.clump_angmom,
+            state.clump_w,
+            state.world_removed,
+        ],
+        device=m.device,
+    )
