@@ -315,76 +315,61 @@ class Solver:
             # (the cell grid is built by plain kernels), so the host never waits on the GPU between blocks
             block = self.cuda_graph_steps
             if steps - done >= block:
-                key = (id(a), id(b), id(contacts), id(control), block)
-                if self._graph is None or self._graph[0] != key:
-                    a.half_step = b.half_step = True
-                    times = (a.time, a.step, b.time, b.step)
-                    try:
-                        with wp.ScopedCapture(device=self.model.device) as cap:
-                            for i in range(block):
-                                src, dst = (a, b) if i % 2 == 0 else (b, a)
-                                self._step(src, dst, control, contacts)
-                    except Exception as exc:  # an older driver without conditional nodes: host-read path
-                        warnings.warn(
-                            f"CUDA graph with a conditional rebuild failed ({exc}); "
-                            "falling back to one host read of the rebuild flag per step",
-                            stacklevel=2,
-                        )
-                        self.cuda_graph_steps = 0
-                        cap = None
-                    a.time, a.step, b.time, b.step = times
-                    self._graph = (key, cap.graph) if cap is not None else None
-                if self._graph is not None and self._graph[0] == key:
+                try:
+                    (graph,) = self._graphs(
+                        a, b, contacts, control, block, lambda: self._alternate(a, b, block, control, contacts)
+                    )
+                except Exception as exc:  # an older driver without conditional nodes: host-read path
+                    warnings.warn(
+                        f"CUDA graph with a conditional rebuild failed ({exc}); "
+                        "falling back to one host read of the rebuild flag per step",
+                        stacklevel=2,
+                    )
+                    self.cuda_graph_steps = 0
+                    self._graph = graph = None
+                if graph is not None:
                     blocks = (steps - done) // block
                     for _ in range(blocks):
-                        wp.capture_launch(self._graph[1])
+                        wp.capture_launch(graph)
                     done += blocks * block
             # the remainder (fewer than a block) is stepped eagerly below, parity kept
             a.time = t0 + done * self.dt
             a.step = step0 + done
         if use_graph and self._is_cuda and not self.cuda_graph_steps:
             # fallback: the host reads the rebuild flag each step (one 4-byte copy) and replays a captured step
-            key = (id(a), id(b), id(contacts), id(control))
-            if self._graph is None or self._graph[0] != key:
-                graphs = []
-                a.half_step = b.half_step = True
-                for src, dst in ((a, b), (b, a)):
-                    t_before, step_before = dst.time, dst.step
-                    with wp.ScopedCapture(device=self.model.device) as cap:
-                        self._advance(src, dst, contacts, control)
-                    dst.time, dst.step = t_before, step_before
-                    graphs.append(cap.graph)
-                self._graph = (key, graphs)
+            # without the rebuild, one graph per direction
+            graphs = self._graphs(
+                a,
+                b,
+                contacts,
+                control,
+                "host reads",
+                lambda: self._advance(a, b, contacts, control),
+                lambda: self._advance(b, a, contacts, control),
+            )
             parity = 0
             while done < steps:
                 wp.copy(self._flag_host, contacts.rebuild)
                 wp.synchronize_stream()
                 if self._flag_host.numpy()[0]:
                     self.rebuild(a if parity == 0 else b, contacts)
-                wp.capture_launch(self._graph[1][parity])
+                wp.capture_launch(graphs[parity])
                 parity ^= 1
                 done += 1
             if parity:
                 a, b = b, a
             a.time, a.step, a.half_step = t0 + steps * self.dt, step0 + steps, True
         elif use_graph and not self._is_cuda and steps - done >= 2:
-            key = (id(a), id(b), id(contacts), id(control))
-            if self._graph is None or self._graph[0] != key:
-                before = int(self._buffers.clock.numpy()[0])
-                t_before, step_before = a.time, a.step
-                with wp.ScopedCapture(device=self.model.device) as cap:
-                    self._step(a, b, control, contacts)
-                    self._step(b, a, control, contacts)
-                self._graph = (key, cap.graph)
-                a.time, a.step = t_before, step_before
-                # Warp's CPU capture also executes what it records: count those two steps
-                if int(self._buffers.clock.numpy()[0]) != before:
-                    a.time += 2 * self.dt
-                    a.step += 2
-                    done += 2
+            before = int(self._buffers.clock.numpy()[0])
+            (graph,) = self._graphs(a, b, contacts, control, 2, lambda: self._alternate(a, b, 2, control, contacts))
+            # Warp's CPU capture also executes what it records: count those two steps
+            if int(self._buffers.clock.numpy()[0]) != before:
+                a.time += 2 * self.dt
+                a.step += 2
+                done += 2
             pairs = max(steps - done, 0) // 2
             for _ in range(pairs):
-                wp.capture_launch(self._graph[1])
+                wp.capture_launch(graph)
             a.time += 2 * pairs * self.dt
             a.step += 2 * pairs
             done += 2 * pairs
@@ -396,6 +381,31 @@ class Solver:
         a.released = state.released
         self.check(contacts)
         return a
+
+    def _alternate(self, a: State, b: State, steps: int, control: Control | None, contacts: Contacts) -> None:
+        """Take ``steps`` steps back and forth between the twin states: a -> b, b -> a, ..."""
+        for i in range(steps):
+            src, dst = (a, b) if i % 2 == 0 else (b, a)
+            self._step(src, dst, control, contacts)
+
+    def _graphs(self, a: State, b: State, contacts: Contacts, control: Control | None, kind, *records) -> list:
+        """The graphs last captured for these twin states, contacts, control and ``kind`` of replay, else one
+        captured per recording function (each launches steps between ``a`` and ``b``). Recording also advances
+        the states' host-side times and step counts: they are put back, since a replay does not advance them."""
+        key = (id(a), id(b), id(contacts), id(control), kind)
+        if self._graph is None or self._graph[0] != key:
+            a.half_step = b.half_step = True
+            graphs = []
+            for record in records:
+                times = (a.time, a.step, b.time, b.step)
+                try:
+                    with wp.ScopedCapture(device=self.model.device) as cap:
+                        record()
+                finally:
+                    a.time, a.step, b.time, b.step = times
+                graphs.append(cap.graph)
+            self._graph = (key, graphs)
+        return self._graph[1]
 
     def release(
         self, state: State, contacts: Contacts, sphere_index, sphere_x, sphere_v, clump_index, clump_x, clump_q, clump_v
