@@ -276,9 +276,6 @@ def step_spheres(
     sphere_world: wp.array[int],
     sphere_clump: wp.array[int],
     sphere_body_volume: wp.array[float],
-    partner_key: wp.array[int],
-    partner_count: wp.array[int],
-    share_mass: int,
     sphere_wall: wp.array[int],
     material_density: wp.array2d[float],
     pair_params: wp.array3d[PairParams],
@@ -291,15 +288,6 @@ def step_spheres(
     wall_face_start: wp.array[int],
     triangle_wall: wp.array[int],
     wall_material: wp.array[int],
-    # Contacts in/out (each thread owns its column):
-    neighbor_count: wp.array[int],
-    neighbor_index: wp.array2d[int],
-    neighbor_history: wp.array2d[ContactHistory],
-    plane_history: wp.array2d[ContactHistory],
-    mesh_count: wp.array[int],
-    mesh_face: wp.array2d[int],
-    mesh_history: wp.array2d[ContactHistory],
-    build_x: wp.array[wp.vec3],
     # State in:
     x_in: wp.array[wp.vec3],
     v_in: wp.array[wp.vec3],
@@ -308,21 +296,34 @@ def step_spheres(
     wall_pose: wp.array[wp.transform],
     wall_v: wp.array[wp.vec3],
     wall_w: wp.array[wp.vec3],
-    # Step:
+    clock: wp.array[int],
+    # Contacts in:
+    neighbor_count: wp.array[int],
+    neighbor_index: wp.array2d[int],
+    mesh_count: wp.array[int],
+    mesh_face: wp.array2d[int],
+    build_x: wp.array[wp.vec3],
+    partner_key: wp.array[int],
+    partner_count: wp.array[int],
+    # Options:
     dt: float,
     kick: float,
     skin: float,
     velocity_limit: float,
     impact_speed_min: float,
-    clock: wp.array[int],
+    share_mass: int,
+    # Out (read, then written; each thread owns its column):
+    neighbor_history_out: wp.array2d[ContactHistory],
+    plane_history_out: wp.array2d[ContactHistory],
+    mesh_history_out: wp.array2d[ContactHistory],
     # Out:
     x_out: wp.array[wp.vec3],
     v_out: wp.array[wp.vec3],
     w_out: wp.array[wp.vec3],
     f_out: wp.array[wp.vec3],
     t_out: wp.array[wp.vec3],
-    wall_f_out: wp.array2d[wp.vec3],
-    wall_t_out: wp.array2d[wp.vec3],
+    wall_f_lanes_out: wp.array2d[wp.vec3],
+    wall_t_lanes_out: wp.array2d[wp.vec3],
     face_impact_count_out: wp.array2d[int],
     face_impact_energy_out: wp.array2d[wp.float64],
     face_impact_speed_out: wp.array2d[float],
@@ -376,8 +377,8 @@ def step_spheres(
         dist = wp.length(d)
         overlap = r_a + r_b - dist
         # apart and without history: no law acts (a JKR pair keeps aux = 1 while it hangs on in a gap)
-        if overlap <= 0.0 and neighbor_history[k, i].aux == 0.0:
-            neighbor_history[k, i] = ContactHistory()
+        if overlap <= 0.0 and neighbor_history_out[k, i].aux == 0.0:
+            neighbor_history_out[k, i] = ContactHistory()
             # a contact due within one step counts already, so a clump's mass is shared from its first step
             if tally >= 0 and dist > 0.0 and overlap + dt * wp.dot(v_in[a] - v_in[b], d / dist) > 0.0:
                 run_key, run_n = partner_tally(
@@ -385,7 +386,7 @@ def step_spheres(
                 )
             continue
         if dist <= 0.0 or active_in[j] == 0:
-            neighbor_history[k, i] = ContactHistory()
+            neighbor_history_out[k, i] = ContactHistory()
             continue
         n = d / dist
         mat_a = sphere_material[a]
@@ -416,9 +417,11 @@ def step_spheres(
         w_b = w_in[b]
         v_rel = (v_in[a] + wp.cross(w_a, arm_a * n)) - (v_in[b] - wp.cross(w_b, arm_b * n))
         p = pair_params[pw, mat_a, mat_b]
-        active, f_a, f_n, f_t, h, k_n = contact_force(overlap, n, v_rel, neighbor_history[k, i], r_star, m_star, p, dt)
+        active, f_a, f_n, f_t, h, k_n = contact_force(
+            overlap, n, v_rel, neighbor_history_out[k, i], r_star, m_star, p, dt
+        )
         if active == 0:
-            neighbor_history[k, i] = h
+            neighbor_history_out[k, i] = h
             continue
         run_key, run_n = partner_tally(
             partner_key_out, partner_count_out, tally, run_key, run_n, body_key(j, sphere_clump, clump_total)
@@ -429,7 +432,7 @@ def step_spheres(
         m_roll, roll = rolling_resistance(
             p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, h.roll, dt
         )
-        neighbor_history[k, i] = ContactHistory(h.spring, roll, h.aux)
+        neighbor_history_out[k, i] = ContactHistory(h.spring, roll, h.aux)
         f_i = f_a
         if i == a:
             t += wp.cross(arm_a * n, f_t) + m_roll
@@ -442,8 +445,10 @@ def step_spheres(
             # a particle-coated wall feels the reaction on its glued sphere
             origin_j = wp.transform_get_translation(wall_pose[glued])
             c_pt = x_in[a] + arm_a * n
-            wp.atomic_add(wall_f_out, plane_point.shape[0] + glued, i % WALL_LANES, -f_i)
-            wp.atomic_add(wall_t_out, plane_point.shape[0] + glued, i % WALL_LANES, wp.cross(c_pt - origin_j, -f_i))
+            wp.atomic_add(wall_f_lanes_out, plane_point.shape[0] + glued, i % WALL_LANES, -f_i)
+            wp.atomic_add(
+                wall_t_lanes_out, plane_point.shape[0] + glued, i % WALL_LANES, wp.cross(c_pt - origin_j, -f_i)
+            )
 
     # infinite planes (static)
     for p_id in range(plane_point.shape[0]):
@@ -456,17 +461,17 @@ def step_spheres(
         key_w = wall_key0 + p_id
         mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
         active, f_a, t_a, h = wall_contact(
-            r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, plane_history[p_id, i], dt
+            r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, plane_history_out[p_id, i], dt
         )
-        plane_history[p_id, i] = h
+        plane_history_out[p_id, i] = h
         if tally >= 0 and (active != 0 or r_i - gap - dt * wp.dot(v_i, n_p) > 0.0):
             run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
         if active != 0:
             f += f_a
             t += t_a
             q = x_i - gap * n_p
-            wp.atomic_add(wall_f_out, p_id, i % WALL_LANES, -f_a)
-            wp.atomic_add(wall_t_out, p_id, i % WALL_LANES, wp.cross(q - plane_point[p_id], -f_a))
+            wp.atomic_add(wall_f_lanes_out, p_id, i % WALL_LANES, -f_a)
+            wp.atomic_add(wall_t_lanes_out, p_id, i % WALL_LANES, wp.cross(q - plane_point[p_id], -f_a))
 
     # triangle-mesh walls (rigid, possibly moving)
     plane_total = plane_point.shape[0]
@@ -494,22 +499,24 @@ def step_spheres(
                 triangle_wall,
             )
         if skip:
-            mesh_history[k, i] = ContactHistory()
+            mesh_history_out[k, i] = ContactHistory()
             continue
         origin = wp.transform_get_translation(wall_pose[wall])
         v_wall = wall_v[wall] + wp.cross(wall_w[wall], q - origin)
         p = pair_params[pw, mat_i, wall_material[wall]]
         key_w = wall_key0 + plane_total + wall
         mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
-        active, f_a, t_a, h = wall_contact(r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, mesh_history[k, i], dt)
-        mesh_history[k, i] = h
+        active, f_a, t_a, h = wall_contact(
+            r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, mesh_history_out[k, i], dt
+        )
+        mesh_history_out[k, i] = h
         if tally >= 0 and (active != 0 or r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0):
             run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
         if active != 0:
             f += f_a
             t += t_a
-            wp.atomic_add(wall_f_out, plane_total + wall, i % WALL_LANES, -f_a)
-            wp.atomic_add(wall_t_out, plane_total + wall, i % WALL_LANES, wp.cross(q - origin, -f_a))
+            wp.atomic_add(wall_f_lanes_out, plane_total + wall, i % WALL_LANES, -f_a)
+            wp.atomic_add(wall_t_lanes_out, plane_total + wall, i % WALL_LANES, wp.cross(q - origin, -f_a))
             # an impact is the first step of a touch: leapfrog moved the sphere by dt * v_i since the last
             # step, so it was clear of the face then iff the overlap is at most the approach this step
             approach = wp.dot(v_i - v_wall, dq / -gap)
@@ -573,9 +580,6 @@ def launch_step_spheres(
             m.sphere_world,
             m.sphere_clump,
             m.sphere_body_volume,
-            c.partner_key,
-            c.partner_count,
-            int(share_mass),
             m.sphere_wall,
             m.material_density,
             m.pair_params,
@@ -588,14 +592,6 @@ def launch_step_spheres(
             m.wall_face_start,
             m.triangle_wall,
             m.wall_material,
-            c.neighbor_count,
-            c.neighbor_index,
-            c.neighbor_history,
-            c.plane_history,
-            c.mesh_count,
-            c.mesh_face,
-            c.mesh_history,
-            c.build_x,
             state_in.sphere_x,
             state_in.sphere_v,
             state_in.sphere_w,
@@ -603,14 +599,25 @@ def launch_step_spheres(
             state_in.wall_pose,
             state_in.wall_v,
             state_in.wall_w,
+            b.clock,
+            c.neighbor_count,
+            c.neighbor_index,
+            c.mesh_count,
+            c.mesh_face,
+            c.build_x,
+            c.partner_key,
+            c.partner_count,
             dt,
             kick,
             skin,
             velocity_limit,
             impact_speed_min,
-            b.clock,
+            int(share_mass),
         ],
         outputs=[
+            c.neighbor_history,
+            c.plane_history,
+            c.mesh_history,
             state_out.sphere_x,
             state_out.sphere_v,
             state_out.sphere_w,
@@ -658,8 +665,7 @@ def integrate_clumps(
     sphere_offset: wp.array[wp.vec3],
     material_density: wp.array2d[float],
     world_gravity: wp.array[wp.vec3],
-    build_x: wp.array[wp.vec3],
-    # State in:
+    # State in (sphere_f and sphere_t: this step's, from step_spheres):
     active_in: wp.array[int],
     sphere_f: wp.array[wp.vec3],
     sphere_t: wp.array[wp.vec3],
@@ -667,12 +673,14 @@ def integrate_clumps(
     q_in: wp.array[wp.quat],
     v_in: wp.array[wp.vec3],
     angmom_in: wp.array[wp.vec3],
-    # Step:
+    clock: wp.array[int],
+    # Contacts in:
+    build_x: wp.array[wp.vec3],
+    # Options:
     dt: float,
     kick: float,
     skin: float,
     velocity_limit: float,
-    clock: wp.array[int],
     lanes: int,
     # Out:
     x_out: wp.array[wp.vec3],
@@ -793,7 +801,6 @@ def launch_integrate_clumps(
             m.sphere_offset,
             m.material_density,
             m.world_gravity,
-            c.build_x,
             state_in.sphere_active,
             state_out.sphere_f,
             state_out.sphere_t,
@@ -801,11 +808,12 @@ def launch_integrate_clumps(
             state_in.clump_q,
             state_in.clump_v,
             state_in.clump_angmom,
+            b.clock,
+            c.build_x,
             dt,
             kick,
             skin,
             velocity_limit,
-            b.clock,
             lanes,
         ],
         outputs=[
@@ -827,13 +835,20 @@ def launch_integrate_clumps(
 
 
 @wp.kernel
-def roll_partners(key_next: wp.array[int], count_next: wp.array[int], key: wp.array[int], count: wp.array[int]):
+def roll_partners(
+    # Out (read, then emptied):
+    partner_key_next_out: wp.array[int],
+    partner_count_next_out: wp.array[int],
+    # Out:
+    partner_key_out: wp.array[int],
+    partner_count_out: wp.array[int],
+):
     """The partner tables just filled become the ones the next step reads; the fill tables are emptied."""
     t = wp.tid()
-    key[t] = key_next[t]
-    count[t] = count_next[t]
-    key_next[t] = -1
-    count_next[t] = 0
+    partner_key_out[t] = partner_key_next_out[t]
+    partner_count_out[t] = partner_count_next_out[t]
+    partner_key_next_out[t] = -1
+    partner_count_next_out[t] = 0
 
 
 def launch_roll_partners(model: "Model", contacts: "Contacts", buffers: StepBuffers) -> None:
@@ -842,8 +857,7 @@ def launch_roll_partners(model: "Model", contacts: "Contacts", buffers: StepBuff
     wp.launch(
         roll_partners,
         dim=b.partner_key_next.shape[0],
-        inputs=[b.partner_key_next, b.partner_count_next],
-        outputs=[contacts.partner_key, contacts.partner_count],
+        outputs=[b.partner_key_next, b.partner_count_next, contacts.partner_key, contacts.partner_count],
         device=model.device,
     )
 
@@ -903,11 +917,12 @@ def move_walls(
     segment_pose: wp.array[wp.transform],
     # Model:
     wall_radius: wp.array[float],
-    # Contacts:
-    wall_build_pose: wp.array[wp.transform],
-    skin: float,
-    # Time:
+    # State in:
     time: wp.array[wp.float64],
+    # Contacts in:
+    wall_build_pose: wp.array[wp.transform],
+    # Options:
+    skin: float,
     slot: int,
     # Out:
     pose_out: wp.array[wp.transform],
@@ -972,9 +987,9 @@ def launch_move_walls(
             ctl.segment_pivot,
             ctl.segment_pose,
             m.wall_radius,
+            buffers.time,
             contacts.wall_build_pose,
             skin,
-            buffers.time,
             1,
         ],
         outputs=[state.wall_pose, state.wall_v, state.wall_w, rebuild],
@@ -992,7 +1007,9 @@ def follow_walls(
     wall_pose: wp.array[wp.transform],
     wall_v: wp.array[wp.vec3],
     wall_w: wp.array[wp.vec3],
+    # Contacts in:
     build_x: wp.array[wp.vec3],
+    # Options:
     skin: float,
     # Out:
     x_out: wp.array[wp.vec3],
@@ -1039,8 +1056,9 @@ def launch_follow_walls(
 
 @wp.kernel
 def begin_step(
+    # Options:
     dt: wp.float64,
-    # Out:
+    # Out (clock and time: read, then advanced):
     wall_f_lanes_out: wp.array2d[wp.vec3],
     wall_t_lanes_out: wp.array2d[wp.vec3],
     clock_out: wp.array[int],
@@ -1072,10 +1090,11 @@ def launch_begin_step(model: "Model", buffers: StepBuffers, dt: float) -> None:
 
 @wp.kernel
 def sum_wall_forces(
-    # In:
+    # State in (this step's partial sums):
     wall_f_lanes: wp.array2d[wp.vec3],
     wall_t_lanes: wp.array2d[wp.vec3],
     impulse_in: wp.array[wp.vec3d],
+    # Options:
     dt: wp.float64,
     # Out:
     wall_f_out: wp.array[wp.vec3],
@@ -1110,7 +1129,11 @@ def launch_sum_wall_forces(
 
 @wp.kernel
 def place_bodies(
-    # In (host-prepared batch):
+    # Model:
+    clump_sphere_start: wp.array[int],
+    clump_sphere_end: wp.array[int],
+    sphere_offset: wp.array[wp.vec3],
+    # Batch in (host-prepared; clump_x, clump_q, clump_v indexed by batch entry):
     sphere_index: wp.array[int],
     sphere_x: wp.array[wp.vec3],
     sphere_v: wp.array[wp.vec3],
@@ -1118,19 +1141,15 @@ def place_bodies(
     clump_x: wp.array[wp.vec3],
     clump_q: wp.array[wp.quat],
     clump_v: wp.array[wp.vec3],
-    # Model:
-    clump_sphere_start: wp.array[int],
-    clump_sphere_end: wp.array[int],
-    sphere_offset: wp.array[wp.vec3],
     # Out:
     x_out: wp.array[wp.vec3],
     v_out: wp.array[wp.vec3],
     w_out: wp.array[wp.vec3],
     active_out: wp.array[int],
-    cx_out: wp.array[wp.vec3],
-    cq_out: wp.array[wp.quat],
-    cv_out: wp.array[wp.vec3],
-    cl_out: wp.array[wp.vec3],
+    clump_x_out: wp.array[wp.vec3],
+    clump_q_out: wp.array[wp.quat],
+    clump_v_out: wp.array[wp.vec3],
+    clump_angmom_out: wp.array[wp.vec3],
     rebuild_out: wp.array[int],
 ):
     """Release factory particles: entries below len(sphere_index) are free spheres, the rest clumps."""
@@ -1144,10 +1163,10 @@ def place_bodies(
         active_out[i] = 1
     else:
         c = clump_index[k - n_s]
-        cx_out[c] = clump_x[k - n_s]
-        cq_out[c] = clump_q[k - n_s]
-        cv_out[c] = clump_v[k - n_s]
-        cl_out[c] = wp.vec3(0.0)
+        clump_x_out[c] = clump_x[k - n_s]
+        clump_q_out[c] = clump_q[k - n_s]
+        clump_v_out[c] = clump_v[k - n_s]
+        clump_angmom_out[c] = wp.vec3(0.0)
         for s in range(clump_sphere_start[c], clump_sphere_end[c]):
             x_out[s] = clump_x[k - n_s] + wp.quat_rotate(clump_q[k - n_s], sphere_offset[s])
             v_out[s] = clump_v[k - n_s]
@@ -1187,6 +1206,9 @@ def launch_place_bodies(
         place_bodies,
         dim=n,
         inputs=[
+            m.clump_sphere_start,
+            m.clump_sphere_end,
+            m.sphere_offset,
             # not padded: its length tells the kernel where the clumps begin
             wp.array(np.asarray(sphere_index, dtype=np.int32), dtype=int, device=dev),
             arr(sphere_x, wp.vec3, 3),
@@ -1195,9 +1217,6 @@ def launch_place_bodies(
             arr(clump_x, wp.vec3, 3),
             arr(clump_q, wp.quat, 4),
             arr(clump_v, wp.vec3, 3),
-            m.clump_sphere_start,
-            m.clump_sphere_end,
-            m.sphere_offset,
         ],
         outputs=[
             state.sphere_x,
@@ -1217,46 +1236,47 @@ def launch_place_bodies(
 @wp.kernel
 def retire_escaped(
     # Model:
-    low: wp.vec3,
-    high: wp.vec3,
     sphere_clump: wp.array[int],
     sphere_world: wp.array[int],
     sphere_wall: wp.array[int],
     clump_sphere_start: wp.array[int],
-    # State in/out:
-    x: wp.array[wp.vec3],
-    clump_x: wp.array[wp.vec3],
-    active: wp.array[int],
-    v: wp.array[wp.vec3],
-    w: wp.array[wp.vec3],
-    clump_v: wp.array[wp.vec3],
-    clump_angmom: wp.array[wp.vec3],
-    clump_w: wp.array[wp.vec3],
-    world_removed: wp.array[int],
+    low: wp.vec3,
+    high: wp.vec3,
+    # State in:
+    x_in: wp.array[wp.vec3],
+    clump_x_in: wp.array[wp.vec3],
+    # Out (active_out and world_removed_out: read, then written):
+    active_out: wp.array[int],
+    v_out: wp.array[wp.vec3],
+    w_out: wp.array[wp.vec3],
+    clump_v_out: wp.array[wp.vec3],
+    clump_angmom_out: wp.array[wp.vec3],
+    clump_w_out: wp.array[wp.vec3],
+    world_removed_out: wp.array[int],
 ):
     """Remove the bodies whose centre is outside the domain box [low, high]: their spheres become inactive
     and at rest (so they neither touch anything nor flag rebuilds); each removed body counts once in its
     world. Every sphere of a clump tests the clump's centre, so a clump leaves whole."""
     i = wp.tid()
-    if active[i] == 0 or sphere_wall[i] >= 0:
+    if active_out[i] == 0 or sphere_wall[i] >= 0:
         return
     c = sphere_clump[i]
-    p = x[i]
+    p = x_in[i]
     if c >= 0:
-        p = clump_x[c]
+        p = clump_x_in[c]
     inside = p[0] >= low[0] and p[1] >= low[1] and p[2] >= low[2]
     inside = inside and p[0] <= high[0] and p[1] <= high[1] and p[2] <= high[2]
     if inside:
         return
-    active[i] = 0
-    v[i] = wp.vec3(0.0)
-    w[i] = wp.vec3(0.0)
+    active_out[i] = 0
+    v_out[i] = wp.vec3(0.0)
+    w_out[i] = wp.vec3(0.0)
     if c < 0 or i == clump_sphere_start[c]:
-        wp.atomic_add(world_removed, sphere_world[i] % world_removed.shape[0], 1)
+        wp.atomic_add(world_removed_out, sphere_world[i] % world_removed_out.shape[0], 1)
         if c >= 0:
-            clump_v[c] = wp.vec3(0.0)
-            clump_angmom[c] = wp.vec3(0.0)
-            clump_w[c] = wp.vec3(0.0)
+            clump_v_out[c] = wp.vec3(0.0)
+            clump_angmom_out[c] = wp.vec3(0.0)
+            clump_w_out[c] = wp.vec3(0.0)
 
 
 def launch_retire_escaped(model: "Model", state: "State") -> None:
@@ -1268,12 +1288,12 @@ def launch_retire_escaped(model: "Model", state: "State") -> None:
         retire_escaped,
         dim=m.sphere_count,
         inputs=[
-            wp.vec3(*m.domain[0]),
-            wp.vec3(*m.domain[1]),
             m.sphere_clump,
             m.sphere_world,
             m.sphere_wall,
             m.clump_sphere_start,
+            wp.vec3(*m.domain[0]),
+            wp.vec3(*m.domain[1]),
             state.sphere_x,
             state.clump_x,
         ],
