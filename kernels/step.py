@@ -31,6 +31,7 @@ from .params import ContactHistory, PairParams
 wp.set_module_options({"enable_backward": False})
 
 BLOWUP_NONE = wp.constant(2147483647)
+"""``StepBuffers.blowup`` while no sphere has blown up (the largest int32, so atomic_min records the first)."""
 WALL_LANES = wp.constant(256)
 """Partial accumulators per wall: spreads the force atomics of thousands of spheres on one wall."""
 CLUMP_LANES = 32
