@@ -42,9 +42,3 @@ def closest_point_triangle(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3):
         return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6))), FEATURE_EDGE
     denom = 1.0 / (va + vb + vc)
     return a + ab * (vb * denom) + ac * (vc * denom), FEATURE_FACE
-
-
-@wp.func
-def sphere_mass(radius: float, density: float):
-    """Mass of a solid sphere [kg]."""
-    return density * (4.0 / 3.0) * wp.pi * radius * radius * radius

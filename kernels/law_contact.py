@@ -3,19 +3,20 @@
 The law of a material pair (``PairParams.law``) picks the normal law; the tangential spring
 (Mindlin, Coulomb-capped) and the rolling resistance are shared. Each law decides when its contact
 exists (cohesive laws keep a contact alive into negative overlap) and what it keeps in the per-contact
-scalar history ``aux``.
+scalar history ``ContactHistory.aux``.
+
+Adding a law: its file ``law_*.py`` of pure ``@wp.func``s, a ``ContactLaw`` member (kernels/enums.py), its
+branch in :func:`contact_force`, and its fields in ``PairParams`` (kernels/params.py), with any further
+history in ``ContactHistory``.
 """
 
 import warp as wp
 
+from .enums import ContactLaw
 from .law_eepa import eepa_damping_coefficient, eepa_normal_force, eepa_tangential_stiffness
 from .law_hertz_mindlin import SQRT_5_6, hertz_mindlin, mindlin_tangential
 from .law_jkr import jkr_contact_radius, jkr_force_of_radius, jkr_friction_load, jkr_in_contact, jkr_stiffness
-from .params import PairParams
-
-LAW_HERTZ_MINDLIN = wp.constant(1)
-LAW_JKR = wp.constant(2)
-LAW_EEPA = wp.constant(3)
+from .params import ContactHistory, PairParams
 
 
 @wp.func
@@ -23,8 +24,7 @@ def contact_force(
     overlap: float,
     n: wp.vec3,
     v_rel: wp.vec3,
-    spring: wp.vec3,
-    aux: float,
+    history: ContactHistory,
     r_star: float,
     m_star: float,
     p: PairParams,
@@ -36,40 +36,47 @@ def contact_force(
         overlap: r_a + r_b - distance [m] (negative: a gap).
         n: unit normal from a towards b.
         v_rel: velocity of a's contact point relative to b's [m/s].
-        spring: tangential spring displacement from the last step [m].
-        aux: the law's scalar history from the last step (0 for a new contact).
+        history: the contact's history from the last step (zero for a new contact).
         r_star, m_star: effective radius [m] and mass [kg].
 
     Returns:
-        (active (1 while the contact exists, else 0 and the caller clears the history), force on a [N],
-        normal load for the rolling limit [N], tangential force on a [N], updated spring [m],
-        updated aux, normal stiffness for the rolling spring [N/m]).
+        (active (1 while the contact exists, else 0), force on a [N], normal load for the rolling limit [N],
+        tangential force on a [N], history with the spring and aux updated (the rolling spring as given;
+        all zero once the contact ended), normal stiffness for the rolling spring [N/m]).
     """
     v_n = wp.dot(v_rel, n)
-    if p.law == LAW_JKR:
+    if p.law == ContactLaw.JKR:
         # aux: 1 while the pair is in contact (it persists into a gap down to the break overlap)
-        if jkr_in_contact(overlap, int(aux > 0.5), r_star, p.e_star, p.gamma) == 0:
-            return int(0), wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.vec3(0.0), 0.0, 0.0
+        if jkr_in_contact(overlap, int(history.aux > 0.5), r_star, p.e_star, p.gamma) == 0:
+            return int(0), wp.vec3(0.0), 0.0, wp.vec3(0.0), ContactHistory(), 0.0
         a = jkr_contact_radius(overlap, r_star, p.e_star, p.gamma)
         s_n, s_t = jkr_stiffness(a, p.e_star, p.g_star)
         damp = -2.0 * SQRT_5_6 * p.beta
         f_n = jkr_force_of_radius(a, r_star, p.e_star, p.gamma) + damp * wp.sqrt(s_n * m_star) * v_n
         load = jkr_friction_load(f_n, r_star, p.gamma)
-        f_t, xi = mindlin_tangential(spring, n, v_rel - v_n * n, s_t, damp * wp.sqrt(s_t * m_star), p.mu_s * load, dt)
+        f_t, xi = mindlin_tangential(
+            history.spring, n, v_rel - v_n * n, s_t, damp * wp.sqrt(s_t * m_star), p.mu_s * load, dt
+        )
         # the rolling spring uses the Hertz secant stiffness of the same contact radius (2/3 S_n)
-        return int(1), -f_n * n + f_t, load, f_t, xi, 1.0, (2.0 / 3.0) * s_n
+        return int(1), -f_n * n + f_t, load, f_t, ContactHistory(xi, history.roll, 1.0), (2.0 / 3.0) * s_n
     if overlap <= 0.0:
-        return int(0), wp.vec3(0.0), 0.0, wp.vec3(0.0), wp.vec3(0.0), 0.0, 0.0
-    if p.law == LAW_EEPA:
+        return int(0), wp.vec3(0.0), 0.0, wp.vec3(0.0), ContactHistory(), 0.0
+    if p.law == ContactLaw.EEPA:
         # aux: the largest overlap of this contact (its plastic overlap follows from it)
         f_hys, d_max, k_damp, load = eepa_normal_force(
-            overlap, aux, r_star, p.e_star, p.f0, p.eepa_n, p.lambda_p, p.chi, p.gamma
+            overlap, history.aux, r_star, p.e_star, p.f0, p.eepa_n, p.lambda_p, p.chi, p.gamma
         )
         f_n = f_hys + eepa_damping_coefficient(k_damp, m_star, p.beta, p.eepa_n) * v_n
         k_t = eepa_tangential_stiffness(overlap, r_star, p.e_star, p.g_star, p.eepa_n, p.ks_fac)
         f_t, xi = mindlin_tangential(
-            spring, n, v_rel - v_n * n, k_t, eepa_damping_coefficient(k_t, m_star, p.beta, p.eepa_n), p.mu_s * load, dt
+            history.spring,
+            n,
+            v_rel - v_n * n,
+            k_t,
+            eepa_damping_coefficient(k_t, m_star, p.beta, p.eepa_n),
+            p.mu_s * load,
+            dt,
         )
-        return int(1), -f_n * n + f_t, load, f_t, xi, d_max, k_damp / p.eepa_n
-    f_a, f_n, f_t, xi, k_n = hertz_mindlin(overlap, n, v_rel, spring, r_star, m_star, p, dt)
-    return int(1), f_a, f_n, f_t, xi, aux, k_n
+        return int(1), -f_n * n + f_t, load, f_t, ContactHistory(xi, history.roll, d_max), k_damp / p.eepa_n
+    f_a, f_n, f_t, xi, k_n = hertz_mindlin(overlap, n, v_rel, history.spring, r_star, m_star, p, dt)
+    return int(1), f_a, f_n, f_t, ContactHistory(xi, history.roll, history.aux), k_n

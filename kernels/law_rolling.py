@@ -12,9 +12,7 @@ Type C:  spring M_k += -k_r w_r dt, k_r = 2.25 k_n mu_r^2 R*^2 with k_n the seca
 
 import warp as wp
 
-ROLLING_NONE = wp.constant(0)
-ROLLING_CONSTANT_TORQUE = wp.constant(1)
-ROLLING_EPSD = wp.constant(2)
+from .enums import RollingModel
 
 
 @wp.func
@@ -34,7 +32,7 @@ def rolling_resistance(
     """Rolling resistance torque on body a.
 
     Args:
-        model: 0 none, 1 constant torque (type A), 2 EPSD (type C).
+        model: a RollingModel (NONE, CONSTANT_TORQUE: type A, EPSD: type C).
         w_rel: angular velocity of a minus that of b [rad/s].
         n: unit contact normal.
         f_n: normal force [N] (only its positive part resists rolling).
@@ -49,16 +47,16 @@ def rolling_resistance(
     Returns:
         (torque on a [N m], updated spring torque [N m]).
     """
-    if model == ROLLING_NONE or mu_r == 0.0:
+    if model == RollingModel.NONE or mu_r == 0.0:
         return wp.vec3(0.0), spring * 0.0
     w_r = w_rel - wp.dot(w_rel, n) * n
     m_max = mu_r * r_star * wp.max(f_n, 0.0)
-    if model == ROLLING_CONSTANT_TORQUE:
+    if model == RollingModel.CONSTANT_TORQUE:
         w_len = wp.length(w_r)
         if w_len > 0.0:
             return -m_max * (w_r / w_len), wp.vec3(0.0)
         return wp.vec3(0.0), wp.vec3(0.0)
-    if model == ROLLING_EPSD:
+    if model == RollingModel.EPSD:
         k_r = 2.25 * k_n * mu_r * mu_r * r_star * r_star
         m_len = wp.length(spring)
         m_k = spring - wp.dot(spring, n) * n

@@ -8,13 +8,51 @@ order does not matter because each sphere's candidates are sorted. Triangle cand
 mesh BVH.
 Each sphere's new candidate list is sorted by partner (or face) index and every new entry looks its
 key up, by binary search, in the sphere's previous sorted list to inherit the spring history.
+
+Each kernel has its launcher beside it (``launch_<kernel>``), as in step.py.
 """
+
+import math
+from typing import TYPE_CHECKING
 
 import warp as wp
 
+from .enums import Overflow
 from .geometry import closest_point_triangle
+from .params import ContactHistory
+
+if TYPE_CHECKING:
+    from warpdem.engine.types import Contacts, Model, State
 
 wp.set_module_options({"enable_backward": False})
+
+CELLS_PER_REACH = 2.0
+"""Neighbour cells per longest reach (2 r_max + skin + cohesive reach): 2 makes the walked box of cells hug
+each sphere's own reach."""
+LIST_ARRAYS = (
+    "neighbor_count",
+    "neighbor_index",
+    "neighbor_history",
+    "mesh_count",
+    "mesh_face",
+    "mesh_history",
+)
+"""The Contacts arrays a rebuild writes (into ``Contacts.scratch``, then committed)."""
+
+
+def cell_grid(sphere_count: int, device) -> dict:
+    """An empty cell grid: ``head`` (bucket -> first sphere, -1 empty; a power-of-two length, about two
+    buckets per sphere, which keeps the lists short without a large table to clear) and ``next``."""
+    buckets = 1 << max(10, int(math.ceil(math.log2(max(2 * sphere_count, 1)))))
+    return {
+        "head": wp.full(buckets, -1, dtype=int, device=device),
+        "next": wp.full(sphere_count, -1, dtype=int, device=device),
+    }
+
+
+def cell_inverse_size(model: "Model", skin: float) -> float:
+    """1 / the cell edge [1/m] of a rebuild with Verlet skin ``skin`` [m]."""
+    return CELLS_PER_REACH / (2.0 * model.radius_max + skin + model.contact_reach)
 
 
 @wp.func
@@ -32,30 +70,56 @@ def cell_bucket(c: wp.vec3i, world: int, mask: int):
 
 
 @wp.kernel
-def clear_cells(cell_head: wp.array[int], rebuild_count: wp.array[int]):
+def clear_cells(
+    # Out (rebuild_count_out: read, then advanced):
+    cell_head_out: wp.array[int],
+    rebuild_count_out: wp.array[int],
+):
     """Empty every bucket (-1 ends a list) and count the rebuild (one thread: no atomic needed)."""
     t = wp.tid()
-    cell_head[t] = -1
+    cell_head_out[t] = -1
     if t == 0:
-        rebuild_count[0] = rebuild_count[0] + 1
+        rebuild_count_out[0] = rebuild_count_out[0] + 1
+
+
+def launch_clear_cells(model: "Model", contacts: "Contacts", rebuild_count: wp.array) -> None:
+    """Empty the cell grid of ``contacts`` and count a rebuild in ``rebuild_count``."""
+    head = contacts.cells["head"]
+    wp.launch(clear_cells, dim=head.shape[0], outputs=[head, rebuild_count], device=model.device)
 
 
 @wp.kernel
 def bin_spheres(
+    # Model:
+    sphere_world: wp.array[int],
+    # State in:
     x: wp.array[wp.vec3],
     active: wp.array[int],
-    sphere_world: wp.array[int],
+    # Options:
     inv_cell: float,
-    cell_head: wp.array[int],
-    cell_next: wp.array[int],
+    # Out (cell_head_out: read, then written):
+    cell_head_out: wp.array[int],
+    cell_next_out: wp.array[int],
 ):
     """Push each active sphere onto its bucket's list (parked factory particles stay out)."""
     i = wp.tid()
     if active[i] == 0:
-        cell_next[i] = -1
+        cell_next_out[i] = -1
         return
-    b = cell_bucket(cell_of(x[i], inv_cell), sphere_world[i], cell_head.shape[0] - 1)
-    cell_next[i] = wp.atomic_exch(cell_head, b, i)
+    b = cell_bucket(cell_of(x[i], inv_cell), sphere_world[i], cell_head_out.shape[0] - 1)
+    cell_next_out[i] = wp.atomic_exch(cell_head_out, b, i)
+
+
+def launch_bin_spheres(model: "Model", state: "State", contacts: "Contacts", inv_cell: float) -> None:
+    """Bin the active spheres of ``state`` into the cell grid of ``contacts`` (cells of edge 1 / ``inv_cell``)."""
+    m = model
+    wp.launch(
+        bin_spheres,
+        dim=m.sphere_count,
+        inputs=[m.sphere_world, state.sphere_x, state.sphere_active, inv_cell],
+        outputs=[contacts.cells["head"], contacts.cells["next"]],
+        device=m.device,
+    )
 
 
 @wp.func
@@ -91,40 +155,30 @@ def sort_column(keys: wp.array2d[int], count: int, col: int):
 def carry_history(
     old_keys: wp.array2d[int],
     old_count: int,
-    old_spring: wp.array2d[wp.vec3],
-    old_roll: wp.array2d[wp.vec3],
-    old_aux: wp.array2d[float],
+    old_history: wp.array2d[ContactHistory],
     new_keys: wp.array2d[int],
     new_count: int,
-    new_spring: wp.array2d[wp.vec3],
-    new_roll: wp.array2d[wp.vec3],
-    new_aux: wp.array2d[float],
+    new_history_out: wp.array2d[ContactHistory],
     col: int,
 ):
     """Give each new (sorted) entry of column ``col`` the history of the old entry with the same key, else zero."""
     for s in range(new_count):
         slot = find_sorted(old_keys, old_count, col, new_keys[s, col])
         if slot >= 0:
-            new_spring[s, col] = old_spring[slot, col]
-            new_roll[s, col] = old_roll[slot, col]
-            new_aux[s, col] = old_aux[slot, col]
+            new_history_out[s, col] = old_history[slot, col]
         else:
-            new_spring[s, col] = wp.vec3(0.0)
-            new_roll[s, col] = wp.vec3(0.0)
-            new_aux[s, col] = 0.0
+            new_history_out[s, col] = ContactHistory()
 
 
 @wp.kernel
 def build_contacts(
     # Model:
-    cell_head: wp.array[int],
-    cell_next: wp.array[int],
-    inv_cell: float,
     sphere_radius: wp.array[float],
     sphere_world: wp.array[int],
     sphere_clump: wp.array[int],
     sphere_wall: wp.array[int],
     radius_max: float,
+    contact_reach: float,
     wall_mesh: wp.array[wp.uint64],
     wall_face_start: wp.array[int],
     wall_world: wp.array[int],
@@ -132,51 +186,46 @@ def build_contacts(
     x: wp.array[wp.vec3],
     active: wp.array[int],
     wall_pose: wp.array[wp.transform],
-    skin: float,
-    reach: float,
-    # Contacts in (previous lists):
+    # Contacts in (the cell grid and the current lists):
+    cell_head: wp.array[int],
+    cell_next: wp.array[int],
     old_count: wp.array[int],
     old_index: wp.array2d[int],
-    old_spring: wp.array2d[wp.vec3],
-    old_roll: wp.array2d[wp.vec3],
-    old_aux: wp.array2d[float],
+    old_history: wp.array2d[ContactHistory],
     old_mesh_count: wp.array[int],
     old_mesh_face: wp.array2d[int],
-    old_mesh_spring: wp.array2d[wp.vec3],
-    old_mesh_roll: wp.array2d[wp.vec3],
-    old_mesh_aux: wp.array2d[float],
-    # Out:
-    new_count: wp.array[int],
-    new_index: wp.array2d[int],
-    new_spring: wp.array2d[wp.vec3],
-    new_roll: wp.array2d[wp.vec3],
-    new_aux: wp.array2d[float],
-    new_mesh_count: wp.array[int],
-    new_mesh_face: wp.array2d[int],
-    new_mesh_spring: wp.array2d[wp.vec3],
-    new_mesh_roll: wp.array2d[wp.vec3],
-    new_mesh_aux: wp.array2d[float],
+    old_mesh_history: wp.array2d[ContactHistory],
+    # Options:
+    inv_cell: float,
+    skin: float,
+    # Out (new_index_out and new_mesh_face_out: written, then sorted in place):
+    new_count_out: wp.array[int],
+    new_index_out: wp.array2d[int],
+    new_history_out: wp.array2d[ContactHistory],
+    new_mesh_count_out: wp.array[int],
+    new_mesh_face_out: wp.array2d[int],
+    new_mesh_history_out: wp.array2d[ContactHistory],
     build_x_out: wp.array[wp.vec3],
     overflow_out: wp.array[int],
 ):
-    """Candidates within r_i + r_j + skin + reach (``reach``: the longest cohesive break distance)."""
+    """Candidates within r_i + r_j + skin + contact_reach (the longest cohesive break distance)."""
     i = wp.tid()
     x_i = x[i]
     build_x_out[i] = x_i
     # parked factory particles and spheres glued to a wall take no part as the gathering side
     if active[i] == 0 or sphere_wall[i] >= 0:
-        new_count[i] = 0
-        new_mesh_count[i] = 0
+        new_count_out[i] = 0
+        new_mesh_count_out[i] = 0
         return
     r_i = sphere_radius[i]
     world = sphere_world[i]
     clump = sphere_clump[i]
-    capacity = new_index.shape[0]
+    capacity = new_index_out.shape[0]
 
     count = int(0)
     # walk the box of cells that holds the query sphere; cells narrower than the reach make that box hug
     # the sphere (a small sphere walks far fewer spheres than a fixed 27-cell stencil would)
-    reach_i = r_i + radius_max + skin + reach
+    reach_i = r_i + radius_max + skin + contact_reach
     lo = cell_of(x_i - wp.vec3(reach_i), inv_cell)
     hi = cell_of(x_i + wp.vec3(reach_i), inv_cell)
     mask = cell_head.shape[0] - 1
@@ -187,25 +236,23 @@ def build_contacts(
                 j = cell_head[cell_bucket(cell, world, mask)]
                 while j >= 0:
                     x_j = x[j]
-                    if wp.length(x_j - x_i) < r_i + sphere_radius[j] + skin + reach:
+                    if wp.length(x_j - x_i) < r_i + sphere_radius[j] + skin + contact_reach:
                         # a bucket holds other cells and worlds too: take j only in its own cell (never twice)
                         if j != i and sphere_world[j] == world and cell_of(x_j, inv_cell) == cell:
                             if clump < 0 or sphere_clump[j] != clump:
                                 if count < capacity:
-                                    new_index[count, i] = j
+                                    new_index_out[count, i] = j
                                     count += 1
                                 else:
-                                    wp.atomic_or(overflow_out, 0, 1)
+                                    wp.atomic_or(overflow_out, 0, Overflow.NEIGHBOR)
                     j = cell_next[j]
-    sort_column(new_index, count, i)
-    carry_history(
-        old_index, old_count[i], old_spring, old_roll, old_aux, new_index, count, new_spring, new_roll, new_aux, i
-    )
-    new_count[i] = count
+    sort_column(new_index_out, count, i)
+    carry_history(old_index, old_count[i], old_history, new_index_out, count, new_history_out, i)
+    new_count_out[i] = count
 
-    mesh_capacity = new_mesh_face.shape[0]
+    mesh_capacity = new_mesh_face_out.shape[0]
     mcount = int(0)
-    limit = r_i + skin + reach
+    limit = r_i + skin + contact_reach
     for wall in range(wall_mesh.shape[0]):
         ww = wall_world[wall]
         if ww >= 0 and ww != world:
@@ -222,67 +269,103 @@ def build_contacts(
             q, feature = closest_point_triangle(x_local, a, b, c)
             if wp.length(x_local - q) < limit:
                 if mcount < mesh_capacity:
-                    new_mesh_face[mcount, i] = wall_face_start[wall] + local
+                    new_mesh_face_out[mcount, i] = wall_face_start[wall] + local
                     mcount += 1
                 else:
-                    wp.atomic_or(overflow_out, 0, 2)
-    sort_column(new_mesh_face, mcount, i)
+                    wp.atomic_or(overflow_out, 0, Overflow.MESH)
+    sort_column(new_mesh_face_out, mcount, i)
     carry_history(
-        old_mesh_face,
-        old_mesh_count[i],
-        old_mesh_spring,
-        old_mesh_roll,
-        old_mesh_aux,
-        new_mesh_face,
-        mcount,
-        new_mesh_spring,
-        new_mesh_roll,
-        new_mesh_aux,
-        i,
+        old_mesh_face, old_mesh_count[i], old_mesh_history, new_mesh_face_out, mcount, new_mesh_history_out, i
     )
-    new_mesh_count[i] = mcount
+    new_mesh_count_out[i] = mcount
+
+
+def launch_build_contacts(
+    model: "Model", state: "State", contacts: "Contacts", *, inv_cell: float, skin: float
+) -> None:
+    """New candidate lists from the binned spheres of ``state`` into ``contacts.scratch``, each entry with the
+    history of its key in the current lists; records the build positions and any overflow."""
+    m, c, s = model, contacts, contacts.scratch
+    wp.launch(
+        build_contacts,
+        dim=m.sphere_count,
+        inputs=[
+            m.sphere_radius,
+            m.sphere_world,
+            m.sphere_clump,
+            m.sphere_wall,
+            m.radius_max,
+            m.contact_reach,
+            m.wall_mesh,
+            m.wall_face_start,
+            m.wall_world,
+            state.sphere_x,
+            state.sphere_active,
+            state.wall_pose,
+            c.cells["head"],
+            c.cells["next"],
+            c.neighbor_count,
+            c.neighbor_index,
+            c.neighbor_history,
+            c.mesh_count,
+            c.mesh_face,
+            c.mesh_history,
+            inv_cell,
+            skin,
+        ],
+        outputs=[
+            s["neighbor_count"],
+            s["neighbor_index"],
+            s["neighbor_history"],
+            s["mesh_count"],
+            s["mesh_face"],
+            s["mesh_history"],
+            c.build_x,
+            c.overflow,
+        ],
+        device=m.device,
+    )
 
 
 @wp.kernel
 def commit_contacts(
-    # In (the lists build_contacts just wrote):
+    # Contacts in (the lists build_contacts just wrote):
     new_count: wp.array[int],
     new_index: wp.array2d[int],
-    new_spring: wp.array2d[wp.vec3],
-    new_roll: wp.array2d[wp.vec3],
-    new_aux: wp.array2d[float],
+    new_history: wp.array2d[ContactHistory],
     new_mesh_count: wp.array[int],
     new_mesh_face: wp.array2d[int],
-    new_mesh_spring: wp.array2d[wp.vec3],
-    new_mesh_roll: wp.array2d[wp.vec3],
-    new_mesh_aux: wp.array2d[float],
+    new_mesh_history: wp.array2d[ContactHistory],
     # Out (the lists the step reads):
-    count: wp.array[int],
-    index: wp.array2d[int],
-    spring: wp.array2d[wp.vec3],
-    roll: wp.array2d[wp.vec3],
-    aux: wp.array2d[float],
-    mesh_count: wp.array[int],
-    mesh_face: wp.array2d[int],
-    mesh_spring: wp.array2d[wp.vec3],
-    mesh_roll: wp.array2d[wp.vec3],
-    mesh_aux: wp.array2d[float],
+    neighbor_count_out: wp.array[int],
+    neighbor_index_out: wp.array2d[int],
+    neighbor_history_out: wp.array2d[ContactHistory],
+    mesh_count_out: wp.array[int],
+    mesh_face_out: wp.array2d[int],
+    mesh_history_out: wp.array2d[ContactHistory],
 ):
     """Copy each sphere's new lists over its old ones, only the slots in use: readers never look past a
     sphere's count, and a full-capacity copy moves several times the bytes (capacities of ~60 slots hold
     ~15 candidates in a dense clump pile)."""
     i = wp.tid()
     n = new_count[i]
-    count[i] = n
+    neighbor_count_out[i] = n
     for k in range(n):
-        index[k, i] = new_index[k, i]
-        spring[k, i] = new_spring[k, i]
-        roll[k, i] = new_roll[k, i]
-        aux[k, i] = new_aux[k, i]
+        neighbor_index_out[k, i] = new_index[k, i]
+        neighbor_history_out[k, i] = new_history[k, i]
     nm = new_mesh_count[i]
-    mesh_count[i] = nm
+    mesh_count_out[i] = nm
     for k in range(nm):
-        mesh_face[k, i] = new_mesh_face[k, i]
-        mesh_spring[k, i] = new_mesh_spring[k, i]
-        mesh_roll[k, i] = new_mesh_roll[k, i]
-        mesh_aux[k, i] = new_mesh_aux[k, i]
+        mesh_face_out[k, i] = new_mesh_face[k, i]
+        mesh_history_out[k, i] = new_mesh_history[k, i]
+
+
+def launch_commit_contacts(model: "Model", contacts: "Contacts") -> None:
+    """Make the lists :func:`launch_build_contacts` wrote the ones the step reads."""
+    wp.launch(
+        commit_contacts,
+        dim=model.sphere_count,
+        inputs=[contacts.scratch[k] for k in LIST_ARRAYS],
+        outputs=[getattr(contacts, k) for k in LIST_ARRAYS],
+        device=model.device,
+    )

@@ -1,4 +1,5 @@
-"""Per-pair contact parameters, derived on the host from materials and the interaction table."""
+"""The structs of the contact laws: per-pair parameters (derived on the host from the materials and the
+interaction table) and per-contact history (carried from step to step and across list rebuilds)."""
 
 import warp as wp
 
@@ -18,11 +19,11 @@ class PairParams:
     mu_r: float
     """Rolling friction coefficient [-] (dimensionless, torque = mu_r * R* * F_n)."""
     rolling_model: int
-    """RollingModel: 0 none, 1 constant torque (type A), 2 EPSD (type C)."""
+    """A ``RollingModel`` (kernels/enums.py)."""
     rolling_damping: float
     """EPSD viscous damping ratio eta_r [-] (Ai et al. 2011 use 0.3)."""
     law: int
-    """ContactLaw of the pair: 1 Hertz-Mindlin, 2 Hertz-Mindlin with JKR, 3 EEPA."""
+    """A ``ContactLaw`` (kernels/enums.py): the pair's normal law."""
     gamma: float
     """Surface energy gamma [J/m^2] (JKR, and EEPA's f_min = -1.5 pi gamma R*); work of adhesion W = 2 gamma."""
     f0: float
@@ -35,3 +36,21 @@ class PairParams:
     """EEPA adhesive branch exponent [-]."""
     ks_fac: float
     """EEPA tangential stiffness multiplier [-]."""
+
+
+@wp.struct
+class ContactHistory:
+    """What one contact remembers from the last step, seen from the pair's body a (the lower index of two
+    spheres, the sphere against a wall). A zero struct is a new contact; a contact that ends is zeroed.
+
+    A law that needs more history adds its field here: the lists, their rebuilds and checkpoints carry the
+    whole struct.
+    """
+
+    spring: wp.vec3
+    """Tangential spring displacement xi [m] (Mindlin), kept in the current tangent plane."""
+    roll: wp.vec3
+    """Rolling spring torque [N m] (EPSD; zero for the other rolling models)."""
+    aux: float
+    """The normal law's scalar history: JKR 1 while in contact (also in a gap down to the break overlap);
+    EEPA the largest overlap of the contact [m]; Hertz-Mindlin leaves it 0."""

@@ -10,24 +10,90 @@ Spheres that belong to a clump only gather forces here; :func:`integrate_clumps`
 to their clump (one thread per clump, fixed order), integrates the rigid body and places the
 component spheres. Mesh walls move rigidly: each keeps its triangles in its own frame and a pose
 per step (see warpdem/engine/motion.py), so no BVH refit is needed.
+
+Each kernel has its launcher beside it (``launch_<kernel>``), the only code that calls ``wp.launch``: it takes
+the Model, State, Control and Contacts (duck-typed; the kernels never import ``warpdem.engine``) and the
+solver's :class:`StepBuffers`, so the solver's step reads as a list of launcher calls.
 """
 
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
 import warp as wp
 
+from .enums import RollingModel
 from .geometry import FEATURE_FACE, closest_point_triangle
 from .law_contact import contact_force
-from .law_rolling import ROLLING_EPSD, rolling_resistance
-from .params import PairParams
+from .law_rolling import rolling_resistance
+from .params import ContactHistory, PairParams
 
 wp.set_module_options({"enable_backward": False})
 
 BLOWUP_NONE = wp.constant(2147483647)
+"""``StepBuffers.blowup`` while no sphere has blown up (the largest int32, so atomic_min records the first)."""
 WALL_LANES = wp.constant(256)
 """Partial accumulators per wall: spreads the force atomics of thousands of spheres on one wall."""
 CLUMP_LANES = 32
 """Threads per clump in integrate_clumps on CUDA (a tiled launch; Warp runs a CPU tile as one thread)."""
 PARTNER_SLOTS = wp.constant(16)
 """Partner bodies a clump's table holds (a power of two): compact clumps touch at most about 14 bodies."""
+
+if TYPE_CHECKING:
+    from warpdem.engine.types import Contacts, Control, Model, State
+
+
+def partner_tables(clump_count: int, device) -> tuple[wp.array, wp.array]:
+    """Empty partner tables of ``PARTNER_SLOTS`` slots per clump: keys (-1: a free slot) and counts, int32."""
+    slots = max(clump_count, 1) * PARTNER_SLOTS
+    return wp.full(slots, -1, dtype=int, device=device), wp.zeros(slots, dtype=int, device=device)
+
+
+@dataclass
+class StepBuffers:
+    """A solver's own device arrays, which the launchers pass to the kernels besides the Model, State,
+    Control and Contacts (one set per solver, made by :meth:`zeros`)."""
+
+    clock: wp.array
+    """Steps taken on the device, shape (1,), int32 (a blow-up records the step it happened in)."""
+    time: wp.array
+    """Device time [s]: [0] the start of the step being taken, [1] its end (the time of state_out), shape (2,),
+    float64."""
+    wall_f_lanes: wp.array
+    """Partial force accumulators of each plane, then each mesh wall [N], shape (max(plane_count + wall_count,
+    1), WALL_LANES), vec3."""
+    wall_t_lanes: wp.array
+    """Partial torque accumulators [N m], same shape, vec3."""
+    partner_key_next: wp.array
+    """Partner tables the step being taken fills (``Contacts.partner_*`` hold the last step's), int32."""
+    partner_count_next: wp.array
+    """Their counts, int32."""
+    blowup: wp.array
+    """[0] the lowest sphere flagged in [1] the first step with a blow-up (``BLOWUP_NONE``: none), shape (2,),
+    int32."""
+    rebuild_count: wp.array
+    """Neighbour-list rebuilds made, shape (1,), int32."""
+    no_rebuild: wp.array
+    """A rebuild flag nothing reads (moving the walls to a fresh state's time must not flag one), shape (1,),
+    int32."""
+
+    @staticmethod
+    def zeros(model: "Model") -> "StepBuffers":
+        """The buffers of a solver of ``model``, at step 0 with nothing flagged."""
+        dev = model.device
+        lanes = wp.zeros((max(model.plane_count + model.wall_count, 1), WALL_LANES), dtype=wp.vec3, device=dev)
+        key_next, count_next = partner_tables(model.clump_count, dev)
+        return StepBuffers(
+            clock=wp.zeros(1, dtype=int, device=dev),
+            time=wp.zeros(2, dtype=wp.float64, device=dev),
+            wall_f_lanes=lanes,
+            wall_t_lanes=wp.zeros_like(lanes),
+            partner_key_next=key_next,
+            partner_count_next=count_next,
+            blowup=wp.array([BLOWUP_NONE, BLOWUP_NONE], dtype=int, device=dev),
+            rebuild_count=wp.zeros(1, dtype=int, device=dev),
+            no_rebuild=wp.zeros(1, dtype=int, device=dev),
+        )
 
 
 @wp.func
@@ -104,9 +170,7 @@ def wall_contact(
     r_i: float,
     m_i: float,
     p: PairParams,
-    spring: wp.vec3,
-    roll: wp.vec3,
-    aux: float,
+    history: ContactHistory,
     dt: float,
 ):
     """A sphere against a wall (infinite radius and mass) along unit normal n (sphere -> wall).
@@ -114,18 +178,18 @@ def wall_contact(
     ``v_wall`` is the wall's velocity at the contact point [m/s].
 
     Returns:
-        (active, force on the sphere [N], torque on the sphere [N m], updated spring [m], updated rolling
-        spring [N m], updated aux).
+        (active, force on the sphere [N], torque on the sphere [N m], updated history (zero once the contact
+        ended)).
     """
     arm = r_i - 0.5 * overlap
     v_rel = v_i + wp.cross(w_i, arm * n) - v_wall
-    active, f_a, f_n, f_t, xi, aux_new, k_n = contact_force(overlap, n, v_rel, spring, aux, r_i, m_i, p, dt)
+    active, f_a, f_n, f_t, h, k_n = contact_force(overlap, n, v_rel, history, r_i, m_i, p, dt)
     if active == 0:
-        return int(0), wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), 0.0
-    m_roll, roll_new = rolling_resistance(
-        p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i, p.rolling_damping, roll, dt
+        return int(0), wp.vec3(0.0), wp.vec3(0.0), h
+    m_roll, roll = rolling_resistance(
+        p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i, p.rolling_damping, h.roll, dt
     )
-    return int(1), f_a, wp.cross(arm * n, f_t) + m_roll, xi, roll_new, aux_new
+    return int(1), f_a, wp.cross(arm * n, f_t) + m_roll, ContactHistory(h.spring, roll, h.aux)
 
 
 @wp.func
@@ -213,9 +277,6 @@ def step_spheres(
     sphere_world: wp.array[int],
     sphere_clump: wp.array[int],
     sphere_body_volume: wp.array[float],
-    partner_key: wp.array[int],
-    partner_count: wp.array[int],
-    share_mass: int,
     sphere_wall: wp.array[int],
     material_density: wp.array2d[float],
     pair_params: wp.array3d[PairParams],
@@ -228,21 +289,6 @@ def step_spheres(
     wall_face_start: wp.array[int],
     triangle_wall: wp.array[int],
     wall_material: wp.array[int],
-    # Contacts in/out (each thread owns its column):
-    neighbor_count: wp.array[int],
-    neighbor_index: wp.array2d[int],
-    neighbor_spring: wp.array2d[wp.vec3],
-    neighbor_roll: wp.array2d[wp.vec3],
-    neighbor_aux: wp.array2d[float],
-    plane_spring: wp.array2d[wp.vec3],
-    plane_roll: wp.array2d[wp.vec3],
-    plane_aux: wp.array2d[float],
-    mesh_count: wp.array[int],
-    mesh_face: wp.array2d[int],
-    mesh_spring: wp.array2d[wp.vec3],
-    mesh_roll: wp.array2d[wp.vec3],
-    mesh_aux: wp.array2d[float],
-    build_x: wp.array[wp.vec3],
     # State in:
     x_in: wp.array[wp.vec3],
     v_in: wp.array[wp.vec3],
@@ -251,21 +297,34 @@ def step_spheres(
     wall_pose: wp.array[wp.transform],
     wall_v: wp.array[wp.vec3],
     wall_w: wp.array[wp.vec3],
-    # Step:
+    clock: wp.array[int],
+    # Contacts in:
+    neighbor_count: wp.array[int],
+    neighbor_index: wp.array2d[int],
+    mesh_count: wp.array[int],
+    mesh_face: wp.array2d[int],
+    build_x: wp.array[wp.vec3],
+    partner_key: wp.array[int],
+    partner_count: wp.array[int],
+    # Options:
     dt: float,
     kick: float,
     skin: float,
     velocity_limit: float,
     impact_speed_min: float,
-    clock: wp.array[int],
+    share_mass: int,
+    # Out (read, then written; each thread owns its column):
+    neighbor_history_out: wp.array2d[ContactHistory],
+    plane_history_out: wp.array2d[ContactHistory],
+    mesh_history_out: wp.array2d[ContactHistory],
     # Out:
     x_out: wp.array[wp.vec3],
     v_out: wp.array[wp.vec3],
     w_out: wp.array[wp.vec3],
     f_out: wp.array[wp.vec3],
     t_out: wp.array[wp.vec3],
-    wall_f_out: wp.array2d[wp.vec3],
-    wall_t_out: wp.array2d[wp.vec3],
+    wall_f_lanes_out: wp.array2d[wp.vec3],
+    wall_t_lanes_out: wp.array2d[wp.vec3],
     face_impact_count_out: wp.array2d[int],
     face_impact_energy_out: wp.array2d[wp.float64],
     face_impact_speed_out: wp.array2d[float],
@@ -319,9 +378,8 @@ def step_spheres(
         dist = wp.length(d)
         overlap = r_a + r_b - dist
         # apart and without history: no law acts (a JKR pair keeps aux = 1 while it hangs on in a gap)
-        if overlap <= 0.0 and neighbor_aux[k, i] == 0.0:
-            neighbor_spring[k, i] = wp.vec3(0.0)
-            neighbor_roll[k, i] = wp.vec3(0.0)
+        if overlap <= 0.0 and neighbor_history_out[k, i].aux == 0.0:
+            neighbor_history_out[k, i] = ContactHistory()
             # a contact due within one step counts already, so a clump's mass is shared from its first step
             if tally >= 0 and dist > 0.0 and overlap + dt * wp.dot(v_in[a] - v_in[b], d / dist) > 0.0:
                 run_key, run_n = partner_tally(
@@ -329,9 +387,7 @@ def step_spheres(
                 )
             continue
         if dist <= 0.0 or active_in[j] == 0:
-            neighbor_spring[k, i] = wp.vec3(0.0)
-            neighbor_roll[k, i] = wp.vec3(0.0)
-            neighbor_aux[k, i] = 0.0
+            neighbor_history_out[k, i] = ContactHistory()
             continue
         n = d / dist
         mat_a = sphere_material[a]
@@ -362,26 +418,22 @@ def step_spheres(
         w_b = w_in[b]
         v_rel = (v_in[a] + wp.cross(w_a, arm_a * n)) - (v_in[b] - wp.cross(w_b, arm_b * n))
         p = pair_params[pw, mat_a, mat_b]
-        active, f_a, f_n, f_t, xi, aux, k_n = contact_force(
-            overlap, n, v_rel, neighbor_spring[k, i], neighbor_aux[k, i], r_star, m_star, p, dt
+        active, f_a, f_n, f_t, h, k_n = contact_force(
+            overlap, n, v_rel, neighbor_history_out[k, i], r_star, m_star, p, dt
         )
         if active == 0:
-            neighbor_spring[k, i] = wp.vec3(0.0)
-            neighbor_roll[k, i] = wp.vec3(0.0)
-            neighbor_aux[k, i] = 0.0
+            neighbor_history_out[k, i] = h
             continue
-        neighbor_spring[k, i] = xi
-        neighbor_aux[k, i] = aux
         run_key, run_n = partner_tally(
             partner_key_out, partner_count_out, tally, run_key, run_n, body_key(j, sphere_clump, clump_total)
         )
         i_roll = 0.0
-        if p.rolling_model == ROLLING_EPSD:
+        if p.rolling_model == RollingModel.EPSD:
             i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
         m_roll, roll = rolling_resistance(
-            p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, neighbor_roll[k, i], dt
+            p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, h.roll, dt
         )
-        neighbor_roll[k, i] = roll
+        neighbor_history_out[k, i] = ContactHistory(h.spring, roll, h.aux)
         f_i = f_a
         if i == a:
             t += wp.cross(arm_a * n, f_t) + m_roll
@@ -394,8 +446,10 @@ def step_spheres(
             # a particle-coated wall feels the reaction on its glued sphere
             origin_j = wp.transform_get_translation(wall_pose[glued])
             c_pt = x_in[a] + arm_a * n
-            wp.atomic_add(wall_f_out, plane_point.shape[0] + glued, i % WALL_LANES, -f_i)
-            wp.atomic_add(wall_t_out, plane_point.shape[0] + glued, i % WALL_LANES, wp.cross(c_pt - origin_j, -f_i))
+            wp.atomic_add(wall_f_lanes_out, plane_point.shape[0] + glued, i % WALL_LANES, -f_i)
+            wp.atomic_add(
+                wall_t_lanes_out, plane_point.shape[0] + glued, i % WALL_LANES, wp.cross(c_pt - origin_j, -f_i)
+            )
 
     # infinite planes (static)
     for p_id in range(plane_point.shape[0]):
@@ -407,31 +461,18 @@ def step_spheres(
         p = pair_params[pw, mat_i, plane_material[p_id]]
         key_w = wall_key0 + p_id
         mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
-        active, f_a, t_a, xi, roll, aux = wall_contact(
-            r_i - gap,
-            -n_p,
-            v_i,
-            w_i,
-            wp.vec3(0.0),
-            r_i,
-            mc_i,
-            p,
-            plane_spring[p_id, i],
-            plane_roll[p_id, i],
-            plane_aux[p_id, i],
-            dt,
+        active, f_a, t_a, h = wall_contact(
+            r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, plane_history_out[p_id, i], dt
         )
-        plane_spring[p_id, i] = xi
-        plane_roll[p_id, i] = roll
-        plane_aux[p_id, i] = aux
+        plane_history_out[p_id, i] = h
         if tally >= 0 and (active != 0 or r_i - gap - dt * wp.dot(v_i, n_p) > 0.0):
             run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
         if active != 0:
             f += f_a
             t += t_a
             q = x_i - gap * n_p
-            wp.atomic_add(wall_f_out, p_id, i % WALL_LANES, -f_a)
-            wp.atomic_add(wall_t_out, p_id, i % WALL_LANES, wp.cross(q - plane_point[p_id], -f_a))
+            wp.atomic_add(wall_f_lanes_out, p_id, i % WALL_LANES, -f_a)
+            wp.atomic_add(wall_t_lanes_out, p_id, i % WALL_LANES, wp.cross(q - plane_point[p_id], -f_a))
 
     # triangle-mesh walls (rigid, possibly moving)
     plane_total = plane_point.shape[0]
@@ -459,28 +500,24 @@ def step_spheres(
                 triangle_wall,
             )
         if skip:
-            mesh_spring[k, i] = wp.vec3(0.0)
-            mesh_roll[k, i] = wp.vec3(0.0)
-            mesh_aux[k, i] = 0.0
+            mesh_history_out[k, i] = ContactHistory()
             continue
         origin = wp.transform_get_translation(wall_pose[wall])
         v_wall = wall_v[wall] + wp.cross(wall_w[wall], q - origin)
         p = pair_params[pw, mat_i, wall_material[wall]]
         key_w = wall_key0 + plane_total + wall
         mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
-        active, f_a, t_a, xi, roll, aux = wall_contact(
-            r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, mesh_spring[k, i], mesh_roll[k, i], mesh_aux[k, i], dt
+        active, f_a, t_a, h = wall_contact(
+            r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, mesh_history_out[k, i], dt
         )
-        mesh_spring[k, i] = xi
-        mesh_roll[k, i] = roll
-        mesh_aux[k, i] = aux
+        mesh_history_out[k, i] = h
         if tally >= 0 and (active != 0 or r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0):
             run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
         if active != 0:
             f += f_a
             t += t_a
-            wp.atomic_add(wall_f_out, plane_total + wall, i % WALL_LANES, -f_a)
-            wp.atomic_add(wall_t_out, plane_total + wall, i % WALL_LANES, wp.cross(q - origin, -f_a))
+            wp.atomic_add(wall_f_lanes_out, plane_total + wall, i % WALL_LANES, -f_a)
+            wp.atomic_add(wall_t_lanes_out, plane_total + wall, i % WALL_LANES, wp.cross(q - origin, -f_a))
             # an impact is the first step of a touch: leapfrog moved the sphere by dt * v_i since the last
             # step, so it was clear of the face then iff the overlap is at most the approach this step
             approach = wp.dot(v_i - v_wall, dq / -gap)
@@ -515,6 +552,92 @@ def step_spheres(
         rebuild_out[0] = 1
 
 
+def launch_step_spheres(
+    model: "Model",
+    contacts: "Contacts",
+    state_in: "State",
+    state_out: "State",
+    buffers: StepBuffers,
+    *,
+    dt: float,
+    kick: float,
+    skin: float,
+    velocity_limit: float,
+    impact_speed_min: float,
+    share_mass: bool,
+) -> None:
+    """Contact forces on every sphere and the leapfrog step of the free ones, ``state_in`` -> ``state_out``.
+
+    ``kick`` is the velocity step [s] (``dt``, or ``dt / 2`` on a fresh state's first step); the impact records
+    are ``state_in``'s (a solver's twin states share them); the partner counts go to ``buffers.partner_*_next``.
+    """
+    m, c, b = model, contacts, buffers
+    wp.launch(
+        step_spheres,
+        dim=m.sphere_count,
+        inputs=[
+            m.sphere_radius,
+            m.sphere_material,
+            m.sphere_world,
+            m.sphere_clump,
+            m.sphere_body_volume,
+            m.sphere_wall,
+            m.material_density,
+            m.pair_params,
+            m.world_gravity,
+            m.plane_point,
+            m.plane_normal,
+            m.plane_material,
+            m.plane_world,
+            m.wall_mesh,
+            m.wall_face_start,
+            m.triangle_wall,
+            m.wall_material,
+            state_in.sphere_x,
+            state_in.sphere_v,
+            state_in.sphere_w,
+            state_in.sphere_active,
+            state_in.wall_pose,
+            state_in.wall_v,
+            state_in.wall_w,
+            b.clock,
+            c.neighbor_count,
+            c.neighbor_index,
+            c.mesh_count,
+            c.mesh_face,
+            c.build_x,
+            c.partner_key,
+            c.partner_count,
+            dt,
+            kick,
+            skin,
+            velocity_limit,
+            impact_speed_min,
+            int(share_mass),
+        ],
+        outputs=[
+            c.neighbor_history,
+            c.plane_history,
+            c.mesh_history,
+            state_out.sphere_x,
+            state_out.sphere_v,
+            state_out.sphere_w,
+            state_out.sphere_f,
+            state_out.sphere_t,
+            b.wall_f_lanes,
+            b.wall_t_lanes,
+            state_in.face_impact_count,
+            state_in.face_impact_energy,
+            state_in.face_impact_speed,
+            b.partner_key_next,
+            b.partner_count_next,
+            c.rebuild,
+            b.blowup,
+        ],
+        device=m.device,
+    )
+
+
 @wp.func
 def body_angular_velocity(q: wp.quat, inertia: wp.vec3, angmom: wp.vec3):
     """World angular velocity R I^-1 R^T L of a body with principal moments ``inertia`` [kg m^2]."""
@@ -543,8 +666,7 @@ def integrate_clumps(
     sphere_offset: wp.array[wp.vec3],
     material_density: wp.array2d[float],
     world_gravity: wp.array[wp.vec3],
-    build_x: wp.array[wp.vec3],
-    # State in:
+    # State in (sphere_f and sphere_t: this step's, from step_spheres):
     active_in: wp.array[int],
     sphere_f: wp.array[wp.vec3],
     sphere_t: wp.array[wp.vec3],
@@ -552,12 +674,14 @@ def integrate_clumps(
     q_in: wp.array[wp.quat],
     v_in: wp.array[wp.vec3],
     angmom_in: wp.array[wp.vec3],
-    # Step:
+    clock: wp.array[int],
+    # Contacts in:
+    build_x: wp.array[wp.vec3],
+    # Options:
     dt: float,
     kick: float,
     skin: float,
     velocity_limit: float,
-    clock: wp.array[int],
     lanes: int,
     # Out:
     x_out: wp.array[wp.vec3],
@@ -648,14 +772,95 @@ def integrate_clumps(
         rebuild_out[0] = 1
 
 
+def launch_integrate_clumps(
+    model: "Model",
+    contacts: "Contacts",
+    state_in: "State",
+    state_out: "State",
+    buffers: StepBuffers,
+    *,
+    dt: float,
+    kick: float,
+    skin: float,
+    velocity_limit: float,
+) -> None:
+    """Reduce the forces :func:`launch_step_spheres` left on the clumps' spheres and step the clumps, tiled
+    with ``CLUMP_LANES`` threads per clump on CUDA (one on CPU)."""
+    m, c, b = model, contacts, buffers
+    lanes = CLUMP_LANES if wp.get_device(m.device).is_cuda else 1
+    wp.launch_tiled(
+        integrate_clumps,
+        dim=[m.clump_count],
+        block_dim=lanes,
+        inputs=[
+            m.clump_sphere_start,
+            m.clump_sphere_end,
+            m.clump_material,
+            m.clump_world,
+            m.clump_volume,
+            m.clump_inertia,
+            m.sphere_offset,
+            m.material_density,
+            m.world_gravity,
+            state_in.sphere_active,
+            state_out.sphere_f,
+            state_out.sphere_t,
+            state_in.clump_x,
+            state_in.clump_q,
+            state_in.clump_v,
+            state_in.clump_angmom,
+            b.clock,
+            c.build_x,
+            dt,
+            kick,
+            skin,
+            velocity_limit,
+            lanes,
+        ],
+        outputs=[
+            state_out.clump_x,
+            state_out.clump_q,
+            state_out.clump_v,
+            state_out.clump_angmom,
+            state_out.clump_w,
+            state_out.clump_f,
+            state_out.clump_t,
+            state_out.sphere_x,
+            state_out.sphere_v,
+            state_out.sphere_w,
+            c.rebuild,
+            b.blowup,
+        ],
+        device=m.device,
+    )
+
+
 @wp.kernel
-def roll_partners(key_next: wp.array[int], count_next: wp.array[int], key: wp.array[int], count: wp.array[int]):
+def roll_partners(
+    # Out (read, then emptied):
+    partner_key_next_out: wp.array[int],
+    partner_count_next_out: wp.array[int],
+    # Out:
+    partner_key_out: wp.array[int],
+    partner_count_out: wp.array[int],
+):
     """The partner tables just filled become the ones the next step reads; the fill tables are emptied."""
     t = wp.tid()
-    key[t] = key_next[t]
-    count[t] = count_next[t]
-    key_next[t] = -1
-    count_next[t] = 0
+    partner_key_out[t] = partner_key_next_out[t]
+    partner_count_out[t] = partner_count_next_out[t]
+    partner_key_next_out[t] = -1
+    partner_count_next_out[t] = 0
+
+
+def launch_roll_partners(model: "Model", contacts: "Contacts", buffers: StepBuffers) -> None:
+    """Hand the partner tables the step just filled to the next step."""
+    b = buffers
+    wp.launch(
+        roll_partners,
+        dim=b.partner_key_next.shape[0],
+        outputs=[b.partner_key_next, b.partner_count_next, contacts.partner_key, contacts.partner_count],
+        device=model.device,
+    )
 
 
 @wp.kernel
@@ -681,6 +886,26 @@ def init_clumps(
     angmom_out[c] = wp.quat_rotate(q[c], wp.vec3(wb[0] * inertia[0], wb[1] * inertia[1], wb[2] * inertia[2]))
 
 
+def launch_init_clumps(model: "Model", state: "State") -> None:
+    """The clumps' angular momenta from their angular velocities (a fresh state holds the latter)."""
+    m = model
+    wp.launch(
+        init_clumps,
+        dim=m.clump_count,
+        inputs=[
+            m.clump_material,
+            m.clump_world,
+            m.clump_volume,
+            m.clump_inertia,
+            m.material_density,
+            state.clump_q,
+            state.clump_w,
+        ],
+        outputs=[state.clump_angmom],
+        device=m.device,
+    )
+
+
 @wp.kernel
 def move_walls(
     # Control:
@@ -693,11 +918,12 @@ def move_walls(
     segment_pose: wp.array[wp.transform],
     # Model:
     wall_radius: wp.array[float],
-    # Contacts:
-    wall_build_pose: wp.array[wp.transform],
-    skin: float,
-    # Time:
+    # State in:
     time: wp.array[wp.float64],
+    # Contacts in:
+    wall_build_pose: wp.array[wp.transform],
+    # Options:
+    skin: float,
     slot: int,
     # Out:
     pose_out: wp.array[wp.transform],
@@ -737,6 +963,41 @@ def move_walls(
         rebuild_out[0] = 1
 
 
+def launch_move_walls(
+    model: "Model",
+    control: "Control",
+    contacts: "Contacts",
+    state: "State",
+    buffers: StepBuffers,
+    *,
+    skin: float,
+    rebuild: wp.array,
+) -> None:
+    """The walls' poses and velocities at the device time ``buffers.time[1]`` into ``state``; ``rebuild`` is
+    flagged once a wall may have moved half the skin since the lists were built."""
+    m, ctl = model, control
+    wp.launch(
+        move_walls,
+        dim=m.wall_count,
+        inputs=[
+            ctl.segment_start,
+            ctl.segment_t0,
+            ctl.segment_t1,
+            ctl.segment_v,
+            ctl.segment_w,
+            ctl.segment_pivot,
+            ctl.segment_pose,
+            m.wall_radius,
+            buffers.time,
+            contacts.wall_build_pose,
+            skin,
+            1,
+        ],
+        outputs=[state.wall_pose, state.wall_v, state.wall_w, rebuild],
+        device=m.device,
+    )
+
+
 @wp.kernel
 def follow_walls(
     # Model:
@@ -747,7 +1008,9 @@ def follow_walls(
     wall_pose: wp.array[wp.transform],
     wall_v: wp.array[wp.vec3],
     wall_w: wp.array[wp.vec3],
+    # Contacts in:
     build_x: wp.array[wp.vec3],
+    # Options:
     skin: float,
     # Out:
     x_out: wp.array[wp.vec3],
@@ -769,10 +1032,34 @@ def follow_walls(
         rebuild_out[0] = 1
 
 
+def launch_follow_walls(
+    model: "Model", contacts: "Contacts", state: "State", *, skin: float, rebuild: wp.array
+) -> None:
+    """Place the spheres glued to walls at their walls' poses in ``state``; ``rebuild`` as for the walls."""
+    m = model
+    wp.launch(
+        follow_walls,
+        dim=m.attached_count,
+        inputs=[
+            m.attached_index,
+            m.sphere_wall,
+            m.sphere_offset,
+            state.wall_pose,
+            state.wall_v,
+            state.wall_w,
+            contacts.build_x,
+            skin,
+        ],
+        outputs=[state.sphere_x, state.sphere_v, state.sphere_w, rebuild],
+        device=m.device,
+    )
+
+
 @wp.kernel
 def begin_step(
+    # Options:
     dt: wp.float64,
-    # Out:
+    # Out (clock and time: read, then advanced):
     wall_f_lanes_out: wp.array2d[wp.vec3],
     wall_t_lanes_out: wp.array2d[wp.vec3],
     clock_out: wp.array[int],
@@ -790,12 +1077,25 @@ def begin_step(
         time_out[1] = t + dt
 
 
+def launch_begin_step(model: "Model", buffers: StepBuffers, dt: float) -> None:
+    """Open a step of ``dt`` [s]: zero the wall accumulators, advance the device clock and time."""
+    b = buffers
+    wp.launch(
+        begin_step,
+        dim=b.wall_f_lanes.shape,
+        inputs=[wp.float64(dt)],
+        outputs=[b.wall_f_lanes, b.wall_t_lanes, b.clock, b.time],
+        device=model.device,
+    )
+
+
 @wp.kernel
 def sum_wall_forces(
-    # In:
+    # State in (this step's partial sums):
     wall_f_lanes: wp.array2d[wp.vec3],
     wall_t_lanes: wp.array2d[wp.vec3],
     impulse_in: wp.array[wp.vec3d],
+    # Options:
     dt: wp.float64,
     # Out:
     wall_f_out: wp.array[wp.vec3],
@@ -814,9 +1114,27 @@ def sum_wall_forces(
     impulse_out[wall] = impulse_in[wall] + wp.vec3d(f) * dt
 
 
+def launch_sum_wall_forces(
+    model: "Model", state_in: "State", state_out: "State", buffers: StepBuffers, dt: float
+) -> None:
+    """Each surface's force and torque of the step into ``state_out``, its impulse summed on from ``state_in``."""
+    b = buffers
+    wp.launch(
+        sum_wall_forces,
+        dim=model.plane_count + model.wall_count,
+        inputs=[b.wall_f_lanes, b.wall_t_lanes, state_in.wall_impulse, wp.float64(dt)],
+        outputs=[state_out.wall_f, state_out.wall_t, state_out.wall_impulse],
+        device=model.device,
+    )
+
+
 @wp.kernel
 def place_bodies(
-    # In (host-prepared batch):
+    # Model:
+    clump_sphere_start: wp.array[int],
+    clump_sphere_end: wp.array[int],
+    sphere_offset: wp.array[wp.vec3],
+    # Batch in (host-prepared; clump_x, clump_q, clump_v indexed by batch entry):
     sphere_index: wp.array[int],
     sphere_x: wp.array[wp.vec3],
     sphere_v: wp.array[wp.vec3],
@@ -824,19 +1142,15 @@ def place_bodies(
     clump_x: wp.array[wp.vec3],
     clump_q: wp.array[wp.quat],
     clump_v: wp.array[wp.vec3],
-    # Model:
-    clump_sphere_start: wp.array[int],
-    clump_sphere_end: wp.array[int],
-    sphere_offset: wp.array[wp.vec3],
     # Out:
     x_out: wp.array[wp.vec3],
     v_out: wp.array[wp.vec3],
     w_out: wp.array[wp.vec3],
     active_out: wp.array[int],
-    cx_out: wp.array[wp.vec3],
-    cq_out: wp.array[wp.quat],
-    cv_out: wp.array[wp.vec3],
-    cl_out: wp.array[wp.vec3],
+    clump_x_out: wp.array[wp.vec3],
+    clump_q_out: wp.array[wp.quat],
+    clump_v_out: wp.array[wp.vec3],
+    clump_angmom_out: wp.array[wp.vec3],
     rebuild_out: wp.array[int],
 ):
     """Release factory particles: entries below len(sphere_index) are free spheres, the rest clumps."""
@@ -850,10 +1164,10 @@ def place_bodies(
         active_out[i] = 1
     else:
         c = clump_index[k - n_s]
-        cx_out[c] = clump_x[k - n_s]
-        cq_out[c] = clump_q[k - n_s]
-        cv_out[c] = clump_v[k - n_s]
-        cl_out[c] = wp.vec3(0.0)
+        clump_x_out[c] = clump_x[k - n_s]
+        clump_q_out[c] = clump_q[k - n_s]
+        clump_v_out[c] = clump_v[k - n_s]
+        clump_angmom_out[c] = wp.vec3(0.0)
         for s in range(clump_sphere_start[c], clump_sphere_end[c]):
             x_out[s] = clump_x[k - n_s] + wp.quat_rotate(clump_q[k - n_s], sphere_offset[s])
             v_out[s] = clump_v[k - n_s]
@@ -862,46 +1176,136 @@ def place_bodies(
     rebuild_out[0] = 1
 
 
+def launch_place_bodies(
+    model: "Model",
+    contacts: "Contacts",
+    state: "State",
+    sphere_index,
+    sphere_x,
+    sphere_v,
+    clump_index,
+    clump_x,
+    clump_q,
+    clump_v,
+) -> None:
+    """Activate parked particles at the given places and flag a rebuild. Host arrays: spheres (n,), (n, 3), (n, 3)
+    [m, m/s]; clumps (k,), (k, 3), (k, 4) quaternions (x, y, z, w), (k, 3)."""
+    m, dev = model, model.device
+
+    def arr(a, dtype, width=None):
+        a = np.asarray(a, dtype=np.float32 if width else np.int32)
+        if width:
+            a = a.reshape(-1, width)
+        if len(a) == 0:
+            a = np.zeros((1, width) if width else 1, dtype=a.dtype)
+        return wp.array(a, dtype=dtype, device=dev)
+
+    n = len(sphere_index) + len(clump_index)
+    if n == 0:
+        return
+    wp.launch(
+        place_bodies,
+        dim=n,
+        inputs=[
+            m.clump_sphere_start,
+            m.clump_sphere_end,
+            m.sphere_offset,
+            # not padded: its length tells the kernel where the clumps begin
+            wp.array(np.asarray(sphere_index, dtype=np.int32), dtype=int, device=dev),
+            arr(sphere_x, wp.vec3, 3),
+            arr(sphere_v, wp.vec3, 3),
+            arr(clump_index, int),
+            arr(clump_x, wp.vec3, 3),
+            arr(clump_q, wp.quat, 4),
+            arr(clump_v, wp.vec3, 3),
+        ],
+        outputs=[
+            state.sphere_x,
+            state.sphere_v,
+            state.sphere_w,
+            state.sphere_active,
+            state.clump_x,
+            state.clump_q,
+            state.clump_v,
+            state.clump_angmom,
+            contacts.rebuild,
+        ],
+        device=dev,
+    )
+
+
 @wp.kernel
 def retire_escaped(
     # Model:
-    low: wp.vec3,
-    high: wp.vec3,
     sphere_clump: wp.array[int],
     sphere_world: wp.array[int],
     sphere_wall: wp.array[int],
     clump_sphere_start: wp.array[int],
-    # State in/out:
-    x: wp.array[wp.vec3],
-    clump_x: wp.array[wp.vec3],
-    active: wp.array[int],
-    v: wp.array[wp.vec3],
-    w: wp.array[wp.vec3],
-    clump_v: wp.array[wp.vec3],
-    clump_angmom: wp.array[wp.vec3],
-    clump_w: wp.array[wp.vec3],
-    world_removed: wp.array[int],
+    low: wp.vec3,
+    high: wp.vec3,
+    # State in:
+    x_in: wp.array[wp.vec3],
+    clump_x_in: wp.array[wp.vec3],
+    # Out (active_out and world_removed_out: read, then written):
+    active_out: wp.array[int],
+    v_out: wp.array[wp.vec3],
+    w_out: wp.array[wp.vec3],
+    clump_v_out: wp.array[wp.vec3],
+    clump_angmom_out: wp.array[wp.vec3],
+    clump_w_out: wp.array[wp.vec3],
+    world_removed_out: wp.array[int],
 ):
     """Remove the bodies whose centre is outside the domain box [low, high]: their spheres become inactive
     and at rest (so they neither touch anything nor flag rebuilds); each removed body counts once in its
     world. Every sphere of a clump tests the clump's centre, so a clump leaves whole."""
     i = wp.tid()
-    if active[i] == 0 or sphere_wall[i] >= 0:
+    if active_out[i] == 0 or sphere_wall[i] >= 0:
         return
     c = sphere_clump[i]
-    p = x[i]
+    p = x_in[i]
     if c >= 0:
-        p = clump_x[c]
+        p = clump_x_in[c]
     inside = p[0] >= low[0] and p[1] >= low[1] and p[2] >= low[2]
     inside = inside and p[0] <= high[0] and p[1] <= high[1] and p[2] <= high[2]
     if inside:
         return
-    active[i] = 0
-    v[i] = wp.vec3(0.0)
-    w[i] = wp.vec3(0.0)
+    active_out[i] = 0
+    v_out[i] = wp.vec3(0.0)
+    w_out[i] = wp.vec3(0.0)
     if c < 0 or i == clump_sphere_start[c]:
-        wp.atomic_add(world_removed, sphere_world[i] % world_removed.shape[0], 1)
+        wp.atomic_add(world_removed_out, sphere_world[i] % world_removed_out.shape[0], 1)
         if c >= 0:
-            clump_v[c] = wp.vec3(0.0)
-            clump_angmom[c] = wp.vec3(0.0)
-            clump_w[c] = wp.vec3(0.0)
+            clump_v_out[c] = wp.vec3(0.0)
+            clump_angmom_out[c] = wp.vec3(0.0)
+            clump_w_out[c] = wp.vec3(0.0)
+
+
+def launch_retire_escaped(model: "Model", state: "State") -> None:
+    """Remove the bodies whose centre left ``model.domain`` (a model without a domain keeps them all)."""
+    m = model
+    if m.domain is None:
+        return
+    wp.launch(
+        retire_escaped,
+        dim=m.sphere_count,
+        inputs=[
+            m.sphere_clump,
+            m.sphere_world,
+            m.sphere_wall,
+            m.clump_sphere_start,
+            wp.vec3(*m.domain[0]),
+            wp.vec3(*m.domain[1]),
+            state.sphere_x,
+            state.clump_x,
+        ],
+        outputs=[
+            state.sphere_active,
+            state.sphere_v,
+            state.sphere_w,
+            state.clump_v,
+            state.clump_angmom,
+            state.clump_w,
+            state.world_removed,
+        ],
+        device=m.device,
+    )

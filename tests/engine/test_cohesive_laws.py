@@ -1,7 +1,8 @@
 """Cohesive contact laws (JKR, EEPA) in Warp against the float64 closed forms of warpdem.engine.analytic.
 
-Displacement-controlled: a tiny kernel evaluates the law along a prescribed overlap path (one thread walks
-the path and carries the per-contact history, as the contact kernel does from step to step).
+Displacement-controlled: a tiny kernel drives one contact along a prescribed overlap path through the step's
+law dispatch ``contact_force`` (one thread walks the path and carries the contact's history, as the step
+kernel does from step to step); other kernels evaluate the laws' functions point by point.
 """
 
 import math
@@ -11,20 +12,18 @@ import pytest
 import warp as wp
 
 from warpdem.engine import analytic as an
-from warpdem.kernels.law_eepa import (
-    eepa_damping_coefficient,
-    eepa_normal_force,
-    eepa_tangential_stiffness,
-)
+from warpdem.kernels.enums import ContactLaw
+from warpdem.kernels.law_contact import contact_force
+from warpdem.kernels.law_eepa import eepa_damping_coefficient, eepa_tangential_stiffness
 from warpdem.kernels.law_jkr import (
     jkr_break_overlap,
     jkr_contact_radius,
     jkr_force_of_radius,
     jkr_friction_load,
-    jkr_in_contact,
     jkr_normal_force,
     jkr_stiffness,
 )
+from warpdem.kernels.params import ContactHistory, PairParams
 
 wp.set_module_options({"enable_backward": False})
 
@@ -70,47 +69,26 @@ def _jkr_stiffness_kernel(
 
 
 @wp.kernel
-def _jkr_path_kernel(
+def _path_kernel(
     overlap: wp.array[float],
+    p: PairParams,
     r_star: float,
-    e_star: float,
-    gamma: float,
-    flag_out: wp.array[int],
+    active_out: wp.array[int],
     f_out: wp.array[float],
-):
-    # one thread walks the path and carries the "in contact" flag, as the contact list does
-    flag = int(0)
-    for i in range(overlap.shape[0]):
-        flag = jkr_in_contact(overlap[i], flag, r_star, e_star, gamma)
-        f = float(0.0)
-        if flag != 0:
-            f = jkr_normal_force(overlap[i], r_star, e_star, gamma)
-        flag_out[i] = flag
-        f_out[i] = f
-
-
-@wp.kernel
-def _eepa_path_kernel(
-    overlap: wp.array[float],
-    r_star: float,
-    e_star: float,
-    f0: float,
-    n: float,
-    lambda_p: float,
-    chi: float,
-    gamma: float,
-    f_out: wp.array[float],
-    dmax_out: wp.array[float],
-    kd_out: wp.array[float],
+    aux_out: wp.array[float],
+    k_out: wp.array[float],
     load_out: wp.array[float],
 ):
-    d_max = float(0.0)
+    # at rest (no dashpot, no tangential spring): the force on a is the law's normal force along -n
+    n = wp.vec3(0.0, 0.0, 1.0)
+    h = ContactHistory()
     for i in range(overlap.shape[0]):
-        f, d_new, kd, load = eepa_normal_force(overlap[i], d_max, r_star, e_star, f0, n, lambda_p, chi, gamma)
-        d_max = d_new
-        f_out[i] = f
-        dmax_out[i] = d_max
-        kd_out[i] = kd
+        active, f_a, load, f_t, h_new, k_n = contact_force(overlap[i], n, wp.vec3(0.0), h, r_star, 1.0, p, 1.0e-6)
+        h = h_new
+        active_out[i] = active
+        f_out[i] = -wp.dot(f_a, n)
+        aux_out[i] = h.aux
+        k_out[i] = k_n
         load_out[i] = load
 
 
@@ -146,26 +124,33 @@ def _jkr(overlap, r_star=R_STAR, e_star=E_STAR, gamma=GAMMA):
     return [o.numpy().astype(float) for o in outs]
 
 
-def _eepa(path, f0=0.0, n=1.5, lambda_p=0.5, chi=1.5, gamma=5.0, r_star=1e-3, e_star=1e8):
+def _walk(path, law, r_star, **fields):
+    """Drive one contact of a pair with ``law`` and PairParams ``fields`` along the overlap ``path`` [m];
+    per point: (active, normal force F_n [N], the law's history aux, its stiffness for the rolling spring [N/m],
+    normal load for the friction limits [N])."""
+    p = PairParams()
+    p.law = law
+    for name, value in fields.items():
+        setattr(p, name, value)
     k = len(path)
+    active = wp.zeros(k, dtype=int, device="cpu")
     outs = [wp.zeros(k, dtype=float, device="cpu") for _ in range(4)]
     wp.launch(
-        _eepa_path_kernel,
+        _path_kernel,
         dim=1,
-        inputs=[
-            wp.array(np.asarray(path, np.float32), dtype=float, device="cpu"),
-            r_star,
-            e_star,
-            f0,
-            n,
-            lambda_p,
-            chi,
-            gamma,
-        ],
-        outputs=outs,
+        inputs=[wp.array(np.asarray(path, np.float32), dtype=float, device="cpu"), p, r_star],
+        outputs=[active, *outs],
         device="cpu",
     )
-    return [o.numpy().astype(float) for o in outs]
+    return [active.numpy()] + [o.numpy().astype(float) for o in outs]
+
+
+def _eepa(path, f0=0.0, n=1.5, lambda_p=0.5, chi=1.5, gamma=5.0, r_star=1e-3, e_star=1e8):
+    """(F_hys, delta_max, k_damp, load) along ``path``: EEPA's rolling stiffness is k_damp / n."""
+    _, f, d_max, k, load = _walk(
+        path, ContactLaw.EEPA, r_star, e_star=e_star, f0=f0, eepa_n=n, lambda_p=lambda_p, chi=chi, gamma=gamma
+    )
+    return f, d_max, k * n, load
 
 
 # ------------------------------------------------------------------------------------------- JKR
@@ -254,16 +239,8 @@ def test_jkr_hysteresis_contact_flag():
     d_0 = an.jkr_zero_force_overlap(R_STAR, E_STAR, GAMMA)
     up = np.linspace(1.5 * d_c, 3.0 * d_0, 400)
     path = np.concatenate([up, up[::-1]]).astype(np.float32)
-    flag = wp.zeros(len(path), dtype=int, device="cpu")
-    f = wp.zeros(len(path), dtype=float, device="cpu")
-    wp.launch(
-        _jkr_path_kernel,
-        dim=1,
-        inputs=[wp.array(path, dtype=float, device="cpu"), R_STAR, E_STAR, GAMMA],
-        outputs=[flag, f],
-        device="cpu",
-    )
-    flag, f = flag.numpy(), f.numpy()
+    flag, f, aux, _, _ = _walk(path, ContactLaw.JKR, R_STAR, e_star=E_STAR, gamma=GAMMA)
+    assert np.array_equal(aux, flag)  # the contact keeps its in-contact flag as its history
     approach, leave = slice(0, len(up)), slice(len(up), len(path))
     assert np.all(flag[approach][path[approach] < 0.0] == 0)
     assert np.all(f[approach][path[approach] < 0.0] == 0.0)

@@ -96,15 +96,26 @@ def _resting_pair(skin):
 
 
 def test_history_survives_rebuilds():
-    """The tangential spring is carried across rebuilds by sorted-key matching: a tiny skin (many rebuilds)
-    and a large one (no rebuild) give the same trajectory."""
+    """The tangential spring is carried across rebuilds by sorted-key matching: a tiny skin (a rebuild every
+    step) and a large one (no rebuild after the first build) give the same trajectory.
+
+    The lists are rebuilt once a sphere has moved half the skin since the last build. Skin 0.2 um: the sheared
+    sphere starts at 2 mm/s, more than 0.1 um per step, and only gathers speed as it rolls off the lower
+    sphere's top (an unstable balance), so the lists are rebuilt before each of the 400 steps. Skin 2 mm: no
+    sphere moves 1 mm, so the first build is the only one."""
     res = []
-    for skin in (2e-7, 2e-3):
+    for skin, rebuilds in ((2e-7, 400), (2e-3, 1)):
         m, s = _resting_pair(skin)
+        x0 = m.state().sphere_x.numpy()
         st = s.run(m.state(), (c := s.contacts()), 400)
         res.append(st.sphere_x.numpy())
-        spring = c.neighbor_spring.numpy()[:, 0]
+        spring = c.neighbor_history.numpy()["spring"][:, 0]
         assert np.linalg.norm(spring[: c.neighbor_count.numpy()[0]]) > 0, "the pair's spring was never loaded"
+        if rebuilds > 1:
+            assert 0.002 * s.dt > 0.5 * skin and np.linalg.norm(st.sphere_v.numpy()[1]) > 0.002
+        else:
+            assert np.linalg.norm(st.sphere_x.numpy() - x0, axis=1).max() < 0.5 * skin
+        assert s.rebuild_count == rebuilds
     np.testing.assert_allclose(res[0], res[1], rtol=0, atol=1e-9)
 
 
@@ -113,7 +124,7 @@ def test_pair_history_identical_on_both_sides():
     m, s = _resting_pair(1e-3)
     c = s.contacts()
     s.run(m.state(), c, 200)
-    cnt, idx, spr = c.neighbor_count.numpy(), c.neighbor_index.numpy(), c.neighbor_spring.numpy()
+    cnt, idx, spr = c.neighbor_count.numpy(), c.neighbor_index.numpy(), c.neighbor_history.numpy()["spring"]
     k0 = list(idx[: cnt[0], 0]).index(1)
     k1 = list(idx[: cnt[1], 1]).index(0)
     assert np.array_equal(spr[k0, 0], spr[k1, 1]) and np.linalg.norm(spr[k0, 0]) > 0
@@ -132,29 +143,30 @@ def test_blowup_names_step_world_and_sphere():
         s.run(m.state(), s.contacts(), 5)
 
 
-def test_neighbor_overflow_reported():
-    """More candidates than slots is reported, naming the capacity option."""
+def _crowded_run(runaway: bool):
+    """Three steps of a 3 x 3 x 3 block of touching spheres with 2 candidate slots each (too few), and with
+    ``runaway`` a 28th sphere far off at 600 m/s (above the velocity limit)."""
     b = wd.ModelBuilder(gravity=(0, 0, 0))
     b.add_material(wd.Material("a", density=2500, youngs_modulus=1e7, poisson_ratio=0.3))
     pts = [(i * 0.0099, j * 0.0099, k * 0.0099) for i in range(3) for j in range(3) for k in range(3)]
     b.add_spheres(pts, 0.005, "a")
+    if runaway:
+        b.add_sphere((1, 0, 0), 0.005, "a", velocity=(600, 0, 0))
     m = b.finalize("cpu")
     s = wd.Solver(m, wd.SolverOptions(neighbor_capacity=2))
+    s.run(m.state(), s.contacts(), 3)
+
+
+def test_neighbor_overflow_reported():
+    """More candidates than slots is reported, naming the capacity option."""
     with pytest.raises(wd.SimulationError, match="neighbor_capacity = 2"):
-        s.run(m.state(), s.contacts(), 3)
+        _crowded_run(runaway=False)
 
 
 def test_blowup_with_overflow_names_both():
     """When a run both blows up and drops contacts, the message gives the blow-up and the overflow."""
-    b = wd.ModelBuilder(gravity=(0, 0, 0))
-    b.add_material(wd.Material("a", density=2500, youngs_modulus=1e7, poisson_ratio=0.3))
-    pts = [(i * 0.0099, j * 0.0099, k * 0.0099) for i in range(3) for j in range(3) for k in range(3)]
-    b.add_spheres(pts, 0.005, "a")
-    b.add_sphere((1, 0, 0), 0.005, "a", velocity=(600, 0, 0))
-    m = b.finalize("cpu")
-    s = wd.Solver(m, wd.SolverOptions(neighbor_capacity=2))
     with pytest.raises(wd.SimulationError, match=r"blow-up at step 1: sphere 27 .*neighbor_capacity = 2"):
-        s.run(m.state(), s.contacts(), 3)
+        _crowded_run(runaway=True)
 
 
 def test_rebuild_count_follows_the_skin():

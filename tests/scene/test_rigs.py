@@ -645,7 +645,7 @@ def test_run_stops_at_its_wall_time_limit_and_resumes(tmp_path):
     assert e.value.checkpoint.exists() and 0 < e.value.simulated_s < 0.2
     with np.load(e.value.checkpoint) as z:  # list slots are saved only up to the longest list
         assert z["contacts.neighbor_index"].shape[0] == z["contacts.neighbor_count"].max()
-        assert z["contacts.mesh_spring"].shape[0] == z["contacts.mesh_count"].max() < 32
+        assert z["contacts.mesh_history"].shape[0] == z["contacts.mesh_count"].max() < 32
     b = runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9)
     assert b.info["resumed_from_s"] == pytest.approx(e.value.simulated_s)
     xa = np.load(tmp_path / "a" / "final.npz")["sphere_x"]

@@ -3,16 +3,15 @@
 import pytest
 
 from tests.conftest import requires_cuda
+from tests.verification.test_analytic import _assert_records
 from warpdem.verify import cases as verify
 
 
 @requires_cuda
 @pytest.mark.parametrize("name", list(verify.CASES))
 def test_case_cuda(name):
-    """Each analytic case passes on the first CUDA device with the CPU tolerances."""
-    recs = verify.CASES[name]("cuda:0")
-    bad = [f"{r.case}: {r.name} = {r.value:.6g} vs {r.expected:.6g}" for r in recs if not r.passed]
-    assert not bad, "\n".join(bad)
+    """Each analytic case produces records and passes on the first CUDA device with the CPU tolerances."""
+    _assert_records(verify.CASES[name]("cuda:0"))
 
 
 @requires_cuda

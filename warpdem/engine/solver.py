@@ -11,6 +11,7 @@ import warp as wp
 
 from warpdem.kernels import neighbors as _nb
 from warpdem.kernels import step as _st
+from warpdem.kernels.params import ContactHistory
 
 from .types import ContactLaw, Contacts, Control, Model, Overflow, State
 
@@ -87,22 +88,6 @@ class SolverOptions:
 # steps in one replayed CUDA graph: long enough to hide the launch cost, short enough for a remainder
 # stepped eagerly to stay cheap
 CUDA_GRAPH_STEPS = 32
-# neighbour cells per longest reach (2 r_max + skin + cohesive reach): 2 makes the walked box of cells hug
-# each sphere's own reach
-CELLS_PER_REACH = 2.0
-LIST_ARRAYS = (
-    "neighbor_count",
-    "neighbor_index",
-    "neighbor_spring",
-    "neighbor_roll",
-    "neighbor_aux",
-    "mesh_count",
-    "mesh_face",
-    "mesh_spring",
-    "mesh_roll",
-    "mesh_aux",
-)
-"""The Contacts arrays a rebuild writes (into ``Contacts.scratch``, then committed)."""
 
 
 class Solver:
@@ -136,28 +121,14 @@ class Solver:
         self.skin = (
             self.options.skin if self.options.skin is not None else self.options.skin_fraction * model.radius_min
         )
-        self._clock = wp.zeros(1, dtype=int, device=model.device)
-        self._wall_lanes = wp.zeros(
-            (max(model.plane_count + model.wall_count, 1), int(_st.WALL_LANES)), dtype=wp.vec3, device=model.device
-        )
-        self._wall_t_lanes = wp.zeros_like(self._wall_lanes)
-        self._time = wp.zeros(2, dtype=wp.float64, device=model.device)
-        """Device time [s]: [0] the start of the step being taken, [1] its end (the time of state_out)."""
+        self._buffers = _st.StepBuffers.zeros(model)
         self.control = model.control()
         """The wall motion used when run or step get no Control."""
-        self._no_rebuild = wp.zeros(1, dtype=int, device=model.device)
-        self._rebuild_count = wp.zeros(1, dtype=int, device=model.device)
-        self._blowup = wp.array([2**31 - 1, 2**31 - 1], dtype=int, device=model.device)
         self._spare: State | None = None
         # host copy of the rebuild flag, read between captured steps on CUDA (pinned: an async 4-byte copy)
         self._is_cuda = wp.get_device(model.device).is_cuda
         self._flag_host = wp.empty(1, dtype=int, device="cpu", pinned=self._is_cuda)
         self._graph = None
-        self._clump_lanes = _st.CLUMP_LANES if self._is_cuda else 1
-        slots = max(model.clump_count, 1) * _st.PARTNER_SLOTS
-        self._partner_key_next = wp.full(slots, -1, dtype=int, device=model.device)
-        self._partner_count_next = wp.zeros(slots, dtype=int, device=model.device)
-        """Partner tables the step being taken fills (Contacts.partner_* hold the last step's)."""
         self.cuda_graph_steps = CUDA_GRAPH_STEPS
         """Steps per replayed CUDA graph (even); 0 reads the rebuild flag on the host every step instead."""
 
@@ -180,133 +151,41 @@ class Solver:
         def slots(k, dtype):
             return wp.zeros((k, n), dtype=dtype, device=dev)
 
+        partner_key, partner_count = _st.partner_tables(m.clump_count, dev)
         c = Contacts(
             neighbor_capacity=cap,
             mesh_capacity=mcap,
             skin=self.skin,
             neighbor_count=wp.zeros(n, dtype=int, device=dev),
             neighbor_index=slots(cap, int),
-            neighbor_spring=slots(cap, wp.vec3),
-            neighbor_roll=slots(cap, wp.vec3),
-            neighbor_aux=slots(cap, float),
-            plane_spring=slots(planes, wp.vec3),
-            plane_roll=slots(planes, wp.vec3),
-            plane_aux=slots(planes, float),
+            neighbor_history=slots(cap, ContactHistory),
+            plane_history=slots(planes, ContactHistory),
             mesh_count=wp.zeros(n, dtype=int, device=dev),
             mesh_face=slots(mcap, int),
-            mesh_spring=slots(mcap, wp.vec3),
-            mesh_roll=slots(mcap, wp.vec3),
-            mesh_aux=slots(mcap, float),
+            mesh_history=slots(mcap, ContactHistory),
             wall_build_pose=wp.zeros(max(m.wall_count, 1), dtype=wp.transform, device=dev),
             build_x=wp.zeros(n, dtype=wp.vec3, device=dev),
             rebuild=wp.ones(1, dtype=int, device=dev),
             overflow=wp.zeros(1, dtype=int, device=dev),
-            partner_key=wp.full(max(m.clump_count, 1) * _st.PARTNER_SLOTS, -1, dtype=int, device=dev),
-            partner_count=wp.zeros(max(m.clump_count, 1) * _st.PARTNER_SLOTS, dtype=int, device=dev),
+            partner_key=partner_key,
+            partner_count=partner_count,
+            cells=_nb.cell_grid(n, dev),
         )
-        for name in LIST_ARRAYS:
+        for name in _nb.LIST_ARRAYS:
             c.scratch[name] = wp.zeros_like(getattr(c, name))
-        # about two buckets per sphere keeps the lists short without a large table to clear
-        buckets = 1 << max(10, int(math.ceil(math.log2(max(2 * n, 1)))))
-        c.cells = {"head": wp.full(buckets, -1, dtype=int, device=dev), "next": wp.full(n, -1, dtype=int, device=dev)}
         return c
 
-    # launchers ------------------------------------------------------------------------------
+    # the step -------------------------------------------------------------------------------
     def rebuild(self, state: State, contacts: Contacts) -> None:
         """Remove the bodies that left the domain, rebuild the candidate lists from ``state`` and carry the
         history over."""
         m, c = self.model, contacts
-        if m.domain is not None:
-            wp.launch(
-                _st.retire_escaped,
-                dim=m.sphere_count,
-                inputs=[
-                    wp.vec3(*m.domain[0]),
-                    wp.vec3(*m.domain[1]),
-                    m.sphere_clump,
-                    m.sphere_world,
-                    m.sphere_wall,
-                    m.clump_sphere_start,
-                    state.sphere_x,
-                    state.clump_x,
-                ],
-                outputs=[
-                    state.sphere_active,
-                    state.sphere_v,
-                    state.sphere_w,
-                    state.clump_v,
-                    state.clump_angmom,
-                    state.clump_w,
-                    state.world_removed,
-                ],
-                device=m.device,
-            )
-        reach = m.contact_reach
-        inv_cell = CELLS_PER_REACH / (2.0 * m.radius_max + self.skin + reach)
-        head, nxt = c.cells["head"], c.cells["next"]
-        wp.launch(_nb.clear_cells, dim=head.shape[0], inputs=[head, self._rebuild_count], device=m.device)
-        wp.launch(
-            _nb.bin_spheres,
-            dim=m.sphere_count,
-            inputs=[state.sphere_x, state.sphere_active, m.sphere_world, inv_cell],
-            outputs=[head, nxt],
-            device=m.device,
-        )
-        s = c.scratch
-        wp.launch(
-            _nb.build_contacts,
-            dim=m.sphere_count,
-            inputs=[
-                head,
-                nxt,
-                inv_cell,
-                m.sphere_radius,
-                m.sphere_world,
-                m.sphere_clump,
-                m.sphere_wall,
-                m.radius_max,
-                m.wall_mesh,
-                m.wall_face_start,
-                m.wall_world,
-                state.sphere_x,
-                state.sphere_active,
-                state.wall_pose,
-                self.skin,
-                reach,
-                c.neighbor_count,
-                c.neighbor_index,
-                c.neighbor_spring,
-                c.neighbor_roll,
-                c.neighbor_aux,
-                c.mesh_count,
-                c.mesh_face,
-                c.mesh_spring,
-                c.mesh_roll,
-                c.mesh_aux,
-            ],
-            outputs=[
-                s["neighbor_count"],
-                s["neighbor_index"],
-                s["neighbor_spring"],
-                s["neighbor_roll"],
-                s["neighbor_aux"],
-                s["mesh_count"],
-                s["mesh_face"],
-                s["mesh_spring"],
-                s["mesh_roll"],
-                s["mesh_aux"],
-                c.build_x,
-                c.overflow,
-            ],
-            device=m.device,
-        )
-        wp.launch(
-            _nb.commit_contacts,
-            dim=m.sphere_count,
-            inputs=[s[k] for k in LIST_ARRAYS],
-            outputs=[getattr(c, k) for k in LIST_ARRAYS],
-            device=m.device,
-        )
+        _st.launch_retire_escaped(m, state)
+        inv_cell = _nb.cell_inverse_size(m, self.skin)
+        _nb.launch_clear_cells(m, c, self._buffers.rebuild_count)
+        _nb.launch_bin_spheres(m, state, c, inv_cell)
+        _nb.launch_build_contacts(m, state, c, inv_cell=inv_cell, skin=self.skin)
+        _nb.launch_commit_contacts(m, c)
         wp.copy(c.wall_build_pose, state.wall_pose)
         c.rebuild.zero_()
 
@@ -321,7 +200,7 @@ class Solver:
 
     def _set_time(self, time: float) -> None:
         """Device time of the next step's start (host write, never inside a capture)."""
-        self._time.assign(np.array([time, time], dtype=np.float64))
+        self._buffers.time.assign(np.array([time, time], dtype=np.float64))
 
     def _step(
         self, state_in: State, state_out: State, control: Control | None, contacts: Contacts, dt: float | None = None
@@ -335,64 +214,18 @@ class Solver:
         """Complete a fresh state: wall poses at its time, clump angular momenta from angular velocities."""
         m = self.model
         if m.wall_count:
-            self._move_walls(state, control, contacts, rebuild=self._no_rebuild)
+            self._move_walls(state, control, contacts, rebuild=self._buffers.no_rebuild)
         if m.clump_count:
-            wp.launch(
-                _st.init_clumps,
-                dim=m.clump_count,
-                inputs=[
-                    m.clump_material,
-                    m.clump_world,
-                    m.clump_volume,
-                    m.clump_inertia,
-                    m.material_density,
-                    state.clump_q,
-                    state.clump_w,
-                ],
-                outputs=[state.clump_angmom],
-                device=m.device,
-            )
+            _st.launch_init_clumps(m, state)
 
     def _move_walls(self, state: State, control: Control | None, contacts: Contacts, rebuild) -> None:
         """Poses of the walls at the device time[1] into ``state``; ``rebuild`` is flagged when they moved far."""
-        m, ctl = self.model, control or self.control
-        wp.launch(
-            _st.move_walls,
-            dim=m.wall_count,
-            inputs=[
-                ctl.segment_start,
-                ctl.segment_t0,
-                ctl.segment_t1,
-                ctl.segment_v,
-                ctl.segment_w,
-                ctl.segment_pivot,
-                ctl.segment_pose,
-                m.wall_radius,
-                contacts.wall_build_pose,
-                self.skin,
-                self._time,
-                1,
-            ],
-            outputs=[state.wall_pose, state.wall_v, state.wall_w, rebuild],
-            device=m.device,
+        m = self.model
+        _st.launch_move_walls(
+            m, control or self.control, contacts, state, self._buffers, skin=self.skin, rebuild=rebuild
         )
         if m.attached_count:
-            wp.launch(
-                _st.follow_walls,
-                dim=m.attached_count,
-                inputs=[
-                    m.attached_index,
-                    m.sphere_wall,
-                    m.sphere_offset,
-                    state.wall_pose,
-                    state.wall_v,
-                    state.wall_w,
-                    contacts.build_x,
-                    self.skin,
-                ],
-                outputs=[state.sphere_x, state.sphere_v, state.sphere_w, rebuild],
-                device=m.device,
-            )
+            _st.launch_follow_walls(m, contacts, state, skin=self.skin, rebuild=rebuild)
 
     def _advance(
         self,
@@ -406,145 +239,30 @@ class Solver:
         m, c = self.model, contacts
         dt = self.dt if dt is None else float(dt)
         kick = dt if state_in.half_step else 0.5 * dt
-        wp.launch(
-            _st.begin_step,
-            dim=self._wall_lanes.shape,
-            inputs=[wp.float64(dt)],
-            outputs=[self._wall_lanes, self._wall_t_lanes, self._clock, self._time],
-            device=m.device,
+        o, b = self.options, self._buffers
+        share = o.clump_contact_mass == "shared"
+        _st.launch_begin_step(m, b, dt)
+        _st.launch_step_spheres(
+            m,
+            c,
+            state_in,
+            state_out,
+            b,
+            dt=dt,
+            kick=kick,
+            skin=self.skin,
+            velocity_limit=o.velocity_limit,
+            impact_speed_min=o.impact_speed_min,
+            share_mass=share,
         )
-        wp.launch(
-            _st.step_spheres,
-            dim=m.sphere_count,
-            inputs=[
-                m.sphere_radius,
-                m.sphere_material,
-                m.sphere_world,
-                m.sphere_clump,
-                m.sphere_body_volume,
-                c.partner_key,
-                c.partner_count,
-                int(self.options.clump_contact_mass == "shared"),
-                m.sphere_wall,
-                m.material_density,
-                m.pair_params,
-                m.world_gravity,
-                m.plane_point,
-                m.plane_normal,
-                m.plane_material,
-                m.plane_world,
-                m.wall_mesh,
-                m.wall_face_start,
-                m.triangle_wall,
-                m.wall_material,
-                c.neighbor_count,
-                c.neighbor_index,
-                c.neighbor_spring,
-                c.neighbor_roll,
-                c.neighbor_aux,
-                c.plane_spring,
-                c.plane_roll,
-                c.plane_aux,
-                c.mesh_count,
-                c.mesh_face,
-                c.mesh_spring,
-                c.mesh_roll,
-                c.mesh_aux,
-                c.build_x,
-                state_in.sphere_x,
-                state_in.sphere_v,
-                state_in.sphere_w,
-                state_in.sphere_active,
-                state_in.wall_pose,
-                state_in.wall_v,
-                state_in.wall_w,
-                dt,
-                kick,
-                self.skin,
-                self.options.velocity_limit,
-                self.options.impact_speed_min,
-                self._clock,
-            ],
-            outputs=[
-                state_out.sphere_x,
-                state_out.sphere_v,
-                state_out.sphere_w,
-                state_out.sphere_f,
-                state_out.sphere_t,
-                self._wall_lanes,
-                self._wall_t_lanes,
-                state_in.face_impact_count,
-                state_in.face_impact_energy,
-                state_in.face_impact_speed,
-                self._partner_key_next,
-                self._partner_count_next,
-                c.rebuild,
-                self._blowup,
-            ],
-            device=m.device,
-        )
-        if m.clump_count and self.options.clump_contact_mass == "shared":
-            wp.launch(
-                _st.roll_partners,
-                dim=self._partner_key_next.shape[0],
-                inputs=[self._partner_key_next, self._partner_count_next],
-                outputs=[c.partner_key, c.partner_count],
-                device=m.device,
-            )
+        if m.clump_count and share:
+            _st.launch_roll_partners(m, c, b)
         if m.clump_count:
-            wp.launch_tiled(
-                _st.integrate_clumps,
-                dim=[m.clump_count],
-                block_dim=self._clump_lanes,
-                inputs=[
-                    m.clump_sphere_start,
-                    m.clump_sphere_end,
-                    m.clump_material,
-                    m.clump_world,
-                    m.clump_volume,
-                    m.clump_inertia,
-                    m.sphere_offset,
-                    m.material_density,
-                    m.world_gravity,
-                    c.build_x,
-                    state_in.sphere_active,
-                    state_out.sphere_f,
-                    state_out.sphere_t,
-                    state_in.clump_x,
-                    state_in.clump_q,
-                    state_in.clump_v,
-                    state_in.clump_angmom,
-                    dt,
-                    kick,
-                    self.skin,
-                    self.options.velocity_limit,
-                    self._clock,
-                    self._clump_lanes,
-                ],
-                outputs=[
-                    state_out.clump_x,
-                    state_out.clump_q,
-                    state_out.clump_v,
-                    state_out.clump_angmom,
-                    state_out.clump_w,
-                    state_out.clump_f,
-                    state_out.clump_t,
-                    state_out.sphere_x,
-                    state_out.sphere_v,
-                    state_out.sphere_w,
-                    c.rebuild,
-                    self._blowup,
-                ],
-                device=m.device,
+            _st.launch_integrate_clumps(
+                m, c, state_in, state_out, b, dt=dt, kick=kick, skin=self.skin, velocity_limit=o.velocity_limit
             )
         if m.plane_count + m.wall_count:
-            wp.launch(
-                _st.sum_wall_forces,
-                dim=m.plane_count + m.wall_count,
-                inputs=[self._wall_lanes, self._wall_t_lanes, state_in.wall_impulse, wp.float64(dt)],
-                outputs=[state_out.wall_f, state_out.wall_t, state_out.wall_impulse],
-                device=m.device,
-            )
+            _st.launch_sum_wall_forces(m, state_in, state_out, b, dt)
         if state_out.sphere_active is not state_in.sphere_active:
             wp.copy(state_out.sphere_active, state_in.sphere_active)
         if m.wall_count:
@@ -597,76 +315,61 @@ class Solver:
             # (the cell grid is built by plain kernels), so the host never waits on the GPU between blocks
             block = self.cuda_graph_steps
             if steps - done >= block:
-                key = (id(a), id(b), id(contacts), id(control), block)
-                if self._graph is None or self._graph[0] != key:
-                    a.half_step = b.half_step = True
-                    times = (a.time, a.step, b.time, b.step)
-                    try:
-                        with wp.ScopedCapture(device=self.model.device) as cap:
-                            for i in range(block):
-                                src, dst = (a, b) if i % 2 == 0 else (b, a)
-                                self._step(src, dst, control, contacts)
-                    except Exception as exc:  # an older driver without conditional nodes: host-read path
-                        warnings.warn(
-                            f"CUDA graph with a conditional rebuild failed ({exc}); "
-                            "falling back to one host read of the rebuild flag per step",
-                            stacklevel=2,
-                        )
-                        self.cuda_graph_steps = 0
-                        cap = None
-                    a.time, a.step, b.time, b.step = times
-                    self._graph = (key, cap.graph) if cap is not None else None
-                if self._graph is not None and self._graph[0] == key:
+                try:
+                    (graph,) = self._graphs(
+                        a, b, contacts, control, block, lambda: self._alternate(a, b, block, control, contacts)
+                    )
+                except Exception as exc:  # an older driver without conditional nodes: host-read path
+                    warnings.warn(
+                        f"CUDA graph with a conditional rebuild failed ({exc}); "
+                        "falling back to one host read of the rebuild flag per step",
+                        stacklevel=2,
+                    )
+                    self.cuda_graph_steps = 0
+                    self._graph = graph = None
+                if graph is not None:
                     blocks = (steps - done) // block
                     for _ in range(blocks):
-                        wp.capture_launch(self._graph[1])
+                        wp.capture_launch(graph)
                     done += blocks * block
             # the remainder (fewer than a block) is stepped eagerly below, parity kept
             a.time = t0 + done * self.dt
             a.step = step0 + done
         if use_graph and self._is_cuda and not self.cuda_graph_steps:
             # fallback: the host reads the rebuild flag each step (one 4-byte copy) and replays a captured step
-            key = (id(a), id(b), id(contacts), id(control))
-            if self._graph is None or self._graph[0] != key:
-                graphs = []
-                a.half_step = b.half_step = True
-                for src, dst in ((a, b), (b, a)):
-                    t_before, step_before = dst.time, dst.step
-                    with wp.ScopedCapture(device=self.model.device) as cap:
-                        self._advance(src, dst, contacts, control)
-                    dst.time, dst.step = t_before, step_before
-                    graphs.append(cap.graph)
-                self._graph = (key, graphs)
+            # without the rebuild, one graph per direction
+            graphs = self._graphs(
+                a,
+                b,
+                contacts,
+                control,
+                "host reads",
+                lambda: self._advance(a, b, contacts, control),
+                lambda: self._advance(b, a, contacts, control),
+            )
             parity = 0
             while done < steps:
                 wp.copy(self._flag_host, contacts.rebuild)
                 wp.synchronize_stream()
                 if self._flag_host.numpy()[0]:
                     self.rebuild(a if parity == 0 else b, contacts)
-                wp.capture_launch(self._graph[1][parity])
+                wp.capture_launch(graphs[parity])
                 parity ^= 1
                 done += 1
             if parity:
                 a, b = b, a
             a.time, a.step, a.half_step = t0 + steps * self.dt, step0 + steps, True
         elif use_graph and not self._is_cuda and steps - done >= 2:
-            key = (id(a), id(b), id(contacts), id(control))
-            if self._graph is None or self._graph[0] != key:
-                before = int(self._clock.numpy()[0])
-                t_before, step_before = a.time, a.step
-                with wp.ScopedCapture(device=self.model.device) as cap:
-                    self._step(a, b, control, contacts)
-                    self._step(b, a, control, contacts)
-                self._graph = (key, cap.graph)
-                a.time, a.step = t_before, step_before
-                # Warp's CPU capture also executes what it records: count those two steps
-                if int(self._clock.numpy()[0]) != before:
-                    a.time += 2 * self.dt
-                    a.step += 2
-                    done += 2
+            before = int(self._buffers.clock.numpy()[0])
+            (graph,) = self._graphs(a, b, contacts, control, 2, lambda: self._alternate(a, b, 2, control, contacts))
+            # Warp's CPU capture also executes what it records: count those two steps
+            if int(self._buffers.clock.numpy()[0]) != before:
+                a.time += 2 * self.dt
+                a.step += 2
+                done += 2
             pairs = max(steps - done, 0) // 2
             for _ in range(pairs):
-                wp.capture_launch(self._graph[1])
+                wp.capture_launch(graph)
             a.time += 2 * pairs * self.dt
             a.step += 2 * pairs
             done += 2 * pairs
@@ -679,57 +382,44 @@ class Solver:
         self.check(contacts)
         return a
 
+    def _alternate(self, a: State, b: State, steps: int, control: Control | None, contacts: Contacts) -> None:
+        """Take ``steps`` steps back and forth between the twin states: a -> b, b -> a, ..."""
+        for i in range(steps):
+            src, dst = (a, b) if i % 2 == 0 else (b, a)
+            self._step(src, dst, control, contacts)
+
+    def _graphs(self, a: State, b: State, contacts: Contacts, control: Control | None, kind, *records) -> list:
+        """The graphs last captured for these twin states, contacts, control and ``kind`` of replay, else one
+        captured per recording function (each launches steps between ``a`` and ``b``). Recording also advances
+        the states' host-side times and step counts: they are put back, since a replay does not advance them."""
+        key = (id(a), id(b), id(contacts), id(control), kind)
+        if self._graph is None or self._graph[0] != key:
+            a.half_step = b.half_step = True
+            graphs = []
+            for record in records:
+                times = (a.time, a.step, b.time, b.step)
+                try:
+                    with wp.ScopedCapture(device=self.model.device) as cap:
+                        record()
+                finally:
+                    a.time, a.step, b.time, b.step = times
+                graphs.append(cap.graph)
+            self._graph = (key, graphs)
+        return self._graph[1]
+
     def release(
         self, state: State, contacts: Contacts, sphere_index, sphere_x, sphere_v, clump_index, clump_x, clump_q, clump_v
     ) -> None:
         """Activate parked particles at the given places (host arrays; spheres shape (n,), (n, 3); clumps
         (k,), (k, 3), (k, 4) quaternions (x, y, z, w), (k, 3)) and flag a rebuild."""
-        m, dev = self.model, self.model.device
-
-        def arr(a, dtype, width=None):
-            a = np.asarray(a, dtype=np.float32 if width else np.int32)
-            if width:
-                a = a.reshape(-1, width)
-            if len(a) == 0:
-                a = np.zeros((1, width) if width else 1, dtype=a.dtype)
-            return wp.array(a, dtype=dtype, device=dev)
-
-        n = len(sphere_index) + len(clump_index)
-        if n == 0:
-            return
-        wp.launch(
-            _st.place_bodies,
-            dim=n,
-            inputs=[
-                wp.array(np.asarray(sphere_index, dtype=np.int32), dtype=int, device=dev),
-                arr(sphere_x, wp.vec3, 3),
-                arr(sphere_v, wp.vec3, 3),
-                arr(clump_index, int),
-                arr(clump_x, wp.vec3, 3),
-                arr(clump_q, wp.quat, 4),
-                arr(clump_v, wp.vec3, 3),
-                m.clump_sphere_start,
-                m.clump_sphere_end,
-                m.sphere_offset,
-            ],
-            outputs=[
-                state.sphere_x,
-                state.sphere_v,
-                state.sphere_w,
-                state.sphere_active,
-                state.clump_x,
-                state.clump_q,
-                state.clump_v,
-                state.clump_angmom,
-                contacts.rebuild,
-            ],
-            device=dev,
+        _st.launch_place_bodies(
+            self.model, contacts, state, sphere_index, sphere_x, sphere_v, clump_index, clump_x, clump_q, clump_v
         )
 
     @property
     def rebuild_count(self) -> int:
         """Neighbour-list rebuilds this solver has made (a host read: synchronises)."""
-        return int(self._rebuild_count.numpy()[0])
+        return int(self._buffers.rebuild_count.numpy()[0])
 
     def advance(self, state: State, contacts: Contacts, duration: float, control: Control | None = None) -> State:
         """Run for ``duration`` [s], releasing the model's dynamic factories on their schedules.
@@ -833,7 +523,7 @@ class Solver:
         An overflow drops contacts, so spheres may pass into each other and blow up; a sphere that blew up
         may also crowd into others and overflow their lists: when both are flagged the message gives both.
         """
-        blow = self._blowup.numpy()
+        blow = self._buffers.blowup.numpy()
         flags = int(contacts.overflow.numpy()[0])
         dropped = ""
         if flags:
@@ -843,7 +533,7 @@ class Solver:
             if flags & Overflow.MESH:
                 what.append(f"mesh_capacity = {contacts.mesh_capacity}")
             dropped = f"contact capacity exceeded ({', '.join(what)}): contacts were dropped; raise it in SolverOptions"
-        if blow[1] != 2**31 - 1:
+        if blow[1] != _st.BLOWUP_NONE:
             i = int(blow[0])
             world = int(self.model.sphere_world.numpy()[i])
             cause = f"; also {dropped}" if dropped else ""

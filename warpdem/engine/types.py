@@ -1,4 +1,4 @@
-"""Enums and the Model / State / Control / Contacts containers.
+"""The Model / State / Control / Contacts containers, and the enums (defined in ``warpdem.kernels.enums``).
 
 The split follows Newton (and the former ``warp.sim``): the Model is the static description on the
 device, a State is one instant of the time-varying quantities, Control holds what moves walls, and
@@ -8,42 +8,15 @@ writes another; nothing in a step synchronises with the host.
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 import warp as wp
 
+from warpdem.kernels.enums import ContactLaw, Overflow, RollingModel
 
-class RollingModel(enum.IntEnum):
-    """Rolling resistance model of a material pair."""
-
-    NONE = 0
-    CONSTANT_TORQUE = 1
-    """Type A (EDEM "standard rolling friction"): torque -mu_r * R* * F_n along the relative rolling direction."""
-    EPSD = 2
-    """Type C (elastic-plastic spring-dashpot, Ai et al. 2011): rolling spring capped at mu_r * R* * F_n, plus a dashpot."""
-
-
-class ContactLaw(enum.IntEnum):
-    """Normal contact law of a material pair."""
-
-    NONE = 0
-    HERTZ_MINDLIN = 1
-    """Hertz-Mindlin (no slip), EDEM's default."""
-    JKR = 2
-    """Hertz-Mindlin with JKR cohesion (EDEM "Hertz-Mindlin with JKR"), surface energy gamma."""
-    EEPA = 3
-    """Edinburgh Elasto-Plastic Adhesion (Morrissey 2013; Thakur et al. 2014)."""
-
-
-class Overflow(enum.IntFlag):
-    """Bits of ``Contacts.overflow``: which fixed capacity a rebuild ran out of."""
-
-    NONE = 0
-    NEIGHBOR = 1
-    MESH = 2
+__all__ = ["ContactLaw", "Contacts", "Control", "Model", "Overflow", "RollingModel", "State"]
 
 
 @dataclass
@@ -355,28 +328,17 @@ class Contacts:
     """Candidates per sphere, shape (sphere_count,), int32."""
     neighbor_index: wp.array
     """Candidate partner, shape (neighbor_capacity, sphere_count), int32, ascending per sphere."""
-    neighbor_spring: wp.array
-    """Tangential spring displacement of the pair (canonical order) [m], shape (neighbor_capacity, sphere_count), vec3."""
-    neighbor_roll: wp.array
-    """Rolling spring torque of the pair (canonical order) [N m], shape (neighbor_capacity, sphere_count), vec3."""
-    neighbor_aux: wp.array
-    """Scalar history of the pair's law (JKR: in-contact flag; EEPA: largest overlap [m]), shape (neighbor_capacity, sphere_count), float32."""
-    plane_spring: wp.array
-    """Tangential spring per sphere and plane [m], shape (max(plane_count,1), sphere_count), vec3."""
-    plane_roll: wp.array
-    """Rolling spring torque per sphere and plane [N m], shape (max(plane_count,1), sphere_count), vec3."""
-    plane_aux: wp.array
-    """Scalar law history per sphere and plane, shape (max(plane_count,1), sphere_count), float32."""
+    neighbor_history: wp.array
+    """History of the pair (canonical order), shape (neighbor_capacity, sphere_count), ``ContactHistory``
+    (kernels/params.py: tangential spring [m], rolling spring torque [N m], the law's scalar)."""
+    plane_history: wp.array
+    """History per sphere and plane, shape (max(plane_count, 1), sphere_count), ContactHistory."""
     mesh_count: wp.array
     """Candidate triangles per sphere, shape (sphere_count,), int32."""
     mesh_face: wp.array
     """Candidate triangle index, shape (mesh_capacity, sphere_count), int32, ascending per sphere."""
-    mesh_spring: wp.array
-    """Tangential spring per sphere and triangle [m], shape (mesh_capacity, sphere_count), vec3."""
-    mesh_roll: wp.array
-    """Rolling spring torque per sphere and triangle [N m], shape (mesh_capacity, sphere_count), vec3."""
-    mesh_aux: wp.array
-    """Scalar law history per sphere and triangle, shape (mesh_capacity, sphere_count), float32."""
+    mesh_history: wp.array
+    """History per sphere and triangle, shape (mesh_capacity, sphere_count), ContactHistory."""
     wall_build_pose: wp.array
     """Wall poses at the last rebuild, shape (max(wall_count, 1),), transform."""
     build_x: wp.array
@@ -393,7 +355,7 @@ class Contacts:
     """Sub-sphere contacts with each body of ``partner_key``: the next step divides the clump's mass by it in that
     body's contacts (``SolverOptions.clump_contact_mass``). Same shape, int32."""
     scratch: dict = field(default_factory=dict)
-    """Second buffers of the history arrays, written by a rebuild and copied back."""
+    """Second buffers of the list and history arrays, written by a rebuild and copied back."""
     cells: dict = field(default_factory=dict)
     """The cell grid of the last rebuild: ``head`` (bucket -> first sphere, -1 empty; a power-of-two length)
     and ``next`` (sphere -> next sphere of its bucket), int32 arrays."""

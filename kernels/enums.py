@@ -1,0 +1,37 @@
+"""The enums of warpdem, defined once: the kernels compare against their members directly (Warp reads an
+``IntEnum`` / ``IntFlag`` member in a kernel as an int constant) and ``warpdem.engine.types`` re-exports them.
+
+No kernels here: importing this module compiles nothing.
+"""
+
+import enum
+
+
+class ContactLaw(enum.IntEnum):
+    """Normal contact law of a material pair (``PairParams.law``); law_contact.contact_force dispatches on it."""
+
+    NONE = 0
+    HERTZ_MINDLIN = 1
+    """Hertz-Mindlin (no slip), EDEM's default."""
+    JKR = 2
+    """Hertz-Mindlin with JKR cohesion (EDEM "Hertz-Mindlin with JKR"), surface energy gamma."""
+    EEPA = 3
+    """Edinburgh Elasto-Plastic Adhesion (Morrissey 2013; Thakur et al. 2014)."""
+
+
+class RollingModel(enum.IntEnum):
+    """Rolling resistance model of a material pair (``PairParams.rolling_model``)."""
+
+    NONE = 0
+    CONSTANT_TORQUE = 1
+    """Type A (EDEM "standard rolling friction"): torque -mu_r * R* * F_n along the relative rolling direction."""
+    EPSD = 2
+    """Type C (elastic-plastic spring-dashpot, Ai et al. 2011): rolling spring capped at mu_r * R* * F_n, plus a dashpot."""
+
+
+class Overflow(enum.IntFlag):
+    """Bits of ``Contacts.overflow``: which fixed capacity a rebuild ran out of."""
+
+    NONE = 0
+    NEIGHBOR = 1
+    MESH = 2
