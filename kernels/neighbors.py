@@ -13,16 +13,12 @@ Each kernel has its launcher beside it (``launch_<kernel>``), as in step.py.
 """
 
 import math
-from typing import TYPE_CHECKING
 
 import warp as wp
 
 from .enums import Overflow
 from .geometry import closest_point_triangle
 from .params import ContactHistory
-
-if TYPE_CHECKING:
-    from warpdem.engine.types import Contacts, Model, State
 
 wp.set_module_options({"enable_backward": False})
 
@@ -50,7 +46,7 @@ def cell_grid(sphere_count: int, device) -> dict:
     }
 
 
-def cell_inverse_size(model: "Model", skin: float) -> float:
+def cell_inverse_size(model, skin: float) -> float:
     """1 / the cell edge [1/m] of a rebuild with Verlet skin ``skin`` [m]."""
     return CELLS_PER_REACH / (2.0 * model.radius_max + skin + model.contact_reach)
 
@@ -82,7 +78,7 @@ def clear_cells(
         rebuild_count_out[0] = rebuild_count_out[0] + 1
 
 
-def launch_clear_cells(model: "Model", contacts: "Contacts", rebuild_count: wp.array) -> None:
+def launch_clear_cells(model, contacts, rebuild_count: wp.array) -> None:
     """Empty the cell grid of ``contacts`` and count a rebuild in ``rebuild_count``."""
     head = contacts.cells["head"]
     wp.launch(clear_cells, dim=head.shape[0], outputs=[head, rebuild_count], device=model.device)
@@ -110,7 +106,7 @@ def bin_spheres(
     cell_next_out[i] = wp.atomic_exch(cell_head_out, b, i)
 
 
-def launch_bin_spheres(model: "Model", state: "State", contacts: "Contacts", inv_cell: float) -> None:
+def launch_bin_spheres(model, state, contacts, inv_cell: float) -> None:
     """Bin the active spheres of ``state`` into the cell grid of ``contacts`` (cells of edge 1 / ``inv_cell``)."""
     m = model
     wp.launch(
@@ -280,9 +276,7 @@ def build_contacts(
     new_mesh_count_out[i] = mcount
 
 
-def launch_build_contacts(
-    model: "Model", state: "State", contacts: "Contacts", *, inv_cell: float, skin: float
-) -> None:
+def launch_build_contacts(model, state, contacts, *, inv_cell: float, skin: float) -> None:
     """New candidate lists from the binned spheres of ``state`` into ``contacts.scratch``, each entry with the
     history of its key in the current lists; records the build positions and any overflow."""
     m, c, s = model, contacts, contacts.scratch
@@ -360,7 +354,7 @@ def commit_contacts(
         mesh_history_out[k, i] = new_mesh_history[k, i]
 
 
-def launch_commit_contacts(model: "Model", contacts: "Contacts") -> None:
+def launch_commit_contacts(model, contacts) -> None:
     """Make the lists :func:`launch_build_contacts` wrote the ones the step reads."""
     wp.launch(
         commit_contacts,

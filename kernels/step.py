@@ -12,12 +12,12 @@ component spheres. Mesh walls move rigidly: each keeps its triangles in its own 
 per step (see warpdem/engine/motion.py), so no BVH refit is needed.
 
 Each kernel has its launcher beside it (``launch_<kernel>``), the only code that calls ``wp.launch``: it takes
-the Model, State, Control and Contacts (duck-typed; the kernels never import ``warpdem.engine``) and the
-solver's :class:`StepBuffers`, so the solver's step reads as a list of launcher calls.
+the engine's Model, State, Control and Contacts (duck-typed and unannotated: the kernels import nothing above
+them, not even for type hints) and the solver's :class:`StepBuffers`, so the solver's step reads as a list of
+launcher calls.
 """
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import warp as wp
@@ -38,9 +38,6 @@ CLUMP_LANES = 32
 """Threads per clump in integrate_clumps on CUDA (a tiled launch; Warp runs a CPU tile as one thread)."""
 PARTNER_SLOTS = wp.constant(16)
 """Partner bodies a clump's table holds (a power of two): compact clumps touch at most about 14 bodies."""
-
-if TYPE_CHECKING:
-    from warpdem.engine.types import Contacts, Control, Model, State
 
 
 def partner_tables(clump_count: int, device) -> tuple[wp.array, wp.array]:
@@ -78,7 +75,7 @@ class StepBuffers:
     int32."""
 
     @staticmethod
-    def zeros(model: "Model") -> "StepBuffers":
+    def zeros(model) -> "StepBuffers":
         """The buffers of a solver of ``model``, at step 0 with nothing flagged."""
         dev = model.device
         lanes = wp.zeros((max(model.plane_count + model.wall_count, 1), WALL_LANES), dtype=wp.vec3, device=dev)
@@ -553,10 +550,10 @@ def step_spheres(
 
 
 def launch_step_spheres(
-    model: "Model",
-    contacts: "Contacts",
-    state_in: "State",
-    state_out: "State",
+    model,
+    contacts,
+    state_in,
+    state_out,
     buffers: StepBuffers,
     *,
     dt: float,
@@ -773,10 +770,10 @@ def integrate_clumps(
 
 
 def launch_integrate_clumps(
-    model: "Model",
-    contacts: "Contacts",
-    state_in: "State",
-    state_out: "State",
+    model,
+    contacts,
+    state_in,
+    state_out,
     buffers: StepBuffers,
     *,
     dt: float,
@@ -852,7 +849,7 @@ def roll_partners(
     partner_count_next_out[t] = 0
 
 
-def launch_roll_partners(model: "Model", contacts: "Contacts", buffers: StepBuffers) -> None:
+def launch_roll_partners(model, contacts, buffers: StepBuffers) -> None:
     """Hand the partner tables the step just filled to the next step."""
     b = buffers
     wp.launch(
@@ -886,7 +883,7 @@ def init_clumps(
     angmom_out[c] = wp.quat_rotate(q[c], wp.vec3(wb[0] * inertia[0], wb[1] * inertia[1], wb[2] * inertia[2]))
 
 
-def launch_init_clumps(model: "Model", state: "State") -> None:
+def launch_init_clumps(model, state) -> None:
     """The clumps' angular momenta from their angular velocities (a fresh state holds the latter)."""
     m = model
     wp.launch(
@@ -964,10 +961,10 @@ def move_walls(
 
 
 def launch_move_walls(
-    model: "Model",
-    control: "Control",
-    contacts: "Contacts",
-    state: "State",
+    model,
+    control,
+    contacts,
+    state,
     buffers: StepBuffers,
     *,
     skin: float,
@@ -1032,9 +1029,7 @@ def follow_walls(
         rebuild_out[0] = 1
 
 
-def launch_follow_walls(
-    model: "Model", contacts: "Contacts", state: "State", *, skin: float, rebuild: wp.array
-) -> None:
+def launch_follow_walls(model, contacts, state, *, skin: float, rebuild: wp.array) -> None:
     """Place the spheres glued to walls at their walls' poses in ``state``; ``rebuild`` as for the walls."""
     m = model
     wp.launch(
@@ -1077,7 +1072,7 @@ def begin_step(
         time_out[1] = t + dt
 
 
-def launch_begin_step(model: "Model", buffers: StepBuffers, dt: float) -> None:
+def launch_begin_step(model, buffers: StepBuffers, dt: float) -> None:
     """Open a step of ``dt`` [s]: zero the wall accumulators, advance the device clock and time."""
     b = buffers
     wp.launch(
@@ -1114,9 +1109,7 @@ def sum_wall_forces(
     impulse_out[wall] = impulse_in[wall] + wp.vec3d(f) * dt
 
 
-def launch_sum_wall_forces(
-    model: "Model", state_in: "State", state_out: "State", buffers: StepBuffers, dt: float
-) -> None:
+def launch_sum_wall_forces(model, state_in, state_out, buffers: StepBuffers, dt: float) -> None:
     """Each surface's force and torque of the step into ``state_out``, its impulse summed on from ``state_in``."""
     b = buffers
     wp.launch(
@@ -1177,9 +1170,9 @@ def place_bodies(
 
 
 def launch_place_bodies(
-    model: "Model",
-    contacts: "Contacts",
-    state: "State",
+    model,
+    contacts,
+    state,
     sphere_index,
     sphere_x,
     sphere_v,
@@ -1280,7 +1273,7 @@ def retire_escaped(
             clump_w_out[c] = wp.vec3(0.0)
 
 
-def launch_retire_escaped(model: "Model", state: "State") -> None:
+def launch_retire_escaped(model, state) -> None:
     """Remove the bodies whose centre left ``model.domain`` (a model without a domain keeps them all)."""
     m = model
     if m.domain is None:
