@@ -149,6 +149,12 @@ class KeyGrammar:
         return None, text
 
 
+def is_rig_key(key: str) -> bool:
+    """True for a key that names a rig parameter (``count``): a word without a dot, the ``rig`` form of
+    :data:`KINDS`. A scene regenerates from its rig for these before the dotted keys apply."""
+    return "." not in key
+
+
 PER_WORLD = KeyGrammar(
     {"material": MATERIAL_SCALARS, "interaction": INTERACTION_SCALARS},
     {"interaction": "a numeric interaction field"},

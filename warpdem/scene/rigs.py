@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpdem.engine import geometry as geo
+from warpdem.engine.keys import is_rig_key
 from warpdem.engine.materials import Interaction, Material
 from warpdem.engine.types import ContactLaw, RollingModel
 
@@ -807,8 +808,7 @@ def load(path, overrides: dict | None = None) -> SceneSpec:
 
     spec_ = read_stage(path)
     overrides = dict(overrides or {})
-    prefixes = ("material.", "interaction.", "run.", "measure.", "factory.")
-    rig_keys = {k: v for k, v in overrides.items() if not k.startswith(prefixes)}
+    rig_keys = {k: v for k, v in overrides.items() if is_rig_key(k)}
     if rig_keys:
         values = dict(spec_.authoring)
         values.update(rig_keys)

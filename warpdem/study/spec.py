@@ -119,7 +119,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli ba
     import tomli as tomllib
 
 from warpdem.engine.checks import did_you_mean, finite_number, is_number, not_allowed
-from warpdem.engine.keys import PER_WORLD, KeyGrammar
+from warpdem.engine.keys import PER_WORLD, KeyGrammar, is_rig_key
 from warpdem.engine.materials import INTERACTION_SCALARS
 
 from . import designs
@@ -294,11 +294,6 @@ def _grammar(rig: str | None, factor: bool) -> KeyGrammar:
             f"a numeric {rig} parameter ({', '.join(words)} are not numbers)" if factor else f"a {rig} parameter"
         )
     return KeyGrammar(fields, labels)
-
-
-def is_rig_key(key: str) -> bool:
-    """True for an override key that sets a rig parameter (``count``), not a material or interaction scalar."""
-    return "." not in key
 
 
 def varies_per_world(key: str) -> bool:
