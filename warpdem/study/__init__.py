@@ -10,7 +10,9 @@
 ``execute``  runs a study as batched worlds, one result file per finished point, resumable; analysis and
              verification runs at the chosen optimum (needs the engine: Warp).
 
-Everything but ``execute`` needs only numpy, scipy, pandas, statsmodels (and matplotlib for plots).
+May import: ``warpdem.scene`` and ``warpdem.engine`` (``spec`` reads override keys with the engine's one
+grammar, so importing this package imports Warp), numpy, scipy, pandas, statsmodels (and matplotlib, inside
+the plotting functions). Never imports ``warpdem.cli``.
 """
 
 from .analysis import (

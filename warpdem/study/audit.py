@@ -50,17 +50,11 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from warpdem.engine.materials import elastic_moduli
+
 from .analysis import ModelFit, backward_eliminate, effects_table, fit_model, parse_term, solve_target, term_label
 from .designs import Factor, alias_structure, box_behnken, ccd_alpha, central_composite, plackett_burman
 from .spec import tomllib  # the standard library's, or the tomli backport on Python 3.10
-
-
-def _elastic_moduli(nu, youngs_modulus=None, shear_modulus=None):
-    """The engine's E/G/nu rule (imported here, not at module level: the audit needs no Warp)."""
-    from warpdem.engine.materials import elastic_moduli
-
-    return elastic_moduli(nu, youngs_modulus=youngs_modulus, shear_modulus=shear_modulus)
-
 
 __all__ = [
     "REFERENCE_ENV",
@@ -722,7 +716,7 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
     g, nu = P["shear_modulus_Pa"], P["poisson"]
     a.add(
         "pellets.material.youngs_modulus_implied",
-        _elastic_moduli(nu, shear_modulus=g)[0],
+        elastic_moduli(nu, shear_modulus=g)[0],
         None,
         "Pa",
         None,
@@ -732,7 +726,7 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
     )
     a.add("pellets.material.poisson_in_range", nu, "(-1, 0.5)", "", -1 < nu < 0.5, "", "seed 000 Table 4", "physics")
     w = P["wall"]
-    e_w = _elastic_moduli(w["poisson"], shear_modulus=w["shear_modulus_Pa"])[0]
+    e_w = elastic_moduli(w["poisson"], shear_modulus=w["shear_modulus_Pa"])[0]
     a.add(
         "pellets.wall.youngs_modulus_implied",
         e_w,
@@ -1027,7 +1021,7 @@ def _wetfeed(a: _Audit, ref: Path, pub: dict):
     g, nu, rho, d = W["shear_modulus_Pa"], W["poisson"], W["density_kg_m3"], W["particle_size_mm"] * 1e-3
     a.add(
         "wetfeed.material.youngs_modulus_implied",
-        _elastic_moduli(nu, shear_modulus=g)[0],
+        elastic_moduli(nu, shear_modulus=g)[0],
         None,
         "Pa",
         None,
@@ -1037,7 +1031,7 @@ def _wetfeed(a: _Audit, ref: Path, pub: dict):
     )
     w = W["wall"]
     for key in ("shear_modulus_Pa_table1", "shear_modulus_Pa_text"):
-        e_w = _elastic_moduli(w["poisson"], shear_modulus=w[key])[0]
+        e_w = elastic_moduli(w["poisson"], shear_modulus=w[key])[0]
         a.add(
             f"wetfeed.wall.youngs_modulus_implied.{key}",
             e_w,
@@ -1351,10 +1345,10 @@ def _phosphate(a: _Audit, ref: Path, pub: dict):
     )
     a.add(
         "phosphate.material.shear_from_E_nu",
-        _elastic_moduli(nu, youngs_modulus=e)[1],
+        elastic_moduli(nu, youngs_modulus=e)[1],
         g,
         "Pa",
-        abs(_elastic_moduli(nu, youngs_modulus=e)[1] - g) <= 0.05 * g,
+        abs(elastic_moduli(nu, youngs_modulus=e)[1] - g) <= 0.05 * g,
         f"G = E / (2 (1 + nu)) with E = {e:g}, nu = {nu}; the printed pair implies nu = E/(2G) - 1 = "
         f"{e / (2 * g) - 1:.2f}, impossible for a solid in DEM (E was printed as '106', G as '2.5 106')",
         "seed 002 Table 2",
