@@ -422,6 +422,17 @@ def _fingerprint(spec, device, world_count, variations, world_seeds) -> str:
     return hashlib.sha1(text.encode()).hexdigest()
 
 
+CHECKPOINT_FORMAT = 2
+"""Version of the arrays a checkpoint holds (2: contact history as one ContactHistory record per slot). A
+checkpoint of another version, or one whose history record has other fields, belongs to other code: the run
+starts afresh instead of resuming from it."""
+
+
+def _checkpoint_format(contacts) -> list:
+    """The version and the history record's fields, as saved in a checkpoint's meta."""
+    return [CHECKPOINT_FORMAT, repr(contacts.neighbor_history.dtype.numpy_dtype())]
+
+
 def _device_arrays(obj) -> dict:
     import warp as wp
 
@@ -446,6 +457,7 @@ def _save_checkpoint(path: Path, fingerprint: str, state, contacts, book: dict) 
             arrays[f"snap.{i}.{k}"] = v
     meta = {
         "fingerprint": fingerprint,
+        "format": _checkpoint_format(contacts),
         "time": state.time,
         "step": state.step,
         "half_step": state.half_step,
@@ -465,16 +477,22 @@ def _load_checkpoint(path: Path, fingerprint: str, state, contacts) -> dict | No
     """Restore a checkpoint into a fresh ``state`` and ``contacts``; None when it belongs to another run."""
     with np.load(path) as z:
         meta = json.loads(bytes(z["meta"]).decode())
-        if meta["fingerprint"] != fingerprint:
+        if meta["fingerprint"] != fingerprint or meta.get("format") != _checkpoint_format(contacts):
             return None
-        for prefix, obj in (("state.", state), ("contacts.", contacts)):
-            for k, v in _device_arrays(obj).items():
-                a = z[prefix + k]
-                if v.ndim == 2 and a.shape[0] != v.shape[0]:  # list slots trimmed at saving: the rest are zero
-                    full = np.zeros((v.shape[0],) + a.shape[1:], dtype=a.dtype)
-                    full[: a.shape[0]] = a
-                    a = full
-                v.assign(a)
+        arrays = [
+            (prefix + k, v)
+            for prefix, obj in (("state.", state), ("contacts.", contacts))
+            for k, v in _device_arrays(obj).items()
+        ]
+        if any(name not in z.files for name, _ in arrays):  # checked before any is restored
+            return None
+        for name, v in arrays:
+            a = z[name]
+            if v.ndim == 2 and a.shape[0] != v.shape[0]:  # list slots trimmed at saving: the rest are zero
+                full = np.zeros((v.shape[0],) + a.shape[1:], dtype=a.dtype)
+                full[: a.shape[0]] = a
+                a = full
+            v.assign(a)
         book = {
             "impulse_prev": z["book.impulse_prev"].copy(),
             "phase_snap": [
