@@ -367,6 +367,12 @@ _Z, _F = np.linspace(0.09, 0.03, 50), np.linspace(0.0, 100.0, 50)
         (lambda: SettleMonitor(-1e-6), "threshold = -1e-06"),
         (lambda: SettleMonitor(1e-6, window=0), "window = 0"),
         (lambda: SettleMonitor(1e-6).update(0.0, -1.0), "kinetic_energy_per_particle = -1.0"),
+        (lambda: SettleMonitor(1e-6).update(0.0, float("nan")), "kinetic_energy_per_particle = nan"),
+        (lambda: SettleMonitor(1e-6).update(0.0, float("inf")), "kinetic_energy_per_particle = inf"),
+        (
+            lambda: SettleMonitor(1e-6).update(0.0, [1e-7, -1e-7]),
+            r"kinetic_energy_per_particle = \[ 1\.e-07, -1\.e-07\] is",
+        ),
         (lambda: plot_press({}, "x.png"), "curve = "),
         (lambda: plot_angles({}, "x.png"), "result = "),
     ],

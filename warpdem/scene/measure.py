@@ -28,7 +28,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from warpdem.engine.checks import fail, finite_number, short
+from warpdem.engine.checks import fail, finite_number
 
 __all__ = [
     "SettleMonitor",
@@ -843,15 +843,14 @@ class SettleMonitor:
         t = _finite_number("time", time, "s")
         ke = kinetic_energy_per_particle
         if np.ndim(ke) == 0:
-            if isinstance(ke, bool) or not isinstance(ke, numbers.Real):
-                _bad("kinetic_energy_per_particle", ke, "a number [J] or one per world, shape (W,)")
-            ke = float(ke)
+            # one energy: it must be a finite number (a NaN is only meaningful as one world of several)
+            ke = _finite_number("kinetic_energy_per_particle", ke, "J")
         else:
             ke = np.array(ke, dtype=float)
             if ke.ndim != 1 or ke.size == 0:
-                _bad("kinetic_energy_per_particle", short(ke), "a number [J] or one per world, shape (W,)")
+                _bad("kinetic_energy_per_particle", ke, "a number [J] or one per world, shape (W,)")
         if np.any(ke < 0):
-            _bad("kinetic_energy_per_particle", ke if np.ndim(ke) == 0 else short(ke), "energies >= 0 J")
+            _bad("kinetic_energy_per_particle", ke, "energies >= 0 J")
         if self.history and t < self.history[-1][0]:
             _bad("time", time, f"a time >= the previous update's {self.history[-1][0]!r} s")
         self.history.append((t, ke))

@@ -290,9 +290,9 @@ def _grammar(rig: str | None, factor: bool) -> KeyGrammar:
         rf = _rig_fields(rig)
         words = [k for k, f in rf.items() if isinstance(f.default, (bool, str))]
         fields["rig"] = tuple(k for k in rf if not (factor and k in words))
-        labels["rig"] = (
-            f"a numeric {rig} parameter ({', '.join(words)} are not numbers)" if factor else f"a {rig} parameter"
-        )
+        labels["rig"] = f"a numeric {rig} parameter" if factor else f"a {rig} parameter"
+        if factor and words:
+            labels["rig"] += f" ({', '.join(words)} {'is not a number' if len(words) == 1 else 'are not numbers'})"
     return KeyGrammar(fields, labels)
 
 
