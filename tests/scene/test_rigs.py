@@ -697,3 +697,21 @@ def test_checkpoint_of_another_format_is_not_resumed(tmp_path):
         got, fresh, _ = load()
         assert got is None, change
         assert np.array_equal(fresh.sphere_x.numpy(), model.state().sphere_x.numpy()), change
+
+
+@pytest.mark.parametrize(
+    "key, raw, says",
+    [
+        ("interaction.grain.grain.law", "foo", "law = 'foo'"),
+        ("material.grain.density", "abc", "could not convert"),
+        ("material.grain.density", "-1", "density = -1.0"),
+        ("run.dt_fraction", "abc", "could not convert"),
+    ],
+)
+def test_set_value_refused_as_stage_error_naming_the_key(key, raw, says):
+    """A --set value that its field refuses (a word for a number, an unknown law, a negative density) raises
+    StageError naming the key and the value, which the CLI prints without a traceback."""
+    spec = rigs.spec("funnel", {}, smoke=True)
+    with pytest.raises(StageError) as err:
+        apply_overrides(spec, {key: raw})
+    assert f"--set {key} = {raw!r}" in str(err.value) and says in str(err.value)

@@ -866,33 +866,41 @@ def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
     defined = {"material": [m.name for m in spec.materials], "factory": [f.name for f in spec.factories]}
     for text, raw in overrides.items():
         key = OVERRIDES.parse(text, "--set", defined=defined, error=StageError)
-        value = _parse(raw)
-        if key.kind == "material":
-            m = spec.material(key.names[0])
-            spec.materials[spec.materials.index(m)] = m.with_value(key.field, float(value))
-        elif key.kind == "interaction":
-            a, b = key.names
-            # an enum field takes the member's name: Interaction reads it
-            for k, (pa, pb, ia) in enumerate(spec.pairs):
-                if {pa, pb} == {a, b}:
-                    spec.pairs[k] = (pa, pb, dataclasses.replace(ia, **{key.field: value}))
-                    break
-            else:
-                spec.pairs.append((a, b, Interaction(**{key.field: value})))
-        elif key.kind == "run":
-            if key.field in RUN_TOKENS:
-                check(
-                    value in RUN_TOKENS[key.field], "--set", text, value, " or ".join(RUN_TOKENS[key.field]), StageError
-                )
-                setattr(spec.run, key.field, value)
-            else:
-                setattr(spec.run, key.field, float(value))
-        elif key.kind == "measure":
-            setattr(spec.measure, key.field, MEASURE_NUMBERS[key.field](value))
-        else:
-            fac = next(f for f in spec.factories if f.name == key.names[0])
-            setattr(fac, key.field, FACTORY_NUMBERS[key.field](value))
+        try:
+            _apply_override(spec, key, text, _parse(raw))
+        except StageError:
+            raise
+        except (TypeError, ValueError) as e:
+            # a value the field's own check refuses (Material, Interaction, a float() of a word): name the key
+            raise StageError(f"--set {text} = {raw!r}: {e}") from None
     return spec
+
+
+def _apply_override(spec: SceneSpec, key, text: str, value) -> None:
+    """Set one parsed override ``key`` (written ``text``) to ``value`` in ``spec``."""
+    if key.kind == "material":
+        m = spec.material(key.names[0])
+        spec.materials[spec.materials.index(m)] = m.with_value(key.field, float(value))
+    elif key.kind == "interaction":
+        a, b = key.names
+        # an enum field takes the member's name: Interaction reads it
+        for k, (pa, pb, ia) in enumerate(spec.pairs):
+            if {pa, pb} == {a, b}:
+                spec.pairs[k] = (pa, pb, dataclasses.replace(ia, **{key.field: value}))
+                break
+        else:
+            spec.pairs.append((a, b, Interaction(**{key.field: value})))
+    elif key.kind == "run":
+        if key.field in RUN_TOKENS:
+            check(value in RUN_TOKENS[key.field], "--set", text, value, " or ".join(RUN_TOKENS[key.field]), StageError)
+            setattr(spec.run, key.field, value)
+        else:
+            setattr(spec.run, key.field, float(value))
+    elif key.kind == "measure":
+        setattr(spec.measure, key.field, MEASURE_NUMBERS[key.field](value))
+    else:
+        fac = next(f for f in spec.factories if f.name == key.names[0])
+        setattr(fac, key.field, FACTORY_NUMBERS[key.field](value))
 
 
 def _parse(raw):
