@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpdem.engine import geometry as geo
+from warpdem.engine.checks import check
 from warpdem.engine.keys import is_rig_key
 from warpdem.engine.materials import Interaction, Material
 from warpdem.engine.types import ContactLaw, RollingModel
@@ -33,27 +34,29 @@ from .stage import FactorySpec, MeasureSpec, RunSpec, SceneSpec, ShapeSpec, Stag
 # ----------------------------------------------------------------------------------------------------
 def _check_params(p) -> None:
     """Numbers must be finite; lengths, times and counts that name a size must be positive."""
+    where = type(p).__name__
     for f in dataclasses.fields(p):
         v = getattr(p, f.name)
         if isinstance(v, bool) or isinstance(v, str):
             continue
-        if not math.isfinite(v):
-            raise ValueError(f"{type(p).__name__}: {f.name} = {v!r} is not allowed; expected a finite number")
+        check(math.isfinite(v), where, f.name, v, "a finite number")
         if f.name in getattr(p, "_may_be_negative", ()):
             continue
-        if v < 0 or (v == 0 and f.name not in p._may_be_zero):
-            raise ValueError(
-                f"{type(p).__name__}: {f.name} = {v!r} is not allowed; expected a value > 0"
-                + (" (0 allowed)" if f.name in p._may_be_zero else "")
-            )
+        zero_ok = f.name in p._may_be_zero
+        check(v > 0 or (v == 0 and zero_ok), where, f.name, v, "a value > 0" + (" (0 allowed)" if zero_ok else ""))
 
 
 def _check_order(p, name: str, relation: str, bound_name: str, bound: float) -> None:
     """Refuse a parameter ``name`` of ``p`` that is not strictly ``relation`` ("more than", or "less than" /
     "below") ``bound``, named ``bound_name`` in the message."""
     v = getattr(p, name)
-    if not (v > bound if relation == "more than" else v < bound):
-        raise ValueError(f"{type(p).__name__}: {name} = {v} is not allowed; expected {relation} {bound_name} = {bound}")
+    check(
+        v > bound if relation == "more than" else v < bound,
+        type(p).__name__,
+        name,
+        v,
+        f"{relation} {bound_name} = {bound}",
+    )
 
 
 def _bound3(shape: ShapeSpec) -> float:
