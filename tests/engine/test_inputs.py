@@ -103,3 +103,14 @@ def test_large_dt_warns():
     # the Rayleigh time itself: T_R = pi R sqrt(rho/G) / (0.1631 nu + 0.8766)
     g = 1e7 / 2.6
     assert m.rayleigh_time == pytest.approx(math.pi * 0.001 * math.sqrt(1000 / g) / (0.1631 * 0.3 + 0.8766), rel=1e-6)
+
+
+@pytest.mark.parametrize("value", [[[0.0, 0.0, 1.0]], [0.0, 1.0], [0.0, float("nan"), 1.0], "abc"])
+def test_vectors_are_three_finite_numbers(value):
+    """A point, normal or velocity is exactly three finite numbers: a nested [[x, y, z]], two numbers, a NaN or
+    a word is refused, naming the argument and the value (one rule for the builder and the factories)."""
+    b = wd.ModelBuilder()
+    with pytest.raises(ValueError, match="add_plane: normal = .* is not allowed; expected three finite numbers"):
+        b.add_plane((0, 0, 0), value, "a")
+    with pytest.raises(ValueError, match="initial_velocity = .* is not allowed; expected three finite numbers"):
+        wd.DynamicFactory(wd.Box((0, 0, 0), (1, 1, 1)), wd.FixedSize(0.01), count=1, rate=1.0, initial_velocity=value)

@@ -108,9 +108,10 @@ def float_array(where: str, name: str, value, allowed: str) -> np.ndarray:
 
 
 def vec3(where: str, name: str, value) -> tuple[float, float, float]:
-    """Three finite numbers (any sequence or array of three) as a tuple of floats."""
+    """Three finite numbers (a sequence or an array of shape (3,)) as a tuple of floats; a nested one, such as
+    [[x, y, z]], is refused."""
     try:
-        a = np.asarray(value, dtype=np.float64).reshape(-1)
+        a = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
         a = None
     check(
