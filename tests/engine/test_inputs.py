@@ -114,3 +114,18 @@ def test_vectors_are_three_finite_numbers(value):
         b.add_plane((0, 0, 0), value, "a")
     with pytest.raises(ValueError, match="initial_velocity = .* is not allowed; expected three finite numbers"):
         wd.DynamicFactory(wd.Box((0, 0, 0), (1, 1, 1)), wd.FixedSize(0.01), count=1, rate=1.0, initial_velocity=value)
+
+
+@pytest.mark.parametrize(
+    "make, says",
+    [
+        (lambda: wd.Material("a", density=True, youngs_modulus=1e7, poisson_ratio=0.3), "density = True"),
+        (lambda: wd.Interaction(restitution=True), "restitution = True"),
+        (lambda: wd.FixedSize(True), "radius = True"),
+    ],
+)
+def test_a_bool_is_not_a_number(make, says):
+    """True given for a density, a restitution or a radius is refused, not read as 1 (one rule for "a finite
+    number" in warpdem.engine.checks)."""
+    with pytest.raises(ValueError, match=says):
+        make()

@@ -50,8 +50,9 @@ def check(cond, where: str, name: str, value, allowed: str, error: type[ValueErr
 
 
 def is_finite(value) -> bool:
-    """True when ``float(value)`` is finite: numbers, bools and one-element arrays, but no strings."""
-    if isinstance(value, (str, bytes)):
+    """True when ``float(value)`` is finite: numbers and one-element arrays, but no strings and no bools (a
+    True given for a density is a mistake, not 1 kg/m^3)."""
+    if isinstance(value, (str, bytes, bool, np.bool_)):
         return False
     try:
         return math.isfinite(float(value))
