@@ -125,12 +125,19 @@ _ENUM_ALIASES = {
 """EDEM's names of the rolling models and contact laws (upper case, ``_`` for spaces) -> member names."""
 
 
-def _param(default, pair: str, ok=None, allowed: str = ""):
-    """A contact parameter: its default, the PairParams field it fills (``warpdem.kernels.params``) and,
-    for a number, the test ``ok(value)`` a value must pass and the words for what passes. Everything else
-    follows from the Interaction fields: their checks, the per-world scalars, the stage attributes, the
-    override keys; a new parameter needs only its field here and its PairParams field."""
-    return field(default=default, metadata={"pair": pair, "ok": ok, "allowed": allowed})
+def damping_factor(restitution: float) -> float:
+    """Damping factor beta = ln e / sqrt(ln^2 e + pi^2) [-] of a coefficient of restitution e (0 for e = 1)."""
+    le = math.log(restitution)
+    return le / math.sqrt(le * le + math.pi * math.pi)
+
+
+def _param(default, pair: str, ok=None, allowed: str = "", to_pair=None):
+    """A contact parameter: its default, the PairParams field it fills (``warpdem.kernels.params``; through
+    ``to_pair`` when that field holds a function of the value) and, for a number, the test ``ok(value)`` a
+    value must pass and the words for what passes. Everything else follows from the Interaction fields: their
+    checks, the per-world scalars, the stage attributes, the override keys; a new parameter needs only its
+    field here and its PairParams field."""
+    return field(default=default, metadata={"pair": pair, "ok": ok, "allowed": allowed, "to_pair": to_pair})
 
 
 @dataclass(frozen=True)
@@ -153,8 +160,9 @@ class Interaction:
         tangential_stiffness_multiplier: EEPA k_t factor [-], > 0.
     """
 
-    # restitution fills PairParams.beta through the property beta
-    restitution: float = _param(0.5, "beta", lambda v: 0.0 < v <= 1.0, "a coefficient of restitution in (0, 1]")
+    restitution: float = _param(
+        0.5, "beta", lambda v: 0.0 < v <= 1.0, "a coefficient of restitution in (0, 1]", to_pair=damping_factor
+    )
     static_friction: float = _param(0.5, "mu_s", lambda v: v >= 0.0, "a friction coefficient >= 0")
     rolling_friction: float = _param(0.0, "mu_r", lambda v: v >= 0.0, "a rolling friction coefficient >= 0")
     rolling_model: RollingModel = _param(RollingModel.CONSTANT_TORQUE, "rolling_model")
@@ -178,15 +186,16 @@ class Interaction:
 
     def pair_fields(self) -> dict:
         """The PairParams fields this interaction fills, by PairParams name (enums as their integers)."""
-        out = {f.metadata["pair"]: getattr(self, f.name) for f in dataclasses.fields(self)}
-        out["beta"] = self.beta
+        out = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            out[f.metadata["pair"]] = f.metadata["to_pair"](v) if f.metadata["to_pair"] else v
         return {k: int(v) if isinstance(v, enum.Enum) else v for k, v in out.items()}
 
     @property
     def beta(self) -> float:
-        """Damping factor beta = ln e / sqrt(ln^2 e + pi^2) (0 for e = 1)."""
-        le = math.log(self.restitution)
-        return le / math.sqrt(le * le + math.pi * math.pi)
+        """Damping factor beta = ln e / sqrt(ln^2 e + pi^2) (0 for e = 1) of this pair's restitution."""
+        return damping_factor(self.restitution)
 
 
 INTERACTION_FIELDS = tuple(f.name for f in dataclasses.fields(Interaction))
