@@ -80,3 +80,27 @@ def contact_force(
         return int(1), -f_n * n + f_t, load, f_t, ContactHistory(xi, history.roll, d_max), k_damp / p.eepa_n
     f_a, f_n, f_t, xi, k_n = hertz_mindlin(overlap, n, v_rel, history.spring, r_star, m_star, p, dt)
     return int(1), f_a, f_n, f_t, ContactHistory(xi, history.roll, history.aux), k_n
+
+
+@wp.func
+def contact_force_hertz_mindlin(
+    overlap: float,
+    n: wp.vec3,
+    v_rel: wp.vec3,
+    history: ContactHistory,
+    r_star: float,
+    m_star: float,
+    p: PairParams,
+    dt: float,
+):
+    """:func:`contact_force` for a model whose every pair is Hertz-Mindlin (the kernels pick it at compile time,
+    see kernels/features.py): the same results without the cohesive laws' branches."""
+    if overlap <= 0.0:
+        return int(0), wp.vec3(0.0), 0.0, wp.vec3(0.0), ContactHistory(), 0.0
+    f_a, f_n, f_t, xi, k_n = hertz_mindlin(overlap, n, v_rel, history.spring, r_star, m_star, p, dt)
+    return int(1), f_a, f_n, f_t, ContactHistory(xi, history.roll, history.aux), k_n
+
+
+def contact_force_for(cohesive_laws: bool):
+    """The contact dispatch a kernel compiled for ``cohesive_laws`` calls (through ``wp.static``)."""
+    return contact_force if cohesive_laws else contact_force_hertz_mindlin

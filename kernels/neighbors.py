@@ -12,11 +12,13 @@ key up, by binary search, in the sphere's previous sorted list to inherit the sp
 Each kernel has its launcher beside it (``launch_<kernel>``), as in step.py.
 """
 
+import functools
 import math
 
 import warp as wp
 
 from .enums import Overflow
+from .features import StepFeatures
 from .geometry import closest_point_triangle
 from .params import ContactHistory
 
@@ -166,122 +168,143 @@ def carry_history(
             new_history_out[s, col] = ContactHistory()
 
 
-@wp.kernel
-def build_contacts(
-    # Model:
-    sphere_radius: wp.array[float],
-    sphere_world: wp.array[int],
-    sphere_clump: wp.array[int],
-    sphere_wall: wp.array[int],
-    radius_max: float,
-    contact_reach: float,
-    wall_mesh: wp.array[wp.uint64],
-    wall_face_start: wp.array[int],
-    wall_world: wp.array[int],
-    # State in:
-    x: wp.array[wp.vec3],
-    active: wp.array[int],
-    wall_pose: wp.array[wp.transform],
-    # Contacts in (the cell grid and the current lists):
-    cell_head: wp.array[int],
-    cell_next: wp.array[int],
-    old_count: wp.array[int],
-    old_index: wp.array2d[int],
-    old_history: wp.array2d[ContactHistory],
-    old_mesh_count: wp.array[int],
-    old_mesh_face: wp.array2d[int],
-    old_mesh_history: wp.array2d[ContactHistory],
-    # Options:
-    inv_cell: float,
-    skin: float,
-    # Out (new_index_out and new_mesh_face_out: written, then sorted in place):
-    new_count_out: wp.array[int],
-    new_index_out: wp.array2d[int],
-    new_history_out: wp.array2d[ContactHistory],
-    new_mesh_count_out: wp.array[int],
-    new_mesh_face_out: wp.array2d[int],
-    new_mesh_history_out: wp.array2d[ContactHistory],
-    build_x_out: wp.array[wp.vec3],
-    overflow_out: wp.array[int],
-):
-    """Candidates within r_i + r_j + skin + contact_reach (the longest cohesive break distance)."""
-    i = wp.tid()
-    x_i = x[i]
-    build_x_out[i] = x_i
-    # parked factory particles and spheres glued to a wall take no part as the gathering side
-    if active[i] == 0 or sphere_wall[i] >= 0:
-        new_count_out[i] = 0
-        new_mesh_count_out[i] = 0
-        return
-    r_i = sphere_radius[i]
-    world = sphere_world[i]
-    clump = sphere_clump[i]
-    capacity = new_index_out.shape[0]
+@functools.cache
+def build_contacts_kernel(features: StepFeatures):
+    """The list builder compiled for ``features`` (kernels/features.py): clumps, mesh and coated walls."""
+    clumps = features.clumps
+    mesh_walls = features.mesh_walls
+    coated_walls = features.coated_walls
 
-    count = int(0)
-    # walk the box of cells that holds the query sphere; cells narrower than the reach make that box hug
-    # the sphere (a small sphere walks far fewer spheres than a fixed 27-cell stencil would)
-    reach_i = r_i + radius_max + skin + contact_reach
-    lo = cell_of(x_i - wp.vec3(reach_i), inv_cell)
-    hi = cell_of(x_i + wp.vec3(reach_i), inv_cell)
-    mask = cell_head.shape[0] - 1
-    for cz in range(lo[2], hi[2] + 1):
-        for cy in range(lo[1], hi[1] + 1):
-            for cx in range(lo[0], hi[0] + 1):
-                cell = wp.vec3i(cx, cy, cz)
-                j = cell_head[cell_bucket(cell, world, mask)]
-                while j >= 0:
-                    x_j = x[j]
-                    if wp.length(x_j - x_i) < r_i + sphere_radius[j] + skin + contact_reach:
-                        # a bucket holds other cells and worlds too: take j only in its own cell (never twice)
-                        if j != i and sphere_world[j] == world and cell_of(x_j, inv_cell) == cell:
-                            if clump < 0 or sphere_clump[j] != clump:
-                                if count < capacity:
-                                    new_index_out[count, i] = j
-                                    count += 1
-                                else:
-                                    wp.atomic_or(overflow_out, 0, Overflow.NEIGHBOR)
-                    j = cell_next[j]
-    sort_column(new_index_out, count, i)
-    carry_history(old_index, old_count[i], old_history, new_index_out, count, new_history_out, i)
-    new_count_out[i] = count
+    @wp.kernel(module="unique", enable_backward=False)
+    def build_contacts(
+        # Model:
+        sphere_radius: wp.array[float],
+        sphere_world: wp.array[int],
+        sphere_clump: wp.array[int],
+        sphere_wall: wp.array[int],
+        radius_max: float,
+        contact_reach: float,
+        wall_mesh: wp.array[wp.uint64],
+        wall_face_start: wp.array[int],
+        wall_world: wp.array[int],
+        # State in:
+        x: wp.array[wp.vec3],
+        active: wp.array[int],
+        wall_pose: wp.array[wp.transform],
+        # Contacts in (the cell grid and the current lists):
+        cell_head: wp.array[int],
+        cell_next: wp.array[int],
+        old_count: wp.array[int],
+        old_index: wp.array2d[int],
+        old_history: wp.array2d[ContactHistory],
+        old_mesh_count: wp.array[int],
+        old_mesh_face: wp.array2d[int],
+        old_mesh_history: wp.array2d[ContactHistory],
+        # Options:
+        inv_cell: float,
+        skin: float,
+        # Out (new_index_out and new_mesh_face_out: written, then sorted in place):
+        new_count_out: wp.array[int],
+        new_index_out: wp.array2d[int],
+        new_history_out: wp.array2d[ContactHistory],
+        new_mesh_count_out: wp.array[int],
+        new_mesh_face_out: wp.array2d[int],
+        new_mesh_history_out: wp.array2d[ContactHistory],
+        build_x_out: wp.array[wp.vec3],
+        overflow_out: wp.array[int],
+    ):
+        """Candidates within r_i + r_j + skin + contact_reach (the longest cohesive break distance)."""
+        i = wp.tid()
+        x_i = x[i]
+        build_x_out[i] = x_i
+        # parked factory particles and spheres glued to a wall take no part as the gathering side
+        parked = active[i] == 0
+        if wp.static(coated_walls):
+            parked = parked or sphere_wall[i] >= 0
+        if parked:
+            new_count_out[i] = 0
+            new_mesh_count_out[i] = 0
+            return
+        r_i = sphere_radius[i]
+        world = sphere_world[i]
+        clump = int(-1)
+        if wp.static(clumps):
+            clump = sphere_clump[i]
+        capacity = new_index_out.shape[0]
 
-    mesh_capacity = new_mesh_face_out.shape[0]
-    mcount = int(0)
-    limit = r_i + skin + contact_reach
-    for wall in range(wall_mesh.shape[0]):
-        ww = wall_world[wall]
-        if ww >= 0 and ww != world:
-            continue
-        # the wall's triangles live in its own frame: query there (a sphere's box is the same in any frame)
-        x_local = wp.transform_point(wp.transform_inverse(wall_pose[wall]), x_i)
-        mesh = wall_mesh[wall]
-        mq = wp.mesh_query_aabb(mesh, x_local - wp.vec3(limit), x_local + wp.vec3(limit))
-        local = int(0)
-        while wp.mesh_query_aabb_next(mq, local):
-            a = wp.mesh_get_point(mesh, local * 3 + 0)
-            b = wp.mesh_get_point(mesh, local * 3 + 1)
-            c = wp.mesh_get_point(mesh, local * 3 + 2)
-            q, feature = closest_point_triangle(x_local, a, b, c)
-            if wp.length(x_local - q) < limit:
-                if mcount < mesh_capacity:
-                    new_mesh_face_out[mcount, i] = wall_face_start[wall] + local
-                    mcount += 1
-                else:
-                    wp.atomic_or(overflow_out, 0, Overflow.MESH)
-    sort_column(new_mesh_face_out, mcount, i)
-    carry_history(
-        old_mesh_face, old_mesh_count[i], old_mesh_history, new_mesh_face_out, mcount, new_mesh_history_out, i
-    )
-    new_mesh_count_out[i] = mcount
+        count = int(0)
+        # walk the box of cells that holds the query sphere; cells narrower than the reach make that box hug
+        # the sphere (a small sphere walks far fewer spheres than a fixed 27-cell stencil would)
+        reach_i = r_i + radius_max + skin + contact_reach
+        lo = cell_of(x_i - wp.vec3(reach_i), inv_cell)
+        hi = cell_of(x_i + wp.vec3(reach_i), inv_cell)
+        mask = cell_head.shape[0] - 1
+        for cz in range(lo[2], hi[2] + 1):
+            for cy in range(lo[1], hi[1] + 1):
+                for cx in range(lo[0], hi[0] + 1):
+                    cell = wp.vec3i(cx, cy, cz)
+                    j = cell_head[cell_bucket(cell, world, mask)]
+                    while j >= 0:
+                        x_j = x[j]
+                        if wp.length(x_j - x_i) < r_i + sphere_radius[j] + skin + contact_reach:
+                            # a bucket holds other cells and worlds too: take j only in its own cell (never twice)
+                            if j != i and sphere_world[j] == world and cell_of(x_j, inv_cell) == cell:
+                                own = False
+                                if wp.static(clumps):
+                                    own = clump >= 0 and sphere_clump[j] == clump
+                                if not own:
+                                    if count < capacity:
+                                        new_index_out[count, i] = j
+                                        count += 1
+                                    else:
+                                        wp.atomic_or(overflow_out, 0, Overflow.NEIGHBOR)
+                        j = cell_next[j]
+        sort_column(new_index_out, count, i)
+        carry_history(old_index, old_count[i], old_history, new_index_out, count, new_history_out, i)
+        new_count_out[i] = count
+
+        if wp.static(mesh_walls):
+            mesh_capacity = new_mesh_face_out.shape[0]
+            mcount = int(0)
+            limit = r_i + skin + contact_reach
+            for wall in range(wall_mesh.shape[0]):
+                ww = wall_world[wall]
+                if ww >= 0 and ww != world:
+                    continue
+                # the wall's triangles live in its own frame: query there (a sphere's box is the same in any frame)
+                x_local = wp.transform_point(wp.transform_inverse(wall_pose[wall]), x_i)
+                mesh = wall_mesh[wall]
+                mq = wp.mesh_query_aabb(mesh, x_local - wp.vec3(limit), x_local + wp.vec3(limit))
+                local = int(0)
+                while wp.mesh_query_aabb_next(mq, local):
+                    a = wp.mesh_get_point(mesh, local * 3 + 0)
+                    b = wp.mesh_get_point(mesh, local * 3 + 1)
+                    c = wp.mesh_get_point(mesh, local * 3 + 2)
+                    q, feature = closest_point_triangle(x_local, a, b, c)
+                    if wp.length(x_local - q) < limit:
+                        if mcount < mesh_capacity:
+                            new_mesh_face_out[mcount, i] = wall_face_start[wall] + local
+                            mcount += 1
+                        else:
+                            wp.atomic_or(overflow_out, 0, Overflow.MESH)
+            sort_column(new_mesh_face_out, mcount, i)
+            carry_history(
+                old_mesh_face, old_mesh_count[i], old_mesh_history, new_mesh_face_out, mcount, new_mesh_history_out, i
+            )
+            new_mesh_count_out[i] = mcount
+        else:
+            new_mesh_count_out[i] = 0
+
+    return build_contacts
 
 
-def launch_build_contacts(model, state, contacts, *, inv_cell: float, skin: float) -> None:
+def launch_build_contacts(model, state, contacts, *, features: StepFeatures, inv_cell: float, skin: float) -> None:
     """New candidate lists from the binned spheres of ``state`` into ``contacts.scratch``, each entry with the
-    history of its key in the current lists; records the build positions and any overflow."""
+    history of its key in the current lists; records the build positions and any overflow (the kernel compiled
+    for ``features``)."""
     m, c, s = model, contacts, contacts.scratch
     wp.launch(
-        build_contacts,
+        build_contacts_kernel(features),
         dim=m.sphere_count,
         inputs=[
             m.sphere_radius,

@@ -17,14 +17,16 @@ them, not even for type hints) and the solver's :class:`StepBuffers`, so the sol
 launcher calls.
 """
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
 
 from .enums import RollingModel
+from .features import StepFeatures
 from .geometry import FEATURE_FACE, closest_point_triangle
-from .law_contact import contact_force
+from .law_contact import contact_force_for
 from .law_rolling import rolling_resistance
 from .params import ContactHistory, PairParams
 
@@ -157,36 +159,45 @@ def mesh_contact_shadowed(
     return False
 
 
-@wp.func
-def wall_contact(
-    overlap: float,
-    n: wp.vec3,
-    v_i: wp.vec3,
-    w_i: wp.vec3,
-    v_wall: wp.vec3,
-    r_i: float,
-    m_i: float,
-    p: PairParams,
-    history: ContactHistory,
-    dt: float,
-):
-    """A sphere against a wall (infinite radius and mass) along unit normal n (sphere -> wall).
+@functools.cache
+def wall_contact_for(cohesive_laws: bool, rolling: bool):
+    """:func:`wall_contact` compiled for a model's laws and rolling models (see kernels/features.py)."""
+    force_law = contact_force_for(cohesive_laws)
 
-    ``v_wall`` is the wall's velocity at the contact point [m/s].
+    @wp.func(module="unique")
+    def wall_contact(
+        overlap: float,
+        n: wp.vec3,
+        v_i: wp.vec3,
+        w_i: wp.vec3,
+        v_wall: wp.vec3,
+        r_i: float,
+        m_i: float,
+        p: PairParams,
+        history: ContactHistory,
+        dt: float,
+    ):
+        """A sphere against a wall (infinite radius and mass) along unit normal n (sphere -> wall).
 
-    Returns:
-        (active, force on the sphere [N], torque on the sphere [N m], updated history (zero once the contact
-        ended)).
-    """
-    arm = r_i - 0.5 * overlap
-    v_rel = v_i + wp.cross(w_i, arm * n) - v_wall
-    active, f_a, f_n, f_t, h, k_n = contact_force(overlap, n, v_rel, history, r_i, m_i, p, dt)
-    if active == 0:
-        return int(0), wp.vec3(0.0), wp.vec3(0.0), h
-    m_roll, roll = rolling_resistance(
-        p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i, p.rolling_damping, h.roll, dt
-    )
-    return int(1), f_a, wp.cross(arm * n, f_t) + m_roll, ContactHistory(h.spring, roll, h.aux)
+        ``v_wall`` is the wall's velocity at the contact point [m/s].
+
+        Returns:
+            (active, force on the sphere [N], torque on the sphere [N m], updated history (zero once the contact
+            ended)).
+        """
+        arm = r_i - 0.5 * overlap
+        v_rel = v_i + wp.cross(w_i, arm * n) - v_wall
+        active, f_a, f_n, f_t, h, k_n = wp.static(force_law)(overlap, n, v_rel, history, r_i, m_i, p, dt)
+        if active == 0:
+            return int(0), wp.vec3(0.0), wp.vec3(0.0), h
+        if wp.static(rolling):
+            m_roll, roll = rolling_resistance(
+                p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i, p.rolling_damping, h.roll, dt
+            )
+            return int(1), f_a, wp.cross(arm * n, f_t) + m_roll, ContactHistory(h.spring, roll, h.aux)
+        return int(1), f_a, wp.cross(arm * n, f_t), ContactHistory(h.spring, h.roll * 0.0, h.aux)
+
+    return wall_contact
 
 
 @wp.func
@@ -266,287 +277,323 @@ def flag_blowup(blowup_out: wp.array[int], step: int, i: int):
         wp.atomic_min(blowup_out, 0, i)
 
 
-@wp.kernel
-def step_spheres(
-    # Model:
-    sphere_radius: wp.array[float],
-    sphere_material: wp.array[int],
-    sphere_world: wp.array[int],
-    sphere_clump: wp.array[int],
-    sphere_body_volume: wp.array[float],
-    sphere_wall: wp.array[int],
-    material_density: wp.array2d[float],
-    pair_params: wp.array3d[PairParams],
-    world_gravity: wp.array[wp.vec3],
-    plane_point: wp.array[wp.vec3],
-    plane_normal: wp.array[wp.vec3],
-    plane_material: wp.array[int],
-    plane_world: wp.array[int],
-    wall_mesh: wp.array[wp.uint64],
-    wall_face_start: wp.array[int],
-    triangle_wall: wp.array[int],
-    wall_material: wp.array[int],
-    # State in:
-    x_in: wp.array[wp.vec3],
-    v_in: wp.array[wp.vec3],
-    w_in: wp.array[wp.vec3],
-    active_in: wp.array[int],
-    wall_pose: wp.array[wp.transform],
-    wall_v: wp.array[wp.vec3],
-    wall_w: wp.array[wp.vec3],
-    clock: wp.array[int],
-    # Contacts in:
-    neighbor_count: wp.array[int],
-    neighbor_index: wp.array2d[int],
-    mesh_count: wp.array[int],
-    mesh_face: wp.array2d[int],
-    build_x: wp.array[wp.vec3],
-    partner_key: wp.array[int],
-    partner_count: wp.array[int],
-    # Options:
-    dt: float,
-    kick: float,
-    skin: float,
-    velocity_limit: float,
-    impact_speed_min: float,
-    share_mass: int,
-    # Out (read, then written; each thread owns its column):
-    neighbor_history_out: wp.array2d[ContactHistory],
-    plane_history_out: wp.array2d[ContactHistory],
-    mesh_history_out: wp.array2d[ContactHistory],
-    # Out:
-    x_out: wp.array[wp.vec3],
-    v_out: wp.array[wp.vec3],
-    w_out: wp.array[wp.vec3],
-    f_out: wp.array[wp.vec3],
-    t_out: wp.array[wp.vec3],
-    wall_f_lanes_out: wp.array2d[wp.vec3],
-    wall_t_lanes_out: wp.array2d[wp.vec3],
-    face_impact_count_out: wp.array2d[int],
-    face_impact_energy_out: wp.array2d[wp.float64],
-    face_impact_speed_out: wp.array2d[float],
-    partner_key_out: wp.array[int],
-    partner_count_out: wp.array[int],
-    rebuild_out: wp.array[int],
-    blowup_out: wp.array[int],
-):
-    i = wp.tid()
-    x_i = x_in[i]
-    v_i = v_in[i]
-    w_i = w_in[i]
-    clump = sphere_clump[i]
-    if active_in[i] == 0 or sphere_wall[i] >= 0:
-        # a factory particle not released yet (parked, invisible to the others), or a sphere glued to a
-        # wall (infinitely heavy; follow_walls places it): neither gathers forces
-        if clump < 0:
-            x_out[i] = x_i
-            v_out[i] = v_i
-            w_out[i] = w_i
-        f_out[i] = wp.vec3(0.0)
-        t_out[i] = wp.vec3(0.0)
-        return
-    world = sphere_world[i]
-    mat_i = sphere_material[i]
-    r_i = sphere_radius[i]
-    mw = world % material_density.shape[0]
-    pw = world % pair_params.shape[0]
-    # the body's mass (a sphere's, or its whole clump's), and the share of it one contact damps
-    m_i = material_density[mw, mat_i] * sphere_body_volume[i]
-    clump_total = partner_key.shape[0] // PARTNER_SLOTS
-    wall_key0 = clump_total + sphere_radius.shape[0]
-    # sub-contacts of this sphere's clump per partner body, for the next step's mass shares
-    tally = -1
-    if share_mass != 0:
-        tally = clump
-    run_key = int(-1)
-    run_n = int(0)
+@functools.cache
+def step_spheres_kernel(features: StepFeatures):
+    """The fused step kernel compiled for ``features`` (one module per set of features; see kernels/features.py)."""
+    clumps = features.clumps
+    share_mass = features.share_mass
+    mesh_walls = features.mesh_walls
+    coated_walls = features.coated_walls
+    cohesive = features.cohesive_laws
+    rolling = features.rolling
+    force_law = contact_force_for(cohesive)
+    wall_contact = wall_contact_for(cohesive, rolling)
 
-    f = wp.vec3(0.0)
-    t = wp.vec3(0.0)
+    @wp.kernel(module="unique", enable_backward=False)
+    def step_spheres(
+        # Model:
+        sphere_radius: wp.array[float],
+        sphere_material: wp.array[int],
+        sphere_world: wp.array[int],
+        sphere_clump: wp.array[int],
+        sphere_body_volume: wp.array[float],
+        sphere_wall: wp.array[int],
+        material_density: wp.array2d[float],
+        pair_params: wp.array3d[PairParams],
+        world_gravity: wp.array[wp.vec3],
+        plane_point: wp.array[wp.vec3],
+        plane_normal: wp.array[wp.vec3],
+        plane_material: wp.array[int],
+        plane_world: wp.array[int],
+        wall_mesh: wp.array[wp.uint64],
+        wall_face_start: wp.array[int],
+        triangle_wall: wp.array[int],
+        wall_material: wp.array[int],
+        # State in:
+        x_in: wp.array[wp.vec3],
+        v_in: wp.array[wp.vec3],
+        w_in: wp.array[wp.vec3],
+        active_in: wp.array[int],
+        wall_pose: wp.array[wp.transform],
+        wall_v: wp.array[wp.vec3],
+        wall_w: wp.array[wp.vec3],
+        clock: wp.array[int],
+        # Contacts in:
+        neighbor_count: wp.array[int],
+        neighbor_index: wp.array2d[int],
+        mesh_count: wp.array[int],
+        mesh_face: wp.array2d[int],
+        build_x: wp.array[wp.vec3],
+        partner_key: wp.array[int],
+        partner_count: wp.array[int],
+        # Options:
+        dt: float,
+        kick: float,
+        skin: float,
+        velocity_limit: float,
+        impact_speed_min: float,
+        # Out (read, then written; each thread owns its column):
+        neighbor_history_out: wp.array2d[ContactHistory],
+        plane_history_out: wp.array2d[ContactHistory],
+        mesh_history_out: wp.array2d[ContactHistory],
+        # Out:
+        x_out: wp.array[wp.vec3],
+        v_out: wp.array[wp.vec3],
+        w_out: wp.array[wp.vec3],
+        f_out: wp.array[wp.vec3],
+        t_out: wp.array[wp.vec3],
+        wall_f_lanes_out: wp.array2d[wp.vec3],
+        wall_t_lanes_out: wp.array2d[wp.vec3],
+        face_impact_count_out: wp.array2d[int],
+        face_impact_energy_out: wp.array2d[wp.float64],
+        face_impact_speed_out: wp.array2d[float],
+        partner_key_out: wp.array[int],
+        partner_count_out: wp.array[int],
+        rebuild_out: wp.array[int],
+        blowup_out: wp.array[int],
+    ):
+        i = wp.tid()
+        x_i = x_in[i]
+        v_i = v_in[i]
+        w_i = w_in[i]
+        clump = int(-1)
+        if wp.static(clumps):
+            clump = sphere_clump[i]
+        parked = active_in[i] == 0
+        if wp.static(coated_walls):
+            parked = parked or sphere_wall[i] >= 0
+        if parked:
+            # a factory particle not released yet (parked, invisible to the others), or a sphere glued to a
+            # wall (infinitely heavy; follow_walls places it): neither gathers forces
+            if clump < 0:
+                x_out[i] = x_i
+                v_out[i] = v_i
+                w_out[i] = w_i
+            f_out[i] = wp.vec3(0.0)
+            t_out[i] = wp.vec3(0.0)
+            return
+        world = sphere_world[i]
+        mat_i = sphere_material[i]
+        r_i = sphere_radius[i]
+        mw = world % material_density.shape[0]
+        pw = world % pair_params.shape[0]
+        # the body's mass (a sphere's, or its whole clump's), and the share of it one contact damps
+        m_i = material_density[mw, mat_i] * sphere_body_volume[i]
+        clump_total = partner_key.shape[0] // PARTNER_SLOTS
+        wall_key0 = clump_total + sphere_radius.shape[0]
+        # sub-contacts of this sphere's clump per partner body, for the next step's mass shares
+        tally = int(-1)
+        if wp.static(share_mass):
+            tally = clump
+        run_key = int(-1)
+        run_n = int(0)
 
-    # sphere-sphere
-    for k in range(neighbor_count[i]):
-        j = neighbor_index[k, i]
-        a = wp.min(i, j)
-        b = wp.max(i, j)
-        r_a = sphere_radius[a]
-        r_b = sphere_radius[b]
-        d = x_in[b] - x_in[a]
-        dist = wp.length(d)
-        overlap = r_a + r_b - dist
-        # apart and without history: no law acts (a JKR pair keeps aux = 1 while it hangs on in a gap)
-        if overlap <= 0.0 and neighbor_history_out[k, i].aux == 0.0:
-            neighbor_history_out[k, i] = ContactHistory()
-            # a contact due within one step counts already, so a clump's mass is shared from its first step
-            if tally >= 0 and dist > 0.0 and overlap + dt * wp.dot(v_in[a] - v_in[b], d / dist) > 0.0:
+        f = wp.vec3(0.0)
+        t = wp.vec3(0.0)
+
+        # sphere-sphere
+        for k in range(neighbor_count[i]):
+            j = neighbor_index[k, i]
+            a = wp.min(i, j)
+            b = wp.max(i, j)
+            r_a = sphere_radius[a]
+            r_b = sphere_radius[b]
+            d = x_in[b] - x_in[a]
+            dist = wp.length(d)
+            overlap = r_a + r_b - dist
+            # apart and without history: no law acts (a JKR pair keeps aux = 1 while it hangs on in a gap;
+            # Hertz-Mindlin keeps aux = 0)
+            hanging = False
+            if wp.static(cohesive):
+                hanging = neighbor_history_out[k, i].aux != 0.0
+            if overlap <= 0.0 and not hanging:
+                neighbor_history_out[k, i] = ContactHistory()
+                if wp.static(share_mass):
+                    # a contact due within one step counts already, so a clump's mass is shared from its
+                    # first step
+                    if tally >= 0 and dist > 0.0 and overlap + dt * wp.dot(v_in[a] - v_in[b], d / dist) > 0.0:
+                        run_key, run_n = partner_tally(
+                            partner_key_out,
+                            partner_count_out,
+                            tally,
+                            run_key,
+                            run_n,
+                            body_key(j, sphere_clump, clump_total),
+                        )
+                continue
+            if dist <= 0.0 or active_in[j] == 0:
+                neighbor_history_out[k, i] = ContactHistory()
+                continue
+            n = d / dist
+            mat_a = sphere_material[a]
+            mat_b = sphere_material[b]
+            m_a = material_density[mw, mat_a] * sphere_body_volume[a]
+            m_b = material_density[mw, mat_b] * sphere_body_volume[b]
+            if wp.static(share_mass):
+                key_a = body_key(a, sphere_clump, clump_total)
+                key_b = body_key(b, sphere_clump, clump_total)
+                m_a = contact_mass(m_a, sphere_clump[a], key_b, partner_key, partner_count, 1)
+                m_b = contact_mass(m_b, sphere_clump[b], key_a, partner_key, partner_count, 1)
+            r_star = r_a * r_b / (r_a + r_b)
+            m_star = m_a * m_b / (m_a + m_b)
+            arm_a = r_a - 0.5 * overlap
+            arm_b = r_b - 0.5 * overlap
+            w_a = w_in[a]
+            w_b = w_in[b]
+            v_rel = (v_in[a] + wp.cross(w_a, arm_a * n)) - (v_in[b] - wp.cross(w_b, arm_b * n))
+            p = pair_params[pw, mat_a, mat_b]
+            active, f_a, f_n, f_t, h, k_n = wp.static(force_law)(
+                overlap, n, v_rel, neighbor_history_out[k, i], r_star, m_star, p, dt
+            )
+            if active == 0:
+                neighbor_history_out[k, i] = h
+                continue
+            if wp.static(share_mass):
                 run_key, run_n = partner_tally(
                     partner_key_out, partner_count_out, tally, run_key, run_n, body_key(j, sphere_clump, clump_total)
                 )
-            continue
-        if dist <= 0.0 or active_in[j] == 0:
-            neighbor_history_out[k, i] = ContactHistory()
-            continue
-        n = d / dist
-        mat_a = sphere_material[a]
-        mat_b = sphere_material[b]
-        key_a = body_key(a, sphere_clump, clump_total)
-        key_b = body_key(b, sphere_clump, clump_total)
-        m_a = contact_mass(
-            material_density[mw, mat_a] * sphere_body_volume[a],
-            sphere_clump[a],
-            key_b,
-            partner_key,
-            partner_count,
-            share_mass,
-        )
-        m_b = contact_mass(
-            material_density[mw, mat_b] * sphere_body_volume[b],
-            sphere_clump[b],
-            key_a,
-            partner_key,
-            partner_count,
-            share_mass,
-        )
-        r_star = r_a * r_b / (r_a + r_b)
-        m_star = m_a * m_b / (m_a + m_b)
-        arm_a = r_a - 0.5 * overlap
-        arm_b = r_b - 0.5 * overlap
-        w_a = w_in[a]
-        w_b = w_in[b]
-        v_rel = (v_in[a] + wp.cross(w_a, arm_a * n)) - (v_in[b] - wp.cross(w_b, arm_b * n))
-        p = pair_params[pw, mat_a, mat_b]
-        active, f_a, f_n, f_t, h, k_n = contact_force(
-            overlap, n, v_rel, neighbor_history_out[k, i], r_star, m_star, p, dt
-        )
-        if active == 0:
-            neighbor_history_out[k, i] = h
-            continue
-        run_key, run_n = partner_tally(
-            partner_key_out, partner_count_out, tally, run_key, run_n, body_key(j, sphere_clump, clump_total)
-        )
-        i_roll = 0.0
-        if p.rolling_model == RollingModel.EPSD:
-            i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
-        m_roll, roll = rolling_resistance(
-            p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, h.roll, dt
-        )
-        neighbor_history_out[k, i] = ContactHistory(h.spring, roll, h.aux)
-        f_i = f_a
-        if i == a:
-            t += wp.cross(arm_a * n, f_t) + m_roll
-        else:
-            f_i = -f_a
-            t += wp.cross(arm_b * n, f_t) - m_roll
-        f += f_i
-        glued = sphere_wall[j]
-        if glued >= 0:
-            # a particle-coated wall feels the reaction on its glued sphere
-            origin_j = wp.transform_get_translation(wall_pose[glued])
-            c_pt = x_in[a] + arm_a * n
-            wp.atomic_add(wall_f_lanes_out, plane_point.shape[0] + glued, i % WALL_LANES, -f_i)
-            wp.atomic_add(
-                wall_t_lanes_out, plane_point.shape[0] + glued, i % WALL_LANES, wp.cross(c_pt - origin_j, -f_i)
+            m_roll = wp.vec3(0.0)
+            roll = h.roll * 0.0
+            if wp.static(rolling):
+                i_roll = 0.0
+                if p.rolling_model == RollingModel.EPSD:
+                    i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
+                m_roll, roll = rolling_resistance(
+                    p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, h.roll, dt
+                )
+            neighbor_history_out[k, i] = ContactHistory(h.spring, roll, h.aux)
+            f_i = f_a
+            if i == a:
+                t += wp.cross(arm_a * n, f_t) + m_roll
+            else:
+                f_i = -f_a
+                t += wp.cross(arm_b * n, f_t) - m_roll
+            f += f_i
+            if wp.static(coated_walls):
+                glued = sphere_wall[j]
+                if glued >= 0:
+                    # a particle-coated wall feels the reaction on its glued sphere
+                    origin_j = wp.transform_get_translation(wall_pose[glued])
+                    c_pt = x_in[a] + arm_a * n
+                    wp.atomic_add(wall_f_lanes_out, plane_point.shape[0] + glued, i % WALL_LANES, -f_i)
+                    wp.atomic_add(
+                        wall_t_lanes_out,
+                        plane_point.shape[0] + glued,
+                        i % WALL_LANES,
+                        wp.cross(c_pt - origin_j, -f_i),
+                    )
+
+        # infinite planes (static)
+        for p_id in range(plane_point.shape[0]):
+            pl_world = plane_world[p_id]
+            if pl_world >= 0 and pl_world != world:
+                continue
+            n_p = plane_normal[p_id]
+            gap = wp.dot(x_i - plane_point[p_id], n_p)
+            p = pair_params[pw, mat_i, plane_material[p_id]]
+            key_w = wall_key0 + p_id
+            mc_i = m_i
+            if wp.static(share_mass):
+                mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, 1)
+            active, f_a, t_a, h = wp.static(wall_contact)(
+                r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, plane_history_out[p_id, i], dt
             )
+            plane_history_out[p_id, i] = h
+            if wp.static(share_mass):
+                if tally >= 0 and (active != 0 or r_i - gap - dt * wp.dot(v_i, n_p) > 0.0):
+                    run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
+            if active != 0:
+                f += f_a
+                t += t_a
+                q = x_i - gap * n_p
+                wp.atomic_add(wall_f_lanes_out, p_id, i % WALL_LANES, -f_a)
+                wp.atomic_add(wall_t_lanes_out, p_id, i % WALL_LANES, wp.cross(q - plane_point[p_id], -f_a))
 
-    # infinite planes (static)
-    for p_id in range(plane_point.shape[0]):
-        pl_world = plane_world[p_id]
-        if pl_world >= 0 and pl_world != world:
-            continue
-        n_p = plane_normal[p_id]
-        gap = wp.dot(x_i - plane_point[p_id], n_p)
-        p = pair_params[pw, mat_i, plane_material[p_id]]
-        key_w = wall_key0 + p_id
-        mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
-        active, f_a, t_a, h = wall_contact(
-            r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, plane_history_out[p_id, i], dt
-        )
-        plane_history_out[p_id, i] = h
-        if tally >= 0 and (active != 0 or r_i - gap - dt * wp.dot(v_i, n_p) > 0.0):
-            run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
-        if active != 0:
-            f += f_a
-            t += t_a
-            q = x_i - gap * n_p
-            wp.atomic_add(wall_f_lanes_out, p_id, i % WALL_LANES, -f_a)
-            wp.atomic_add(wall_t_lanes_out, p_id, i % WALL_LANES, wp.cross(q - plane_point[p_id], -f_a))
+        # triangle-mesh walls (rigid, possibly moving)
+        if wp.static(mesh_walls):
+            plane_total = plane_point.shape[0]
+            for k in range(mesh_count[i]):
+                face = mesh_face[k, i]
+                wall = triangle_wall[face]
+                q, feature = wall_triangle_closest(wall_mesh, wall_face_start, wall_pose, wall, face, x_i)
+                dq = x_i - q
+                gap = wp.length(dq)
+                skip = gap <= 0.0
+                if not skip and feature != FEATURE_FACE and gap < r_i:
+                    skip = mesh_contact_shadowed(
+                        wall_mesh,
+                        wall_face_start,
+                        wall_pose,
+                        x_i,
+                        r_i,
+                        k,
+                        q,
+                        feature,
+                        wall,
+                        i,
+                        mesh_count,
+                        mesh_face,
+                        triangle_wall,
+                    )
+                if skip:
+                    mesh_history_out[k, i] = ContactHistory()
+                    continue
+                origin = wp.transform_get_translation(wall_pose[wall])
+                v_wall = wall_v[wall] + wp.cross(wall_w[wall], q - origin)
+                p = pair_params[pw, mat_i, wall_material[wall]]
+                key_w = wall_key0 + plane_total + wall
+                mc_i = m_i
+                if wp.static(share_mass):
+                    mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, 1)
+                active, f_a, t_a, h = wp.static(wall_contact)(
+                    r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, mesh_history_out[k, i], dt
+                )
+                mesh_history_out[k, i] = h
+                if wp.static(share_mass):
+                    if tally >= 0 and (active != 0 or r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0):
+                        run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
+                if active != 0:
+                    f += f_a
+                    t += t_a
+                    wp.atomic_add(wall_f_lanes_out, plane_total + wall, i % WALL_LANES, -f_a)
+                    wp.atomic_add(wall_t_lanes_out, plane_total + wall, i % WALL_LANES, wp.cross(q - origin, -f_a))
+                    # an impact is the first step of a touch: leapfrog moved the sphere by dt * v_i since the
+                    # last step, so it was clear of the face then iff the overlap is at most the approach this
+                    # step
+                    approach = wp.dot(v_i - v_wall, dq / -gap)
+                    overlap = r_i - gap
+                    if overlap > 0.0 and overlap <= approach * dt and approach >= impact_speed_min:
+                        fw = world % face_impact_count_out.shape[0]
+                        wp.atomic_add(face_impact_count_out, fw, face, 1)
+                        wp.atomic_add(face_impact_energy_out, fw, face, wp.float64(0.5 * m_i * approach * approach))
+                        wp.atomic_max(face_impact_speed_out, fw, face, approach)
 
-    # triangle-mesh walls (rigid, possibly moving)
-    plane_total = plane_point.shape[0]
-    for k in range(mesh_count[i]):
-        face = mesh_face[k, i]
-        wall = triangle_wall[face]
-        q, feature = wall_triangle_closest(wall_mesh, wall_face_start, wall_pose, wall, face, x_i)
-        dq = x_i - q
-        gap = wp.length(dq)
-        skip = gap <= 0.0
-        if not skip and feature != FEATURE_FACE and gap < r_i:
-            skip = mesh_contact_shadowed(
-                wall_mesh,
-                wall_face_start,
-                wall_pose,
-                x_i,
-                r_i,
-                k,
-                q,
-                feature,
-                wall,
-                i,
-                mesh_count,
-                mesh_face,
-                triangle_wall,
-            )
-        if skip:
-            mesh_history_out[k, i] = ContactHistory()
-            continue
-        origin = wp.transform_get_translation(wall_pose[wall])
-        v_wall = wall_v[wall] + wp.cross(wall_w[wall], q - origin)
-        p = pair_params[pw, mat_i, wall_material[wall]]
-        key_w = wall_key0 + plane_total + wall
-        mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, share_mass)
-        active, f_a, t_a, h = wall_contact(
-            r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, mesh_history_out[k, i], dt
-        )
-        mesh_history_out[k, i] = h
-        if tally >= 0 and (active != 0 or r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0):
-            run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
-        if active != 0:
-            f += f_a
-            t += t_a
-            wp.atomic_add(wall_f_lanes_out, plane_total + wall, i % WALL_LANES, -f_a)
-            wp.atomic_add(wall_t_lanes_out, plane_total + wall, i % WALL_LANES, wp.cross(q - origin, -f_a))
-            # an impact is the first step of a touch: leapfrog moved the sphere by dt * v_i since the last
-            # step, so it was clear of the face then iff the overlap is at most the approach this step
-            approach = wp.dot(v_i - v_wall, dq / -gap)
-            overlap = r_i - gap
-            if overlap > 0.0 and overlap <= approach * dt and approach >= impact_speed_min:
-                fw = world % face_impact_count_out.shape[0]
-                wp.atomic_add(face_impact_count_out, fw, face, 1)
-                wp.atomic_add(face_impact_energy_out, fw, face, wp.float64(0.5 * m_i * approach * approach))
-                wp.atomic_max(face_impact_speed_out, fw, face, approach)
+        f_out[i] = f
+        t_out[i] = t
+        if wp.static(share_mass):
+            if run_n > 0:
+                partner_add(partner_key_out, partner_count_out, tally, run_key, run_n)
+        if wp.static(clumps):
+            if clump >= 0:
+                return
 
-    f_out[i] = f
-    t_out[i] = t
-    if run_n > 0:
-        partner_add(partner_key_out, partner_count_out, tally, run_key, run_n)
-    if clump >= 0:
-        return
+        # leapfrog (velocity Verlet): v(t+dt/2) = v(t-dt/2) + dt a(t); the first step kicks by dt/2
+        inertia_i = 0.4 * m_i * r_i * r_i
+        g = world_gravity[world % world_gravity.shape[0]]
+        v_new = v_i + kick * (f / m_i + g)
+        w_new = w_i + kick * (t / inertia_i)
+        x_new = x_i + dt * v_new
+        x_out[i] = x_new
+        v_out[i] = v_new
+        w_out[i] = w_new
 
-    # leapfrog (velocity Verlet): v(t+dt/2) = v(t-dt/2) + dt a(t); the first step kicks by dt/2
-    inertia_i = 0.4 * m_i * r_i * r_i
-    g = world_gravity[world % world_gravity.shape[0]]
-    v_new = v_i + kick * (f / m_i + g)
-    w_new = w_i + kick * (t / inertia_i)
-    x_new = x_i + dt * v_new
-    x_out[i] = x_new
-    v_out[i] = v_new
-    w_out[i] = w_new
+        speed = wp.length(v_new)
+        if not (speed <= velocity_limit) or not wp.isfinite(x_new) or not wp.isfinite(w_new):
+            flag_blowup(blowup_out, clock[0], i)
+        if wp.length(x_new - build_x[i]) > 0.5 * skin:
+            rebuild_out[0] = 1
 
-    speed = wp.length(v_new)
-    if not (speed <= velocity_limit) or not wp.isfinite(x_new) or not wp.isfinite(w_new):
-        flag_blowup(blowup_out, clock[0], i)
-    if wp.length(x_new - build_x[i]) > 0.5 * skin:
-        rebuild_out[0] = 1
+    return step_spheres
 
 
 def launch_step_spheres(
@@ -556,21 +603,22 @@ def launch_step_spheres(
     state_out,
     buffers: StepBuffers,
     *,
+    features: StepFeatures,
     dt: float,
     kick: float,
     skin: float,
     velocity_limit: float,
     impact_speed_min: float,
-    share_mass: bool,
 ) -> None:
-    """Contact forces on every sphere and the leapfrog step of the free ones, ``state_in`` -> ``state_out``.
+    """Contact forces on every sphere and the leapfrog step of the free ones, ``state_in`` -> ``state_out``,
+    with the kernel compiled for ``features`` (the mass-sharing option is ``features.share_mass``).
 
     ``kick`` is the velocity step [s] (``dt``, or ``dt / 2`` on a fresh state's first step); the impact records
     are ``state_in``'s (a solver's twin states share them); the partner counts go to ``buffers.partner_*_next``.
     """
     m, c, b = model, contacts, buffers
     wp.launch(
-        step_spheres,
+        step_spheres_kernel(features),
         dim=m.sphere_count,
         inputs=[
             m.sphere_radius,
@@ -610,7 +658,6 @@ def launch_step_spheres(
             skin,
             velocity_limit,
             impact_speed_min,
-            int(share_mass),
         ],
         outputs=[
             c.neighbor_history,

@@ -11,6 +11,7 @@ import warp as wp
 
 from warpdem.kernels import neighbors as _nb
 from warpdem.kernels import step as _st
+from warpdem.kernels.features import StepFeatures
 from warpdem.kernels.params import ContactHistory
 
 from .types import ContactLaw, Contacts, Control, Model, Overflow, State
@@ -121,6 +122,8 @@ class Solver:
         self.skin = (
             self.options.skin if self.options.skin is not None else self.options.skin_fraction * model.radius_min
         )
+        self.features = StepFeatures.of(model, share_mass=self.options.clump_contact_mass == "shared")
+        """What the model uses: the step and rebuild kernels are compiled for it (kernels/features.py)."""
         self._buffers = _st.StepBuffers.zeros(model)
         self.control = model.control()
         """The wall motion used when run or step get no Control."""
@@ -184,7 +187,7 @@ class Solver:
         inv_cell = _nb.cell_inverse_size(m, self.skin)
         _nb.launch_clear_cells(m, c, self._buffers.rebuild_count)
         _nb.launch_bin_spheres(m, state, c, inv_cell)
-        _nb.launch_build_contacts(m, state, c, inv_cell=inv_cell, skin=self.skin)
+        _nb.launch_build_contacts(m, state, c, features=self.features, inv_cell=inv_cell, skin=self.skin)
         _nb.launch_commit_contacts(m, c)
         wp.copy(c.wall_build_pose, state.wall_pose)
         c.rebuild.zero_()
@@ -240,7 +243,6 @@ class Solver:
         dt = self.dt if dt is None else float(dt)
         kick = dt if state_in.half_step else 0.5 * dt
         o, b = self.options, self._buffers
-        share = o.clump_contact_mass == "shared"
         _st.launch_begin_step(m, b, dt)
         _st.launch_step_spheres(
             m,
@@ -248,14 +250,14 @@ class Solver:
             state_in,
             state_out,
             b,
+            features=self.features,
             dt=dt,
             kick=kick,
             skin=self.skin,
             velocity_limit=o.velocity_limit,
             impact_speed_min=o.impact_speed_min,
-            share_mass=share,
         )
-        if m.clump_count and share:
+        if self.features.share_mass:
             _st.launch_roll_partners(m, c, b)
         if m.clump_count:
             _st.launch_integrate_clumps(

@@ -1,0 +1,46 @@
+"""What a model uses, as compile-time switches of the step and rebuild kernels.
+
+A feature a model lacks is compiled out (``wp.static`` in the kernel factories of step.py and neighbors.py):
+a plain-sphere bed then carries no registers, loads or branches for clumps, mass tables, mesh walls, impact
+records, coated walls, cohesive laws or rolling resistance. Each distinct set of features is one kernel
+module, compiled once and cached by Warp.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .enums import ContactLaw, RollingModel
+
+
+@dataclass(frozen=True)
+class StepFeatures:
+    """The features one model's kernels are compiled for (the defaults: everything)."""
+
+    clumps: bool = True
+    """The model has clumps: spheres reduce to their clump, and a clump's spheres skip each other."""
+    share_mass: bool = True
+    """Clump contacts damp a shared mass (``SolverOptions.clump_contact_mass == "shared"``): partner tables."""
+    mesh_walls: bool = True
+    """The model has triangle-mesh walls (and their impact records)."""
+    coated_walls: bool = True
+    """Spheres are glued to walls (``Model.attached_count``)."""
+    cohesive_laws: bool = True
+    """Some pair uses a law other than Hertz-Mindlin (JKR or EEPA)."""
+    rolling: bool = True
+    """Some pair has a rolling model and a rolling friction above zero."""
+
+    @staticmethod
+    def of(model, share_mass: bool) -> "StepFeatures":
+        """The features of ``model`` (duck-typed: clump_count, wall_count, attached_count, pair_params)."""
+        pairs = model.pair_params.numpy()
+        rolling = (pairs["rolling_model"] != int(RollingModel.NONE)) & (pairs["mu_r"] != 0.0)
+        clumps = model.clump_count > 0
+        return StepFeatures(
+            clumps=clumps,
+            share_mass=clumps and bool(share_mass),
+            mesh_walls=model.wall_count > 0,
+            coated_walls=model.attached_count > 0,
+            cohesive_laws=bool(np.any(pairs["law"] != int(ContactLaw.HERTZ_MINDLIN))),
+            rolling=bool(np.any(rolling)),
+        )
