@@ -1,8 +1,11 @@
-"""benchmarks/perf_table.py: the README table from a record (no timing is checked)."""
+"""benchmarks/perf_record.py and perf_table.py: the trees, the record's structure and the README table (CPU; no
+timing is checked)."""
 
 import copy
 import importlib
 import json
+import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -11,6 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 perf_table = importlib.import_module("perf_table")
+perf_record = importlib.import_module("perf_record")
 
 
 def _run(tree, case, repeat, rate=None, **figures):
@@ -100,3 +104,43 @@ def test_readme_without_markers_is_refused(tmp_path, capsys):
     assert readme.read_text() == f"# Notes\n{perf_table.END}\n{perf_table.BEGIN}\n"
     with pytest.raises(ValueError, match="NOTES"):
         perf_table.replace_block("no markers\n", "table", "NOTES.md")
+
+
+@pytest.fixture(scope="module")
+def trees(tmp_path_factory):
+    """`prepare --old HEAD` into a temporary folder: (old, new)."""
+    if shutil.which("git") is None or subprocess.run(["git", "-C", str(ROOT), "rev-parse"]).returncode != 0:
+        pytest.skip("needs git and a git checkout")
+    base = tmp_path_factory.mktemp("ab")
+    old, new = base / "old", base / "new"
+    assert perf_record.main(["prepare", "--old", "HEAD", "--old-dir", str(old), "--new-dir", str(new)]) == 0
+    return old, new
+
+
+def test_prepare_makes_importable_trees(trees):
+    """Each tree holds only the package, kernels as a real warpdem/kernels folder, and imports from itself."""
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True).stdout
+    for tree in trees:
+        assert sorted(p.name for p in tree.iterdir()) == ["COMMIT.json", "warpdem"]
+        kernels = tree / "warpdem" / "kernels"
+        assert kernels.is_dir() and not kernels.is_symlink() and (kernels / "step.py").is_file()
+        assert json.loads((tree / "COMMIT.json").read_text())["sha"] == head.strip()
+        where = perf_record.check_tree(tree, sys.executable)
+        assert Path(where["kernels"]).is_relative_to(tree)
+    assert "dirty" in json.loads((trees[1] / "COMMIT.json").read_text())
+
+
+def test_cpu_smoke_run_record(trees, tmp_path):
+    """One tiny CPU bench of the new tree: the record's structure (the figures are not judged)."""
+    out = tmp_path / "record.json"
+    argv = ["run", "--trees", str(trees[1]), "--cases", "hm", "--repeat", "1", "--device", "cpu", "--out", str(out)]
+    assert perf_record.main(argv + ["--bench-args", "--count 100 --steps 5 --settle-steps 5"]) == 0
+    rec = json.loads(out.read_text())
+    assert {"schema", "date", "device", "warp", "host", "trees", "runs", "deme"} <= set(rec)
+    assert rec["schema"] == 1 and rec["device"] == "cpu" and rec["deme"] == []
+    assert list(rec["trees"]) == ["new"] and rec["trees"]["new"]["sha"]
+    (run,) = rec["runs"]
+    assert (run["tree"], run["case"], run["repeat"]) == ("new", "hm", 0)
+    assert run["argv"][:3] == ["bench", "--device", "cpu"] and "error" not in run
+    fig = run["figures"]
+    assert fig["worlds"] == 1 and fig["spheres"] > 0 and fig["particle_steps_per_s"] > 0
