@@ -217,7 +217,8 @@ def _done(entries: list[dict], **key) -> bool:
 def _rate(res: dict) -> str:
     if "figures" in res:
         return f"{sci(float(res['figures'].get(RATE, float('nan'))))} sphere-steps/s"
-    return "unsupported" if res.get("unsupported") else "FAILED: " + res["error"].strip().splitlines()[-1][:200]
+    last = (res["error"].strip().splitlines() or ["(no output)"])[-1]
+    return "unsupported" if res.get("unsupported") else f"FAILED: {last[:200]}"
 
 
 def cmd_run(a) -> int:
@@ -254,7 +255,7 @@ def cmd_run(a) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     _write(record, out)
     bench_args = shlex.split(a.bench_args)
-    total = a.repeat * len(cases) * (len(trees) + (1 if a.deme else 0))
+    total = a.repeat * (len(cases) * len(trees) + (sum(c in DEME_CASES for c in cases) if a.deme else 0))
     n = 0
     for k in range(a.repeat):
         # the trees take turns leading, so a drift of the machine (clocks, temperature) hits each alike
@@ -341,7 +342,7 @@ def print_summary(record: dict) -> None:
             cells.append(sci(e["deme"]) if e["deme"] is not None else "")
             cells.append(f"{new / e['deme']:.3f}" if e["deme"] and new else "")
         rows.append(cells)
-    title = f"median sphere-steps/s on {record.get('device')}"
+    title = f"median sphere-steps/s on {record.get('device') or '?'}"
     try:
         from rich.console import Console
         from rich.table import Table

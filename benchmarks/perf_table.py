@@ -125,7 +125,7 @@ def markdown(record: dict) -> str:
     sha = str(meta.get("sha", "?"))[:12] + (" with uncommitted changes" if meta.get("dirty") else "")
     command = record.get("command", "python benchmarks/perf_record.py run ...")
     lines = [
-        f"Measured {str(record.get('date', '?'))[:10]} on {record.get('device', '?')}, Warp {record.get('warp', '?')}, "
+        f"Measured {str(record.get('date', '?'))[:10]} on {record.get('device') or '?'}, Warp {record.get('warp') or '?'}, "
         f"commit {sha} (`{command}`)",
         "",
     ]
