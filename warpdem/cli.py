@@ -67,16 +67,23 @@ def cmd_verify(args) -> int:
 
 def cmd_bench(args) -> int:
     _quiet_warp()
-    from .verify.bench import run_bench
+    from .verify.bench import UNITS, run_bench
 
     res = run_bench(
-        args.device, args.count, args.steps, args.settle_steps, clumps=args.clumps, walls=args.walls, law=args.law
+        args.device,
+        args.count,
+        args.steps,
+        args.settle_steps,
+        clumps=args.clumps,
+        walls=args.walls,
+        law=args.law,
+        worlds=args.worlds,
     )
     rows = [(k, f"{v:.4g}" if isinstance(v, float) else str(v)) for k, v in res.items()]
     _table("warpdem bench: settled bed, Hertz-Mindlin with history", ["figure", "value"], rows)
     if args.json:
         with open(args.json, "w") as f:
-            json.dump([{"name": k, "value": v, "unit": ""} for k, v in res.items()], f, indent=1)
+            json.dump([{"name": k, "value": v, "unit": UNITS.get(k, "")} for k, v in res.items()], f, indent=1)
     return 0
 
 
@@ -298,12 +305,13 @@ def main(argv=None) -> int:
     b = sub.add_parser("bench", help="throughput of a settled bed")
     b.add_argument("--device", default="cpu")
     b.add_argument("--json")
-    b.add_argument("--count", type=int, help="bodies (default 2000 on CPU, 1,000,000 on CUDA)")
+    b.add_argument("--count", type=int, help="bodies per world (default 2000 on CPU, 1,000,000 on CUDA)")
     b.add_argument("--steps", type=int, help="timed steps")
     b.add_argument("--settle-steps", type=int, default=20000)
     b.add_argument("--clumps", type=int, default=0, help="8: every body an 8-sphere clump (count = clumps)")
     b.add_argument("--walls", default="planes", choices=["planes", "mesh"], help="box as planes or one mesh")
     b.add_argument("--law", default="HM", choices=["HM", "JKR", "EEPA"], help="contact law of every pair")
+    b.add_argument("--worlds", type=int, default=1, help="identical copies of the bed, batched in one model")
     b.set_defaults(fn=cmd_bench)
     au = sub.add_parser("audit", help="recompute the seed papers' published statistics from their own data")
     au.add_argument("--json", help="write the records to this file ('-': JSON to stdout instead of the table)")
