@@ -277,9 +277,17 @@ def flag_blowup(blowup_out: wp.array[int], step: int, i: int):
         wp.atomic_min(blowup_out, 0, i)
 
 
+STEP_MAX_REGISTERS = 64
+"""Register cap of the step kernel on CUDA (``__maxnreg__``; None: the compiler's choice). The compiler's own
+choice (88) leaves room for two blocks of 256 threads per SM: 25 % occupancy for a kernel that waits on
+memory. On an H100, 64 gave 1.69e9 sphere-steps/s on the HM bed against 1.57e9 uncapped, and 9.7e8 against
+6.7e8 on the clump bed; 48 and 40 spill and are slower."""
+
+
 @functools.cache
-def step_spheres_kernel(features: StepFeatures):
-    """The fused step kernel compiled for ``features`` (one module per set of features; see kernels/features.py)."""
+def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None):
+    """The fused step kernel compiled for ``features`` (one module per set of features; see kernels/features.py),
+    with at most ``max_registers`` registers per thread on CUDA."""
     clumps = features.clumps
     share_mass = features.share_mass
     mesh_walls = features.mesh_walls
@@ -289,7 +297,7 @@ def step_spheres_kernel(features: StepFeatures):
     force_law = contact_force_for(cohesive)
     wall_contact = wall_contact_for(cohesive, rolling)
 
-    @wp.kernel(module="unique", enable_backward=False)
+    @wp.kernel(module="unique", enable_backward=False, cuda_max_registers=max_registers)
     def step_spheres(
         # Model:
         sphere_radius: wp.array[float],
@@ -618,7 +626,7 @@ def launch_step_spheres(
     """
     m, c, b = model, contacts, buffers
     wp.launch(
-        step_spheres_kernel(features),
+        step_spheres_kernel(features, STEP_MAX_REGISTERS),
         dim=m.sphere_count,
         inputs=[
             m.sphere_radius,
