@@ -6,8 +6,8 @@ kernels with one atomic exchange per sphere, not a sort, so that a rebuild can s
 node of a CUDA graph (Warp's ``HashGrid`` sorts with CUB, which a conditional node cannot hold); list
 order does not matter because each sphere's candidates are sorted. Triangle candidates come from the
 mesh BVH.
-Each sphere's new candidate list is sorted by partner (or face) index and every new entry looks its
-key up, by binary search, in the sphere's previous sorted list to inherit the spring history.
+Each sphere's new candidate list is sorted by partner (or face) index and merged with the sphere's previous
+sorted list: every new entry inherits the history of its key, moved in place (no second history array).
 
 Each kernel has its launcher beside it (``launch_<kernel>``), as in step.py.
 """
@@ -27,15 +27,8 @@ wp.set_module_options({"enable_backward": False})
 CELLS_PER_REACH = 2.0
 """Neighbour cells per longest reach (2 r_max + skin + cohesive reach): 2 makes the walked box of cells hug
 each sphere's own reach."""
-LIST_ARRAYS = (
-    "neighbor_count",
-    "neighbor_index",
-    "neighbor_history",
-    "mesh_count",
-    "mesh_face",
-    "mesh_history",
-)
-"""The Contacts arrays a rebuild writes (into ``Contacts.scratch``, then committed)."""
+LIST_ARRAYS = ("neighbor_count", "neighbor_index", "mesh_count", "mesh_face")
+"""The Contacts arrays a rebuild writes into ``Contacts.scratch``, then commits (the histories move in place)."""
 
 
 def cell_grid(sphere_count: int, device) -> dict:
@@ -121,23 +114,6 @@ def launch_bin_spheres(model, state, contacts, inv_cell: float) -> None:
 
 
 @wp.func
-def find_sorted(keys: wp.array2d[int], count: int, col: int, key: int):
-    """Slot of ``key`` in column ``col`` of ``keys`` (ascending over the first ``count`` slots), or -1."""
-    lo = int(0)
-    hi = count - 1
-    while lo <= hi:
-        mid = (lo + hi) // 2
-        v = keys[mid, col]
-        if v == key:
-            return mid
-        if v < key:
-            lo = mid + 1
-        else:
-            hi = mid - 1
-    return -1
-
-
-@wp.func
 def sort_column(keys: wp.array2d[int], count: int, col: int):
     """Insertion sort of column ``col`` of ``keys`` over its first ``count`` slots (lists are short)."""
     for s in range(1, count):
@@ -153,19 +129,44 @@ def sort_column(keys: wp.array2d[int], count: int, col: int):
 def carry_history(
     old_keys: wp.array2d[int],
     old_count: int,
-    old_history: wp.array2d[ContactHistory],
     new_keys: wp.array2d[int],
     new_count: int,
-    new_history_out: wp.array2d[ContactHistory],
+    history: wp.array2d[ContactHistory],
     col: int,
 ):
-    """Give each new (sorted) entry of column ``col`` the history of the old entry with the same key, else zero."""
+    """Move column ``col`` of ``history`` from the old sorted keys to the new sorted keys, in place: each new
+    entry gets the history of the old entry with its key, else zero.
+
+    In place, so that the lists need no second history array (448 bytes per sphere at 16 slots). Matched
+    entries keep their order, so an entry moving to a lower slot (old slot >= new) can only overwrite old slots
+    that entries before it already read: those go in ascending order; entries moving up go in descending order
+    for the same reason, and neither kind can overwrite an old slot the other still needs. Unmatched entries
+    are zeroed last.
+    """
+    t = int(0)
     for s in range(new_count):
-        slot = find_sorted(old_keys, old_count, col, new_keys[s, col])
-        if slot >= 0:
-            new_history_out[s, col] = old_history[slot, col]
-        else:
-            new_history_out[s, col] = ContactHistory()
+        key = new_keys[s, col]
+        while t < old_count and old_keys[t, col] < key:
+            t += 1
+        if t < old_count and t > s:
+            if old_keys[t, col] == key:
+                history[s, col] = history[t, col]
+    t = old_count - 1
+    for r in range(new_count):
+        s = new_count - 1 - r
+        key = new_keys[s, col]
+        while t >= 0 and old_keys[t, col] > key:
+            t -= 1
+        if t >= 0 and t < s:
+            if old_keys[t, col] == key:
+                history[s, col] = history[t, col]
+    t = int(0)
+    for s in range(new_count):
+        key = new_keys[s, col]
+        while t < old_count and old_keys[t, col] < key:
+            t += 1
+        if t >= old_count or old_keys[t, col] != key:
+            history[s, col] = ContactHistory()
 
 
 @functools.cache
@@ -196,20 +197,19 @@ def build_contacts_kernel(features: StepFeatures):
         cell_next: wp.array[int],
         old_count: wp.array[int],
         old_index: wp.array2d[int],
-        old_history: wp.array2d[ContactHistory],
         old_mesh_count: wp.array[int],
         old_mesh_face: wp.array2d[int],
-        old_mesh_history: wp.array2d[ContactHistory],
         # Options:
         inv_cell: float,
         skin: float,
-        # Out (new_index_out and new_mesh_face_out: written, then sorted in place):
+        # Out (new_index_out and new_mesh_face_out: written, then sorted in place; the histories: carried over
+        # in place from the old lists' keys to the new ones):
         new_count_out: wp.array[int],
         new_index_out: wp.array2d[int],
-        new_history_out: wp.array2d[ContactHistory],
         new_mesh_count_out: wp.array[int],
         new_mesh_face_out: wp.array2d[int],
-        new_mesh_history_out: wp.array2d[ContactHistory],
+        history_out: wp.array2d[ContactHistory],
+        mesh_history_out: wp.array2d[ContactHistory],
         build_x_out: wp.array[wp.vec3],
         overflow_out: wp.array[int],
     ):
@@ -260,7 +260,7 @@ def build_contacts_kernel(features: StepFeatures):
                                         wp.atomic_or(overflow_out, 0, Overflow.NEIGHBOR)
                         j = cell_next[j]
         sort_column(new_index_out, count, i)
-        carry_history(old_index, old_count[i], old_history, new_index_out, count, new_history_out, i)
+        carry_history(old_index, old_count[i], new_index_out, count, history_out, i)
         new_count_out[i] = count
 
         if wp.static(mesh_walls):
@@ -288,9 +288,7 @@ def build_contacts_kernel(features: StepFeatures):
                         else:
                             wp.atomic_or(overflow_out, 0, Overflow.MESH)
             sort_column(new_mesh_face_out, mcount, i)
-            carry_history(
-                old_mesh_face, old_mesh_count[i], old_mesh_history, new_mesh_face_out, mcount, new_mesh_history_out, i
-            )
+            carry_history(old_mesh_face, old_mesh_count[i], new_mesh_face_out, mcount, mesh_history_out, i)
             new_mesh_count_out[i] = mcount
         else:
             new_mesh_count_out[i] = 0
@@ -299,9 +297,9 @@ def build_contacts_kernel(features: StepFeatures):
 
 
 def launch_build_contacts(model, state, contacts, *, features: StepFeatures, inv_cell: float, skin: float) -> None:
-    """New candidate lists from the binned spheres of ``state`` into ``contacts.scratch``, each entry with the
-    history of its key in the current lists; records the build positions and any overflow (the kernel compiled
-    for ``features``)."""
+    """New candidate lists from the binned spheres of ``state`` into ``contacts.scratch``; the histories move in
+    place to their keys' new slots (see :func:`carry_history`). Records the build positions and any overflow (the
+    kernel compiled for ``features``)."""
     m, c, s = model, contacts, contacts.scratch
     wp.launch(
         build_contacts_kernel(features),
@@ -323,20 +321,18 @@ def launch_build_contacts(model, state, contacts, *, features: StepFeatures, inv
             c.cells["next"],
             c.neighbor_count,
             c.neighbor_index,
-            c.neighbor_history,
             c.mesh_count,
             c.mesh_face,
-            c.mesh_history,
             inv_cell,
             skin,
         ],
         outputs=[
             s["neighbor_count"],
             s["neighbor_index"],
-            s["neighbor_history"],
             s["mesh_count"],
             s["mesh_face"],
-            s["mesh_history"],
+            c.neighbor_history,
+            c.mesh_history,
             c.build_x,
             c.overflow,
         ],
@@ -349,32 +345,26 @@ def commit_contacts(
     # Contacts in (the lists build_contacts just wrote):
     new_count: wp.array[int],
     new_index: wp.array2d[int],
-    new_history: wp.array2d[ContactHistory],
     new_mesh_count: wp.array[int],
     new_mesh_face: wp.array2d[int],
-    new_mesh_history: wp.array2d[ContactHistory],
     # Out (the lists the step reads):
     neighbor_count_out: wp.array[int],
     neighbor_index_out: wp.array2d[int],
-    neighbor_history_out: wp.array2d[ContactHistory],
     mesh_count_out: wp.array[int],
     mesh_face_out: wp.array2d[int],
-    mesh_history_out: wp.array2d[ContactHistory],
 ):
-    """Copy each sphere's new lists over its old ones, only the slots in use: readers never look past a
-    sphere's count, and a full-capacity copy moves several times the bytes (capacities of ~60 slots hold
-    ~15 candidates in a dense clump pile)."""
+    """Copy each sphere's new keys over its old ones (the histories are already in place), only the slots in
+    use: readers never look past a sphere's count, and a full-capacity copy moves several times the bytes
+    (capacities of ~60 slots hold ~15 candidates in a dense clump pile)."""
     i = wp.tid()
     n = new_count[i]
     neighbor_count_out[i] = n
     for k in range(n):
         neighbor_index_out[k, i] = new_index[k, i]
-        neighbor_history_out[k, i] = new_history[k, i]
     nm = new_mesh_count[i]
     mesh_count_out[i] = nm
     for k in range(nm):
         mesh_face_out[k, i] = new_mesh_face[k, i]
-        mesh_history_out[k, i] = new_mesh_history[k, i]
 
 
 def launch_commit_contacts(model, contacts) -> None:

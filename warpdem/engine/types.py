@@ -355,7 +355,8 @@ class Contacts:
     """Sub-sphere contacts with each body of ``partner_key``: the next step divides the clump's mass by it in that
     body's contacts (``SolverOptions.clump_contact_mass``). Same shape, int32."""
     scratch: dict = field(default_factory=dict)
-    """Second buffers of the list and history arrays, written by a rebuild and copied back."""
+    """Second buffers of the candidate lists (counts and keys), written by a rebuild and copied back; the
+    histories move in place (kernels/neighbors.py, carry_history)."""
     cells: dict = field(default_factory=dict)
     """The cell grid of the last rebuild: ``head`` (bucket -> first sphere, -1 empty; a power-of-two length)
     and ``next`` (sphere -> next sphere of its bucket), int32 arrays."""
