@@ -307,7 +307,7 @@ def main(argv=None) -> int:
     b.add_argument("--json")
     b.add_argument("--count", type=int, help="bodies per world (default 2000 on CPU, 1,000,000 on CUDA)")
     b.add_argument("--steps", type=int, help="timed steps")
-    b.add_argument("--settle-steps", type=int, default=20000)
+    b.add_argument("--settle-steps", type=int, help="steps before timing (default: 0.2 s of simulated time)")
     b.add_argument("--clumps", type=int, default=0, help="8: every body an 8-sphere clump (count = clumps)")
     b.add_argument("--walls", default="planes", choices=["planes", "mesh"], help="box as planes or one mesh")
     b.add_argument("--law", default="HM", choices=["HM", "JKR", "EEPA"], help="contact law of every pair")
