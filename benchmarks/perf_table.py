@@ -124,9 +124,13 @@ def markdown(record: dict) -> str:
     meta = trees[newest]
     sha = str(meta.get("sha", "?"))[:12] + (" with uncommitted changes" if meta.get("dirty") else "")
     command = record.get("command", "python benchmarks/perf_record.py run ...")
+    # a record may span several calls (--resume): its first command, and how many more calls completed it
+    repeats = 1 + max((int(r.get("repeat", 0)) for r in record.get("runs", [])), default=0)
+    resumed = len(record.get("resumed", []))
+    more = f", then {resumed} more call{'s' * (resumed > 1)} with --resume" if resumed else ""
     lines = [
         f"Measured {str(record.get('date', '?'))[:10]} on {record.get('device') or '?'}, Warp {record.get('warp') or '?'}, "
-        f"commit {sha} (`{command}`)",
+        f"commit {sha}; medians of {repeats} repeat{'s' * (repeats > 1)} (`{command}`{more})",
         "",
     ]
     header = ["case"] + [f"{_tree_name(label, trees[label])} sphere-steps/s" for label in labels]

@@ -52,8 +52,8 @@ RECORD = {
     ],
 }
 TABLE = [
-    "Measured 2026-11-24 on NVIDIA H100 80GB HBM3, Warp 1.19.0, commit bbbbbbbbbbbb with uncommitted changes "
-    "(`python benchmarks/perf_record.py run --trees .ab/old .ab/new --out record.json`)",
+    "Measured 2026-11-24 on NVIDIA H100 80GB HBM3, Warp 1.19.0, commit bbbbbbbbbbbb with uncommitted changes; "
+    "medians of 2 repeats (`python benchmarks/perf_record.py run --trees .ab/old .ab/new --out record.json`)",
     "",
     "| case | old (aaaaaaa) sphere-steps/s | new (bbbbbbb + changes) sphere-steps/s | new / old | contacts per sphere "
     "| bytes per sphere | DEME sphere-steps/s | new / DEME |",
