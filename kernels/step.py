@@ -259,11 +259,12 @@ def partner_tally(keys: wp.array[int], counts: wp.array[int], c: int, run_key: i
 
 
 @wp.func
-def contact_mass(m: float, c: int, key: int, keys: wp.array[int], counts: wp.array[int], share: int):
+def contact_mass(m: float, c: int, key: int, keys: wp.array[int], counts: wp.array[int]):
     """Mass [kg] one contact damps for a sphere of body mass ``m`` in clump ``c`` (-1: a plain sphere) touching
-    body ``key``: with ``share``, a clump's mass divided by its sub-contacts with that body at the last step,
-    since they act in parallel as one touch; a plain sphere's contacts keep the whole mass (EDEM's convention)."""
-    if share == 0 or c < 0:
+    body ``key``, where clump masses are shared (``StepFeatures.share_mass``): a clump's mass divided by its
+    sub-contacts with that body at the last step, since they act in parallel as one touch; a plain sphere's
+    contacts keep the whole mass (EDEM's convention)."""
+    if c < 0:
         return m
     return m / float(wp.max(partner_find(keys, counts, c, key), 1))
 
@@ -440,8 +441,8 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             if wp.static(share_mass):
                 key_a = body_key(a, sphere_clump, clump_total)
                 key_b = body_key(b, sphere_clump, clump_total)
-                m_a = contact_mass(m_a, sphere_clump[a], key_b, partner_key, partner_count, 1)
-                m_b = contact_mass(m_b, sphere_clump[b], key_a, partner_key, partner_count, 1)
+                m_a = contact_mass(m_a, sphere_clump[a], key_b, partner_key, partner_count)
+                m_b = contact_mass(m_b, sphere_clump[b], key_a, partner_key, partner_count)
             r_star = r_a * r_b / (r_a + r_b)
             m_star = m_a * m_b / (m_a + m_b)
             arm_a = r_a - 0.5 * overlap
@@ -502,7 +503,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             key_w = wall_key0 + p_id
             mc_i = m_i
             if wp.static(share_mass):
-                mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, 1)
+                mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count)
             active, f_a, t_a, h = wp.static(wall_contact)(
                 r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, plane_history_out[p_id, i], dt
             )
@@ -552,7 +553,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                 key_w = wall_key0 + plane_total + wall
                 mc_i = m_i
                 if wp.static(share_mass):
-                    mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count, 1)
+                    mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count)
                 active, f_a, t_a, h = wp.static(wall_contact)(
                     r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, mesh_history_out[k, i], dt
                 )
