@@ -9,8 +9,10 @@ module, compiled once and cached by Warp.
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
 from .enums import ContactLaw, RollingModel
+from .params import ContactHistory
 
 
 @dataclass(frozen=True)
@@ -29,12 +31,23 @@ class StepFeatures:
     """Some pair uses a law other than Hertz-Mindlin (JKR or EEPA)."""
     rolling: bool = True
     """Some pair has a rolling model and a rolling friction above zero."""
+    rolling_spring: bool = True
+    """Some pair has EPSD rolling resistance (a rolling friction above zero), whose spring is history."""
+
+    @property
+    def history_type(self):
+        """What a list slot stores (kernels/params.py, ``history_load``/``history_store``): the whole
+        ``ContactHistory`` (28 bytes) when a cohesive law or an EPSD spring needs it, else only the tangential
+        spring, a ``wp.vec3`` (12 bytes). The history moves through memory twice per contact and step (the
+        bytes the step kernel waits on) and is most of a sphere's memory."""
+        return ContactHistory if self.cohesive_laws or self.rolling_spring else wp.vec3
 
     @staticmethod
     def of(model, share_mass: bool) -> "StepFeatures":
         """The features of ``model`` (duck-typed: clump_count, wall_count, attached_count, pair_params)."""
         pairs = model.pair_params.numpy()
         rolling = (pairs["rolling_model"] != int(RollingModel.NONE)) & (pairs["mu_r"] != 0.0)
+        epsd = (pairs["rolling_model"] == int(RollingModel.EPSD)) & (pairs["mu_r"] != 0.0)
         clumps = model.clump_count > 0
         return StepFeatures(
             clumps=clumps,
@@ -43,4 +56,5 @@ class StepFeatures:
             coated_walls=model.attached_count > 0,
             cohesive_laws=bool(np.any(pairs["law"] != int(ContactLaw.HERTZ_MINDLIN))),
             rolling=bool(np.any(rolling)),
+            rolling_spring=bool(np.any(epsd)),
         )

@@ -14,13 +14,14 @@ Each kernel has its launcher beside it (``launch_<kernel>``), as in step.py.
 
 import functools
 import math
+from typing import Any
 
 import warp as wp
 
 from .enums import Overflow
 from .features import StepFeatures
 from .geometry import closest_point_triangle
-from .params import ContactHistory
+from .params import ContactHistory, history_store
 
 wp.set_module_options({"enable_backward": False})
 
@@ -131,17 +132,17 @@ def carry_history(
     old_count: int,
     new_keys: wp.array2d[int],
     new_count: int,
-    history: wp.array2d[ContactHistory],
+    history: wp.array2d(dtype=Any),
     col: int,
 ):
     """Move column ``col`` of ``history`` from the old sorted keys to the new sorted keys, in place: each new
     entry gets the history of the old entry with its key, else zero.
 
-    In place, so that the lists need no second history array (448 bytes per sphere at 16 slots). Matched
-    entries keep their order, so an entry moving to a lower slot (old slot >= new) can only overwrite old slots
-    that entries before it already read: those go in ascending order; entries moving up go in descending order
-    for the same reason, and neither kind can overwrite an old slot the other still needs. Unmatched entries
-    are zeroed last.
+    In place, so that the lists need no second history array (``history``: either slot layout, see
+    ``StepFeatures.history_type``). Matched entries keep their order, so an entry moving to a lower slot (old
+    slot >= new) can only overwrite old slots that entries before it already read: those go in ascending order;
+    entries moving up go in descending order for the same reason, and neither kind can overwrite an old slot the
+    other still needs. Unmatched entries are zeroed last.
     """
     t = int(0)
     for s in range(new_count):
@@ -166,7 +167,7 @@ def carry_history(
         while t < old_count and old_keys[t, col] < key:
             t += 1
         if t >= old_count or old_keys[t, col] != key:
-            history[s, col] = ContactHistory()
+            history_store(history, s, col, ContactHistory())
 
 
 @functools.cache
@@ -175,6 +176,7 @@ def build_contacts_kernel(features: StepFeatures):
     clumps = features.clumps
     mesh_walls = features.mesh_walls
     coated_walls = features.coated_walls
+    History = features.history_type
 
     @wp.kernel(module="unique", enable_backward=False)
     def build_contacts(
@@ -208,8 +210,8 @@ def build_contacts_kernel(features: StepFeatures):
         new_index_out: wp.array2d[int],
         new_mesh_count_out: wp.array[int],
         new_mesh_face_out: wp.array2d[int],
-        history_out: wp.array2d[ContactHistory],
-        mesh_history_out: wp.array2d[ContactHistory],
+        history_out: wp.array2d[History],
+        mesh_history_out: wp.array2d[History],
         build_x_out: wp.array[wp.vec3],
         overflow_out: wp.array[int],
     ):

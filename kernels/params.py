@@ -1,5 +1,6 @@
 """The structs of the contact laws: per-pair parameters (derived on the host from the materials and the
-interaction table) and per-contact history (carried from step to step and across list rebuilds)."""
+interaction table) and per-contact history (carried from step to step and across list rebuilds), with the
+functions that load and store a history slot in either of its layouts."""
 
 import warp as wp
 
@@ -43,8 +44,10 @@ class ContactHistory:
     """What one contact remembers from the last step, seen from the pair's body a (the lower index of two
     spheres, the sphere against a wall). A zero struct is a new contact; a contact that ends is zeroed.
 
-    A law that needs more history adds its field here: the lists, their rebuilds and checkpoints carry the
-    whole struct.
+    A law that needs more history adds its field here, and says in ``StepFeatures.history_type``
+    (kernels/features.py) when a model needs it: the lists store the whole struct, or only ``spring`` (a
+    ``wp.vec3``) when nothing else is used. Kernels read and write slots through :func:`history_load` and
+    :func:`history_store`, which take either layout.
     """
 
     spring: wp.vec3
@@ -54,3 +57,28 @@ class ContactHistory:
     aux: float
     """The normal law's scalar history: JKR 1 while in contact (also in a gap down to the break overlap);
     EEPA the largest overlap of the contact [m]; Hertz-Mindlin leaves it 0."""
+
+
+@wp.func
+def history_load(slots: wp.array2d[ContactHistory], k: int, i: int):
+    """Slot (k, i) of a whole-struct history array."""
+    return slots[k, i]
+
+
+@wp.func
+def history_load(slots: wp.array2d[wp.vec3], k: int, i: int):  # noqa: F811 (a Warp overload)
+    """Slot (k, i) of a spring-only history array: the rolling spring and ``aux`` read as zero."""
+    return ContactHistory(slots[k, i], wp.vec3(0.0), 0.0)
+
+
+@wp.func
+def history_store(slots: wp.array2d[ContactHistory], k: int, i: int, h: ContactHistory):
+    """Write ``h`` to slot (k, i) of a whole-struct history array."""
+    slots[k, i] = h
+
+
+@wp.func
+def history_store(slots: wp.array2d[wp.vec3], k: int, i: int, h: ContactHistory):  # noqa: F811
+    """Write ``h``'s spring to slot (k, i) of a spring-only history array (a model of that layout keeps its
+    rolling spring and ``aux`` at zero)."""
+    slots[k, i] = h.spring

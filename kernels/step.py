@@ -28,7 +28,7 @@ from .features import StepFeatures
 from .geometry import FEATURE_FACE, closest_point_triangle
 from .law_contact import contact_force_for
 from .law_rolling import rolling_resistance
-from .params import ContactHistory, PairParams
+from .params import ContactHistory, PairParams, history_load, history_store
 
 wp.set_module_options({"enable_backward": False})
 
@@ -297,6 +297,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
     rolling = features.rolling
     force_law = contact_force_for(cohesive)
     wall_contact = wall_contact_for(cohesive, rolling)
+    History = features.history_type
 
     @wp.kernel(module="unique", enable_backward=False, cuda_max_registers=max_registers)
     def step_spheres(
@@ -342,9 +343,9 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
         velocity_limit: float,
         impact_speed_min: float,
         # Out (read, then written; each thread owns its column):
-        neighbor_history_out: wp.array2d[ContactHistory],
-        plane_history_out: wp.array2d[ContactHistory],
-        mesh_history_out: wp.array2d[ContactHistory],
+        neighbor_history_out: wp.array2d[History],
+        plane_history_out: wp.array2d[History],
+        mesh_history_out: wp.array2d[History],
         # Out:
         x_out: wp.array[wp.vec3],
         v_out: wp.array[wp.vec3],
@@ -414,9 +415,9 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             # Hertz-Mindlin keeps aux = 0)
             hanging = False
             if wp.static(cohesive):
-                hanging = neighbor_history_out[k, i].aux != 0.0
+                hanging = history_load(neighbor_history_out, k, i).aux != 0.0
             if overlap <= 0.0 and not hanging:
-                neighbor_history_out[k, i] = ContactHistory()
+                history_store(neighbor_history_out, k, i, ContactHistory())
                 if wp.static(share_mass):
                     # a contact due within one step counts already, so a clump's mass is shared from its
                     # first step
@@ -431,7 +432,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                         )
                 continue
             if dist <= 0.0 or active_in[j] == 0:
-                neighbor_history_out[k, i] = ContactHistory()
+                history_store(neighbor_history_out, k, i, ContactHistory())
                 continue
             n = d / dist
             mat_a = sphere_material[a]
@@ -452,10 +453,10 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             v_rel = (v_in[a] + wp.cross(w_a, arm_a * n)) - (v_in[b] - wp.cross(w_b, arm_b * n))
             p = pair_params[pw, mat_a, mat_b]
             active, f_a, f_n, f_t, h, k_n = wp.static(force_law)(
-                overlap, n, v_rel, neighbor_history_out[k, i], r_star, m_star, p, dt
+                overlap, n, v_rel, history_load(neighbor_history_out, k, i), r_star, m_star, p, dt
             )
             if active == 0:
-                neighbor_history_out[k, i] = h
+                history_store(neighbor_history_out, k, i, h)
                 continue
             if wp.static(share_mass):
                 run_key, run_n = partner_tally(
@@ -470,7 +471,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                 m_roll, roll = rolling_resistance(
                     p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, h.roll, dt
                 )
-            neighbor_history_out[k, i] = ContactHistory(h.spring, roll, h.aux)
+            history_store(neighbor_history_out, k, i, ContactHistory(h.spring, roll, h.aux))
             f_i = f_a
             if i == a:
                 t += wp.cross(arm_a * n, f_t) + m_roll
@@ -505,9 +506,9 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             if wp.static(share_mass):
                 mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count)
             active, f_a, t_a, h = wp.static(wall_contact)(
-                r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, plane_history_out[p_id, i], dt
+                r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, history_load(plane_history_out, p_id, i), dt
             )
-            plane_history_out[p_id, i] = h
+            history_store(plane_history_out, p_id, i, h)
             if wp.static(share_mass):
                 if tally >= 0 and (active != 0 or r_i - gap - dt * wp.dot(v_i, n_p) > 0.0):
                     run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
@@ -545,7 +546,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                         triangle_wall,
                     )
                 if skip:
-                    mesh_history_out[k, i] = ContactHistory()
+                    history_store(mesh_history_out, k, i, ContactHistory())
                     continue
                 origin = wp.transform_get_translation(wall_pose[wall])
                 v_wall = wall_v[wall] + wp.cross(wall_w[wall], q - origin)
@@ -555,9 +556,9 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                 if wp.static(share_mass):
                     mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count)
                 active, f_a, t_a, h = wp.static(wall_contact)(
-                    r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, mesh_history_out[k, i], dt
+                    r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, history_load(mesh_history_out, k, i), dt
                 )
-                mesh_history_out[k, i] = h
+                history_store(mesh_history_out, k, i, h)
                 if wp.static(share_mass):
                     if tally >= 0 and (active != 0 or r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0):
                         run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)

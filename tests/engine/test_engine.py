@@ -109,7 +109,7 @@ def test_history_survives_rebuilds():
         x0 = m.state().sphere_x.numpy()
         st = s.run(m.state(), (c := s.contacts()), 400)
         res.append(st.sphere_x.numpy())
-        spring = c.neighbor_history.numpy()["spring"][:, 0]
+        spring = c.spring()[:, 0]
         assert np.linalg.norm(spring[: c.neighbor_count.numpy()[0]]) > 0, "the pair's spring was never loaded"
         if rebuilds > 1:
             assert 0.002 * s.dt > 0.5 * skin and np.linalg.norm(st.sphere_v.numpy()[1]) > 0.002
@@ -124,7 +124,7 @@ def test_pair_history_identical_on_both_sides():
     m, s = _resting_pair(1e-3)
     c = s.contacts()
     s.run(m.state(), c, 200)
-    cnt, idx, spr = c.neighbor_count.numpy(), c.neighbor_index.numpy(), c.neighbor_history.numpy()["spring"]
+    cnt, idx, spr = c.neighbor_count.numpy(), c.neighbor_index.numpy(), c.spring()
     k0 = list(idx[: cnt[0], 0]).index(1)
     k1 = list(idx[: cnt[1], 1]).index(0)
     assert np.array_equal(spr[k0, 0], spr[k1, 1]) and np.linalg.norm(spr[k0, 0]) > 0

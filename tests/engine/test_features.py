@@ -39,13 +39,40 @@ def _bed(kind: str):
 @pytest.mark.parametrize(
     "kind, expected",
     [
-        ("hm", StepFeatures(False, False, False, False, False, False)),
-        ("jkr", StepFeatures(False, False, False, False, True, True)),
-        ("clumps", StepFeatures(True, True, True, True, False, False)),
+        ("hm", StepFeatures(False, False, False, False, False, False, False)),
+        ("jkr", StepFeatures(False, False, False, False, True, True, True)),
+        ("clumps", StepFeatures(True, True, True, True, False, False, False)),
     ],
 )
 def test_features_follow_the_model(kind, expected):
     assert wd.Solver(_bed(kind)).features == expected
+
+
+@pytest.mark.parametrize(
+    "features, slot_bytes",
+    [
+        (StepFeatures(cohesive_laws=False, rolling=False, rolling_spring=False), 12),
+        (StepFeatures(cohesive_laws=False, rolling=True, rolling_spring=False), 12),  # constant-torque rolling
+        (StepFeatures(cohesive_laws=False, rolling=True, rolling_spring=True), 28),  # EPSD keeps its spring
+        (StepFeatures(cohesive_laws=True, rolling=False, rolling_spring=False), 28),  # JKR/EEPA keep aux
+    ],
+)
+def test_history_slot_holds_only_what_the_laws_use(features, slot_bytes):
+    s = wd.Solver(_bed("hm"))
+    s.features = features
+    c = s.contacts()
+    assert c.neighbor_history.capacity == slot_bytes * c.neighbor_history.size
+    assert c.plane_history.dtype is c.neighbor_history.dtype is features.history_type
+
+
+def test_contacts_of_another_layout_are_refused():
+    """Features changed after the contacts were allocated: a clear error, not a kernel reading the wrong type."""
+    m = _bed("hm")
+    s = wd.Solver(m)
+    c = s.contacts()
+    s.features = StepFeatures()
+    with pytest.raises(ValueError, match="contacts hold history of type vec3f.*Solver.contacts"):
+        s.run(m.state(), c, 2)
 
 
 def test_body_contact_mass_needs_no_partner_tables():

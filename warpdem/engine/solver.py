@@ -12,7 +12,6 @@ import warp as wp
 from warpdem.kernels import neighbors as _nb
 from warpdem.kernels import step as _st
 from warpdem.kernels.features import StepFeatures
-from warpdem.kernels.params import ContactHistory
 
 from .types import ContactLaw, Contacts, Control, Model, Overflow, State
 
@@ -150,6 +149,7 @@ class Solver:
         cap = int(self.options.neighbor_capacity or self.default_neighbor_capacity())
         mcap = int(self.options.mesh_capacity) if m.wall_count else 1
         planes = max(m.plane_count, 1)
+        history = self.features.history_type
 
         def slots(k, dtype):
             return wp.zeros((k, n), dtype=dtype, device=dev)
@@ -161,11 +161,11 @@ class Solver:
             skin=self.skin,
             neighbor_count=wp.zeros(n, dtype=int, device=dev),
             neighbor_index=slots(cap, int),
-            neighbor_history=slots(cap, ContactHistory),
-            plane_history=slots(planes, ContactHistory),
+            neighbor_history=slots(cap, history),
+            plane_history=slots(planes, history),
             mesh_count=wp.zeros(n, dtype=int, device=dev),
             mesh_face=slots(mcap, int),
-            mesh_history=slots(mcap, ContactHistory),
+            mesh_history=slots(mcap, history),
             wall_build_pose=wp.zeros(max(m.wall_count, 1), dtype=wp.transform, device=dev),
             build_x=wp.zeros(n, dtype=wp.vec3, device=dev),
             rebuild=wp.ones(1, dtype=int, device=dev),
@@ -177,6 +177,17 @@ class Solver:
         for name in _nb.LIST_ARRAYS:
             c.scratch[name] = wp.zeros_like(getattr(c, name))
         return c
+
+    def _check_contacts(self, contacts: Contacts) -> None:
+        """Contacts must hold the history layout the kernels are compiled for (``features`` set after
+        :meth:`contacts` allocated them would not match)."""
+        want = self.features.history_type
+        if contacts.neighbor_history.dtype is not want:
+            raise ValueError(
+                f"Solver: contacts hold history of type {contacts.neighbor_history.dtype.__name__}, but the "
+                f"kernels are compiled for {want.__name__} (features {self.features}); allocate them with "
+                "Solver.contacts() after setting Solver.features"
+            )
 
     # the step -------------------------------------------------------------------------------
     def rebuild(self, state: State, contacts: Contacts) -> None:
@@ -196,6 +207,7 @@ class Solver:
         self, state_in: State, state_out: State, control: Control | None, contacts: Contacts, dt: float | None = None
     ) -> None:
         """Advance ``state_in`` by one step into ``state_out`` (rebuilding the lists first if due)."""
+        self._check_contacts(contacts)
         for name in State.TWIN_SHARED:
             setattr(state_out, name, getattr(state_in, name))
         self._set_time(state_in.time)
@@ -290,6 +302,7 @@ class Solver:
         flag between steps. Blow-ups and overflows are checked once at the end and raise
         :class:`SimulationError`.
         """
+        self._check_contacts(contacts)
         steps = int(steps)
         if steps <= 0:
             return state

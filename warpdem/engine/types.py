@@ -329,16 +329,18 @@ class Contacts:
     neighbor_index: wp.array
     """Candidate partner, shape (neighbor_capacity, sphere_count), int32, ascending per sphere."""
     neighbor_history: wp.array
-    """History of the pair (canonical order), shape (neighbor_capacity, sphere_count), ``ContactHistory``
-    (kernels/params.py: tangential spring [m], rolling spring torque [N m], the law's scalar)."""
+    """History of the pair (canonical order), shape (neighbor_capacity, sphere_count): ``ContactHistory``
+    (kernels/params.py: tangential spring [m], rolling spring torque [N m], the law's scalar), or only the
+    tangential spring [m] as a ``wp.vec3`` when the model has no cohesive law and no EPSD rolling
+    (``StepFeatures.history_type``)."""
     plane_history: wp.array
-    """History per sphere and plane, shape (max(plane_count, 1), sphere_count), ContactHistory."""
+    """History per sphere and plane, shape (max(plane_count, 1), sphere_count), the same type."""
     mesh_count: wp.array
     """Candidate triangles per sphere, shape (sphere_count,), int32."""
     mesh_face: wp.array
     """Candidate triangle index, shape (mesh_capacity, sphere_count), int32, ascending per sphere."""
     mesh_history: wp.array
-    """History per sphere and triangle, shape (mesh_capacity, sphere_count), ContactHistory."""
+    """History per sphere and triangle, shape (mesh_capacity, sphere_count), the same type."""
     wall_build_pose: wp.array
     """Wall poses at the last rebuild, shape (max(wall_count, 1),), transform."""
     build_x: wp.array
@@ -360,3 +362,9 @@ class Contacts:
     cells: dict = field(default_factory=dict)
     """The cell grid of the last rebuild: ``head`` (bucket -> first sphere, -1 empty; a power-of-two length)
     and ``next`` (sphere -> next sphere of its bucket), int32 arrays."""
+
+    def spring(self, kind: str = "neighbor") -> np.ndarray:
+        """Tangential springs [m] of the ``kind`` ("neighbor", "plane" or "mesh") history slots, whichever layout
+        they are stored in: a host array of shape (slots, sphere_count, 3)."""
+        slots = getattr(self, f"{kind}_history").numpy()
+        return slots["spring"] if slots.dtype.names else slots

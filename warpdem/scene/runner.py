@@ -422,15 +422,18 @@ def _fingerprint(spec, device, world_count, variations, world_seeds) -> str:
     return hashlib.sha1(text.encode()).hexdigest()
 
 
-CHECKPOINT_FORMAT = 2
-"""Version of the arrays a checkpoint holds (2: contact history as one ContactHistory record per slot). A
-checkpoint of another version, or one whose history record has other fields, belongs to other code: the run
-starts afresh instead of resuming from it."""
+CHECKPOINT_FORMAT = 3
+"""Version of the arrays a checkpoint holds (3: contact history as one ContactHistory record per slot, or its
+spring only; see ``StepFeatures.history_type``). A checkpoint of another version, or one whose history slot
+has another layout, belongs to other code: the run starts afresh instead of resuming from it."""
 
 
 def _checkpoint_format(contacts) -> list:
-    """The version and the history record's fields, as saved in a checkpoint's meta."""
-    return [CHECKPOINT_FORMAT, repr(contacts.neighbor_history.dtype.numpy_dtype())]
+    """The version and the history slot's layout (its record's fields, or its vector type), as saved in a
+    checkpoint's meta."""
+    dtype = contacts.neighbor_history.dtype
+    layout = dtype.numpy_dtype() if hasattr(dtype, "numpy_dtype") else dtype.__name__
+    return [CHECKPOINT_FORMAT, repr(layout)]
 
 
 def _device_arrays(obj) -> dict:
