@@ -21,7 +21,7 @@ import warp as wp
 from .enums import Overflow
 from .features import StepFeatures
 from .geometry import closest_point_triangle
-from .params import ContactHistory, history_store
+from .params import ContactHistory, history_store, slot_bit, slot_live
 
 wp.set_module_options({"enable_backward": False})
 
@@ -134,9 +134,11 @@ def carry_history(
     new_count: int,
     history: wp.array2d(dtype=Any),
     col: int,
+    live: wp.uint64,
 ):
     """Move column ``col`` of ``history`` from the old sorted keys to the new sorted keys, in place: each new
-    entry gets the history of the old entry with its key, else zero.
+    entry gets the history of the old entry with its key, else zero. Returns the new live mask (kernels/params.py,
+    ``slot_live``): each new slot inherits its old slot's bit of ``live``.
 
     In place, so that the lists need no second history array (``history``: either slot layout, see
     ``StepFeatures.history_type``). Matched entries keep their order, so an entry moving to a lower slot (old
@@ -162,12 +164,16 @@ def carry_history(
             if old_keys[t, col] == key:
                 history[s, col] = history[t, col]
     t = int(0)
+    new_live = wp.uint64(0)
     for s in range(new_count):
         key = new_keys[s, col]
         while t < old_count and old_keys[t, col] < key:
             t += 1
         if t >= old_count or old_keys[t, col] != key:
             history_store(history, s, col, ContactHistory())
+        elif slot_live(live, t):
+            new_live = new_live | slot_bit(s)
+    return new_live
 
 
 @functools.cache
@@ -212,6 +218,7 @@ def build_contacts_kernel(features: StepFeatures):
         new_mesh_face_out: wp.array2d[int],
         history_out: wp.array2d[History],
         mesh_history_out: wp.array2d[History],
+        neighbor_live_out: wp.array[wp.uint64],
         build_x_out: wp.array[wp.vec3],
         overflow_out: wp.array[int],
     ):
@@ -226,6 +233,7 @@ def build_contacts_kernel(features: StepFeatures):
         if parked:
             new_count_out[i] = 0
             new_mesh_count_out[i] = 0
+            neighbor_live_out[i] = wp.uint64(0)
             return
         r_i = sphere_radius[i]
         world = sphere_world[i]
@@ -262,7 +270,9 @@ def build_contacts_kernel(features: StepFeatures):
                                         wp.atomic_or(overflow_out, 0, Overflow.NEIGHBOR)
                         j = cell_next[j]
         sort_column(new_index_out, count, i)
-        carry_history(old_index, old_count[i], new_index_out, count, history_out, i)
+        neighbor_live_out[i] = carry_history(
+            old_index, old_count[i], new_index_out, count, history_out, i, neighbor_live_out[i]
+        )
         new_count_out[i] = count
 
         if wp.static(mesh_walls):
@@ -290,7 +300,10 @@ def build_contacts_kernel(features: StepFeatures):
                         else:
                             wp.atomic_or(overflow_out, 0, Overflow.MESH)
             sort_column(new_mesh_face_out, mcount, i)
-            carry_history(old_mesh_face, old_mesh_count[i], new_mesh_face_out, mcount, mesh_history_out, i)
+            # mesh slots keep no live mask (all live)
+            carry_history(
+                old_mesh_face, old_mesh_count[i], new_mesh_face_out, mcount, mesh_history_out, i, ~wp.uint64(0)
+            )
             new_mesh_count_out[i] = mcount
         else:
             new_mesh_count_out[i] = 0
@@ -335,6 +348,7 @@ def launch_build_contacts(model, state, contacts, *, features: StepFeatures, inv
             s["mesh_face"],
             c.neighbor_history,
             c.mesh_history,
+            c.neighbor_live,
             c.build_x,
             c.overflow,
         ],

@@ -1,6 +1,7 @@
 """The structs of the contact laws: per-pair parameters (derived on the host from the materials and the
 interaction table) and per-contact history (carried from step to step and across list rebuilds), with the
-functions that load and store a history slot in either of its layouts."""
+functions that load and store a history slot in either of its layouts and those that read a sphere's live-slot
+mask."""
 
 import warp as wp
 
@@ -82,3 +83,25 @@ def history_store(slots: wp.array2d[wp.vec3], k: int, i: int, h: ContactHistory)
     """Write ``h``'s spring to slot (k, i) of a spring-only history array (a model of that layout keeps its
     rolling spring and ``aux`` at zero)."""
     slots[k, i] = h.spring
+
+
+LIVE_SLOTS = wp.constant(64)
+"""Slots of a sphere's list that its live mask covers (one ``wp.uint64`` per sphere); later slots count as live."""
+
+
+@wp.func
+def slot_live(mask: wp.uint64, k: int):
+    """Whether slot ``k`` may hold a nonzero history: its bit of ``mask``, or always past ``LIVE_SLOTS``.
+
+    A slot whose contact was not active at the last step holds a zero history: the live mask lets the step skip
+    reading and rewriting those zeros (most candidates of a settled bed, and every plane a sphere is far from).
+    """
+    return k >= LIVE_SLOTS or ((mask >> wp.uint64(k)) & wp.uint64(1)) != wp.uint64(0)
+
+
+@wp.func
+def slot_bit(k: int):
+    """The bit of slot ``k`` in a live mask (none past ``LIVE_SLOTS``)."""
+    if k >= LIVE_SLOTS:
+        return wp.uint64(0)
+    return wp.uint64(1) << wp.uint64(k)

@@ -28,7 +28,7 @@ from .features import StepFeatures
 from .geometry import FEATURE_FACE, closest_point_triangle
 from .law_contact import contact_force_for
 from .law_rolling import rolling_resistance
-from .params import ContactHistory, PairParams, history_load, history_store
+from .params import ContactHistory, PairParams, history_load, history_store, slot_bit, slot_live
 
 wp.set_module_options({"enable_backward": False})
 
@@ -346,6 +346,8 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
         neighbor_history_out: wp.array2d[History],
         plane_history_out: wp.array2d[History],
         mesh_history_out: wp.array2d[History],
+        neighbor_live_out: wp.array[wp.uint64],
+        plane_live_out: wp.array[wp.uint64],
         # Out:
         x_out: wp.array[wp.vec3],
         v_out: wp.array[wp.vec3],
@@ -401,8 +403,11 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
         f = wp.vec3(0.0)
         t = wp.vec3(0.0)
 
-        # sphere-sphere
+        # sphere-sphere (a slot not live holds a zero history: it is neither read nor rewritten)
+        live_in = neighbor_live_out[i]
+        live = wp.uint64(0)
         for k in range(neighbor_count[i]):
+            was_live = slot_live(live_in, k)
             j = neighbor_index[k, i]
             a = wp.min(i, j)
             b = wp.max(i, j)
@@ -415,9 +420,11 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             # Hertz-Mindlin keeps aux = 0)
             hanging = False
             if wp.static(cohesive):
-                hanging = history_load(neighbor_history_out, k, i).aux != 0.0
+                if was_live:
+                    hanging = history_load(neighbor_history_out, k, i).aux != 0.0
             if overlap <= 0.0 and not hanging:
-                history_store(neighbor_history_out, k, i, ContactHistory())
+                if was_live:
+                    history_store(neighbor_history_out, k, i, ContactHistory())
                 if wp.static(share_mass):
                     # a contact due within one step counts already, so a clump's mass is shared from its
                     # first step
@@ -432,7 +439,8 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                         )
                 continue
             if dist <= 0.0 or active_in[j] == 0:
-                history_store(neighbor_history_out, k, i, ContactHistory())
+                if was_live:
+                    history_store(neighbor_history_out, k, i, ContactHistory())
                 continue
             n = d / dist
             mat_a = sphere_material[a]
@@ -452,11 +460,13 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             w_b = w_in[b]
             v_rel = (v_in[a] + wp.cross(w_a, arm_a * n)) - (v_in[b] - wp.cross(w_b, arm_b * n))
             p = pair_params[pw, mat_a, mat_b]
-            active, f_a, f_n, f_t, h, k_n = wp.static(force_law)(
-                overlap, n, v_rel, history_load(neighbor_history_out, k, i), r_star, m_star, p, dt
-            )
+            h_last = ContactHistory()
+            if was_live:
+                h_last = history_load(neighbor_history_out, k, i)
+            active, f_a, f_n, f_t, h, k_n = wp.static(force_law)(overlap, n, v_rel, h_last, r_star, m_star, p, dt)
             if active == 0:
-                history_store(neighbor_history_out, k, i, h)
+                if was_live:
+                    history_store(neighbor_history_out, k, i, h)
                 continue
             if wp.static(share_mass):
                 run_key, run_n = partner_tally(
@@ -472,6 +482,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                     p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, h.roll, dt
                 )
             history_store(neighbor_history_out, k, i, ContactHistory(h.spring, roll, h.aux))
+            live = live | slot_bit(k)
             f_i = f_a
             if i == a:
                 t += wp.cross(arm_a * n, f_t) + m_roll
@@ -493,22 +504,36 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                         wp.cross(c_pt - origin_j, -f_i),
                     )
 
-        # infinite planes (static)
+        # infinite planes (static): one the sphere neither touches (no law forms a contact in a gap) nor touched at
+        # the last step (a zero history) has nothing to compute, read or write
+        plane_live_in = plane_live_out[i]
+        plane_live = wp.uint64(0)
         for p_id in range(plane_point.shape[0]):
             pl_world = plane_world[p_id]
             if pl_world >= 0 and pl_world != world:
                 continue
             n_p = plane_normal[p_id]
             gap = wp.dot(x_i - plane_point[p_id], n_p)
-            p = pair_params[pw, mat_i, plane_material[p_id]]
             key_w = wall_key0 + p_id
-            mc_i = m_i
-            if wp.static(share_mass):
-                mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count)
-            active, f_a, t_a, h = wp.static(wall_contact)(
-                r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, history_load(plane_history_out, p_id, i), dt
-            )
-            history_store(plane_history_out, p_id, i, h)
+            was_live = slot_live(plane_live_in, p_id)
+            active = int(0)
+            f_a = wp.vec3(0.0)
+            t_a = wp.vec3(0.0)
+            if was_live or r_i - gap >= 0.0:
+                p = pair_params[pw, mat_i, plane_material[p_id]]
+                mc_i = m_i
+                if wp.static(share_mass):
+                    mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count)
+                h_last = ContactHistory()
+                if was_live:
+                    h_last = history_load(plane_history_out, p_id, i)
+                active, f_a, t_a, h = wp.static(wall_contact)(
+                    r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, h_last, dt
+                )
+                if active != 0 or was_live:
+                    history_store(plane_history_out, p_id, i, h)
+                if active != 0:
+                    plane_live = plane_live | slot_bit(p_id)
             if wp.static(share_mass):
                 if tally >= 0 and (active != 0 or r_i - gap - dt * wp.dot(v_i, n_p) > 0.0):
                     run_key, run_n = partner_tally(partner_key_out, partner_count_out, tally, run_key, run_n, key_w)
@@ -578,6 +603,8 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                         wp.atomic_add(face_impact_energy_out, fw, face, wp.float64(0.5 * m_i * approach * approach))
                         wp.atomic_max(face_impact_speed_out, fw, face, approach)
 
+        neighbor_live_out[i] = live
+        plane_live_out[i] = plane_live
         f_out[i] = f
         t_out[i] = t
         if wp.static(share_mass):
@@ -673,6 +700,8 @@ def launch_step_spheres(
             c.neighbor_history,
             c.plane_history,
             c.mesh_history,
+            c.neighbor_live,
+            c.plane_live,
             state_out.sphere_x,
             state_out.sphere_v,
             state_out.sphere_w,

@@ -96,3 +96,34 @@ def test_specialised_kernels_compute_what_the_general_ones_do(kind):
     for a, b in zip(runs[0][:3], runs[1][:3]):
         assert np.array_equal(a, b)
     assert np.abs(runs[0][0][:, 2] - 0.006).max() > 1e-4, "the spheres should have moved"
+
+
+@pytest.mark.parametrize("kind", ["hm", "jkr"])
+def test_live_masks_mark_the_slots_with_history(kind):
+    """A neighbour or plane slot whose live bit is clear holds a zero history (the step skips reading it), and the
+    bits mark exactly the contacts of the last step (recomputed here from its positions, x - dt v): touching
+    partners, and the floor. A JKR pair may also stay live in a gap (it hangs on down to its break overlap)."""
+    m = _bed(kind)
+    s = wd.Solver(m, wd.SolverOptions(dt=2e-5))
+    c = s.contacts()
+    st = s.run(m.state(), c, 2000)  # 40 ms: the upper layer lands on the lower
+    x = st.sphere_x.numpy().astype(np.float64) - s.dt * st.sphere_v.numpy()
+    r = m.sphere_radius.numpy()
+    cnt, idx = c.neighbor_count.numpy(), c.neighbor_index.numpy()
+    rows = cnt.max()
+    live = (c.neighbor_live.numpy()[None, :] >> np.arange(rows, dtype=np.uint64)[:, None]) & np.uint64(1)
+    live = live.astype(bool)
+    used = np.arange(rows)[:, None] < cnt[None, :]
+    assert not np.any(c.spring()[:rows][~live & used]), "a slot without its live bit holds a history"
+    assert not np.any(live & ~used), "a live bit past the list"
+    cols = np.broadcast_to(np.arange(len(r)), (rows, len(r)))
+    j = np.where(used, idx[:rows], 0)
+    overlap = r[cols] + r[j] - np.linalg.norm(x[j] - x[cols], axis=-1)
+    touching = used & (overlap > 1e-9)
+    assert touching.sum() >= 4, "the layers should touch"
+    assert np.array_equal(live & (np.abs(overlap) > 1e-9), touching if kind == "hm" else live & (overlap > 1e-9))
+    assert np.all(live[touching])
+    floor = x[:, 2] < r - 1e-9
+    plane_live = (c.plane_live.numpy() & np.uint64(1)).astype(bool)
+    assert floor.sum() >= 4 and np.array_equal(plane_live & (np.abs(x[:, 2] - r) > 1e-9), floor)
+    assert not np.any(c.spring("plane")[0][~plane_live])

@@ -166,6 +166,8 @@ class Solver:
             mesh_count=wp.zeros(n, dtype=int, device=dev),
             mesh_face=slots(mcap, int),
             mesh_history=slots(mcap, history),
+            neighbor_live=wp.zeros(n, dtype=wp.uint64, device=dev),
+            plane_live=wp.zeros(n, dtype=wp.uint64, device=dev),
             wall_build_pose=wp.zeros(max(m.wall_count, 1), dtype=wp.transform, device=dev),
             build_x=wp.zeros(n, dtype=wp.vec3, device=dev),
             rebuild=wp.ones(1, dtype=int, device=dev),

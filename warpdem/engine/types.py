@@ -341,6 +341,12 @@ class Contacts:
     """Candidate triangle index, shape (mesh_capacity, sphere_count), int32, ascending per sphere."""
     mesh_history: wp.array
     """History per sphere and triangle, shape (mesh_capacity, sphere_count), the same type."""
+    neighbor_live: wp.array
+    """Live mask of each sphere's first 64 neighbour slots, shape (sphere_count,), uint64: bit k set when slot k's
+    contact was active at the last step (kernels/params.py, ``slot_live``); a clear bit's slot holds a zero
+    history, which the step neither reads nor rewrites."""
+    plane_live: wp.array
+    """The same mask over the planes (bit p: plane p; planes past 64 always count as live)."""
     wall_build_pose: wp.array
     """Wall poses at the last rebuild, shape (max(wall_count, 1),), transform."""
     build_x: wp.array

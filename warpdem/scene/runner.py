@@ -422,9 +422,9 @@ def _fingerprint(spec, device, world_count, variations, world_seeds) -> str:
     return hashlib.sha1(text.encode()).hexdigest()
 
 
-CHECKPOINT_FORMAT = 3
-"""Version of the arrays a checkpoint holds (3: contact history as one ContactHistory record per slot, or its
-spring only; see ``StepFeatures.history_type``). A checkpoint of another version, or one whose history slot
+CHECKPOINT_FORMAT = 4
+"""Version of the arrays a checkpoint holds (4: contact history as one ContactHistory record per slot, or its
+spring only, see ``StepFeatures.history_type``; live masks of the neighbour and plane slots). A checkpoint of another version, or one whose history slot
 has another layout, belongs to other code: the run starts afresh instead of resuming from it."""
 
 
