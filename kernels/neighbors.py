@@ -1,15 +1,19 @@
 """Neighbour search with a Verlet skin and history carried across rebuilds by sorted-key matching.
 
-Sphere candidates come from a hashed cell grid with one linked list per bucket, keyed by cell and world
-(the world keeps overlapping worlds apart, so every world sits at the origin). It is built by plain
-kernels with one atomic exchange per sphere, not a sort, so that a rebuild can sit in a conditional
-node of a CUDA graph (Warp's ``HashGrid`` sorts with CUB, which a conditional node cannot hold); list
-order does not matter because each sphere's candidates are sorted. Triangle candidates come from the
-mesh BVH.
+Sphere candidates come from a hashed cell grid, keyed by cell and world (the world keeps overlapping worlds apart,
+so every world sits at the origin), built as a counting sort of the active spheres into the hash buckets: count
+the spheres of each bucket, scan the counts into bucket starts, then scatter each sphere into a slot of its
+bucket with a packed copy of what the walk reads (centre and radius; index, world and clump). The walk then
+streams each bucket's slots instead of chasing a linked list and gathering every candidate from random
+addresses. The scan is plain tiled kernels and the sort takes atomic adds, not CUB, so that a rebuild can sit in a
+conditional node of a CUDA graph (Warp's ``HashGrid`` sorts with CUB, which a conditional node cannot hold); the
+order within a bucket does not matter because each sphere's candidates are sorted. Triangle candidates come from
+the mesh BVH.
 Each sphere's new candidate list is sorted by partner (or face) index and merged with the sphere's previous
 sorted list: every new entry inherits the history of its key, moved in place (no second history array).
 
-Each kernel has its launcher beside it (``launch_<kernel>``), as in step.py.
+A rebuild: clear_cells, count_cells, sum_cell_tiles, scan_cell_tile_sums, scan_cells, sort_spheres,
+build_contacts, commit_contacts. Each kernel has its launcher beside it (``launch_<kernel>``), as in step.py.
 """
 
 import functools
@@ -27,18 +31,44 @@ wp.set_module_options({"enable_backward": False})
 
 CELLS_PER_REACH = 2.0
 """Neighbour cells per longest reach (2 r_max + skin + cohesive reach): 2 makes the walked box of cells hug
-each sphere's own reach."""
+each sphere's own reach. The candidate lists do not depend on it (the walk keeps exactly the spheres within
+reach); it trades the buckets walked (4 to 5 per axis at 2) against the foreign spheres read in each."""
+BUCKETS_PER_SPHERE = 2
+"""Hash buckets per sphere, before rounding up to a power of two (so 2 to 4; at least 1024 buckets). In a packed
+bed a cell (half a diameter wide) holds ~0.15 spheres, and a sphere walks 64 to 125 cells, so most buckets it
+visits belong to cells that hold none of its partners: at 2 to 4 buckets per sphere such a bucket still holds 0.25
+to 0.5 spheres of other cells or worlds, each a 16-byte read that fails the distance test (at 1 per sphere, 0.5
+to 1). A bucket costs 4 bytes and 8 bytes of scan traffic; at this ratio the count, scan and sort take ~2 % of a
+rebuild on CPU."""
+CELL_TILE = 256
+"""Buckets per tile of the bucket scan, and the CUDA block size of its tiled launches (Warp's default block size,
+so the module builds once per device)."""
+SUM_TILE = 4 * CELL_TILE
+"""Tile sums scanned per round of the one-block scan of the tile sums (B / (CELL_TILE * SUM_TILE) rounds: 8 for a
+million spheres)."""
 LIST_ARRAYS = ("neighbor_count", "neighbor_index", "mesh_count", "mesh_face")
 """The Contacts arrays a rebuild writes into ``Contacts.scratch``, then commits (the histories move in place)."""
 
 
 def cell_grid(sphere_count: int, device) -> dict:
-    """An empty cell grid: ``head`` (bucket -> first sphere, -1 empty; a power-of-two length, about two
-    buckets per sphere, which keeps the lists short without a large table to clear) and ``next``."""
-    buckets = 1 << max(10, int(math.ceil(math.log2(max(2 * sphere_count, 1)))))
+    """An empty cell grid, allocated once (a rebuild allocates nothing), with B a power of two of about
+    ``BUCKETS_PER_SPHERE`` buckets per sphere:
+
+    - ``start``: (B + 1,) int32; bucket b holds slots ``start[b] .. start[b + 1]`` once sorted (during a rebuild it
+      holds the counts, then the starts, then the ends: ``start[b + 1]`` is bucket b's count, start, then cursor);
+    - ``tile_sum``: (B / CELL_TILE,) int32, the spheres of each tile of buckets, then their exclusive scan;
+    - ``slot_xr``: (sphere_count,) vec4, centre [m] and radius [m] of the sphere in each slot;
+    - ``slot_sphere``: (sphere_count,) vec3i, index, world and clump of the sphere in each slot.
+
+    Bytes per sphere: 4 per bucket (8 to 16) + 16 + 12 = 36 to 44 (the linked lists took 4 per bucket + 4).
+    """
+    buckets = BUCKETS_PER_SPHERE * max(sphere_count, 1)
+    buckets = 1 << max(int(math.log2(4 * CELL_TILE)), int(math.ceil(math.log2(buckets))))
     return {
-        "head": wp.full(buckets, -1, dtype=int, device=device),
-        "next": wp.full(sphere_count, -1, dtype=int, device=device),
+        "start": wp.zeros(buckets + 1, dtype=int, device=device),
+        "tile_sum": wp.zeros(buckets // CELL_TILE, dtype=int, device=device),
+        "slot_xr": wp.zeros(sphere_count, dtype=wp.vec4, device=device),
+        "slot_sphere": wp.zeros(sphere_count, dtype=wp.vec3i, device=device),
     }
 
 
@@ -64,24 +94,24 @@ def cell_bucket(c: wp.vec3i, world: int, mask: int):
 @wp.kernel
 def clear_cells(
     # Out (rebuild_count_out: read, then advanced):
-    cell_head_out: wp.array[int],
+    cell_start_out: wp.array[int],
     rebuild_count_out: wp.array[int],
 ):
-    """Empty every bucket (-1 ends a list) and count the rebuild (one thread: no atomic needed)."""
+    """Zero every bucket's count and count the rebuild (one thread: no atomic needed)."""
     t = wp.tid()
-    cell_head_out[t] = -1
+    cell_start_out[t] = 0
     if t == 0:
         rebuild_count_out[0] = rebuild_count_out[0] + 1
 
 
 def launch_clear_cells(model, contacts, rebuild_count: wp.array) -> None:
     """Empty the cell grid of ``contacts`` and count a rebuild in ``rebuild_count``."""
-    head = contacts.cells["head"]
-    wp.launch(clear_cells, dim=head.shape[0], outputs=[head, rebuild_count], device=model.device)
+    start = contacts.cells["start"]
+    wp.launch(clear_cells, dim=start.shape[0], outputs=[start, rebuild_count], device=model.device)
 
 
 @wp.kernel
-def bin_spheres(
+def count_cells(
     # Model:
     sphere_world: wp.array[int],
     # State in:
@@ -89,27 +119,148 @@ def bin_spheres(
     active: wp.array[int],
     # Options:
     inv_cell: float,
-    # Out (cell_head_out: read, then written):
-    cell_head_out: wp.array[int],
-    cell_next_out: wp.array[int],
+    # Out (cell_start_out[b + 1]: bucket b's count, advanced):
+    cell_start_out: wp.array[int],
 ):
-    """Push each active sphere onto its bucket's list (parked factory particles stay out)."""
+    """Count the active spheres of each bucket (parked factory particles stay out)."""
     i = wp.tid()
     if active[i] == 0:
-        cell_next_out[i] = -1
         return
-    b = cell_bucket(cell_of(x[i], inv_cell), sphere_world[i], cell_head_out.shape[0] - 1)
-    cell_next_out[i] = wp.atomic_exch(cell_head_out, b, i)
+    b = cell_bucket(cell_of(x[i], inv_cell), sphere_world[i], cell_start_out.shape[0] - 2)
+    wp.atomic_add(cell_start_out, b + 1, 1)
 
 
-def launch_bin_spheres(model, state, contacts, inv_cell: float) -> None:
-    """Bin the active spheres of ``state`` into the cell grid of ``contacts`` (cells of edge 1 / ``inv_cell``)."""
+def launch_count_cells(model, state, contacts, inv_cell: float) -> None:
+    """Count the active spheres of ``state`` per bucket of ``contacts``' cell grid (cells of edge 1 / ``inv_cell``)."""
     m = model
     wp.launch(
-        bin_spheres,
+        count_cells,
         dim=m.sphere_count,
         inputs=[m.sphere_world, state.sphere_x, state.sphere_active, inv_cell],
-        outputs=[contacts.cells["head"], contacts.cells["next"]],
+        outputs=[contacts.cells["start"]],
+        device=m.device,
+    )
+
+
+@wp.kernel
+def sum_cell_tiles(
+    # Contacts in (cell_start[b + 1]: bucket b's count):
+    cell_start: wp.array[int],
+    # Out:
+    tile_sum_out: wp.array[int],
+):
+    """Spheres in each tile of ``CELL_TILE`` buckets (one block per tile)."""
+    k = wp.tid()
+    counts = wp.tile_load(cell_start, shape=CELL_TILE, offset=k * CELL_TILE + 1)
+    wp.tile_store(tile_sum_out, wp.tile_sum(counts), offset=k)
+
+
+def launch_sum_cell_tiles(model, contacts) -> None:
+    """Sum the bucket counts of ``contacts``' cell grid per tile of buckets."""
+    tile_sum = contacts.cells["tile_sum"]
+    wp.launch_tiled(
+        sum_cell_tiles,
+        dim=tile_sum.shape[0],
+        inputs=[contacts.cells["start"]],
+        outputs=[tile_sum],
+        block_dim=CELL_TILE,
+        device=model.device,
+    )
+
+
+@wp.kernel
+def scan_cell_tile_sums(
+    # Out (read, then written):
+    tile_sum_out: wp.array[int],
+):
+    """Exclusive scan of the tile sums in place, by one block, ``SUM_TILE`` sums a round, each round carrying the
+    total of those before it."""
+    carry = int(0)
+    for k in range((tile_sum_out.shape[0] + SUM_TILE - 1) // SUM_TILE):
+        sums = wp.tile_load(tile_sum_out, shape=SUM_TILE, offset=k * SUM_TILE)
+        inclusive = wp.tile_scan_inclusive(sums)
+        ahead = wp.tile_full(SUM_TILE, value=carry, dtype=int)
+        wp.tile_store(tile_sum_out, inclusive - sums + ahead, offset=k * SUM_TILE)
+        carry += inclusive[SUM_TILE - 1]
+
+
+def launch_scan_cell_tile_sums(model, contacts) -> None:
+    """Turn the tile sums of ``contacts``' cell grid into each tile's first slot."""
+    wp.launch_tiled(
+        scan_cell_tile_sums,
+        dim=1,
+        inputs=[],
+        outputs=[contacts.cells["tile_sum"]],
+        block_dim=CELL_TILE,
+        device=model.device,
+    )
+
+
+@wp.kernel
+def scan_cells(
+    # Contacts in (the first slot of each tile of buckets):
+    tile_start: wp.array[int],
+    # Out (cell_start_out[b + 1]: bucket b's count, then its first slot):
+    cell_start_out: wp.array[int],
+):
+    """Exclusive scan of the bucket counts within each tile, offset by the tile's first slot (one block per
+    tile)."""
+    k = wp.tid()
+    counts = wp.tile_load(cell_start_out, shape=CELL_TILE, offset=k * CELL_TILE + 1)
+    first = wp.tile_full(CELL_TILE, value=tile_start[k], dtype=int)
+    wp.tile_store(cell_start_out, wp.tile_scan_exclusive(counts) + first, offset=k * CELL_TILE + 1)
+
+
+def launch_scan_cells(model, contacts) -> None:
+    """Turn the bucket counts of ``contacts``' cell grid into each bucket's first slot."""
+    tile_sum = contacts.cells["tile_sum"]
+    wp.launch_tiled(
+        scan_cells,
+        dim=tile_sum.shape[0],
+        inputs=[tile_sum],
+        outputs=[contacts.cells["start"]],
+        block_dim=CELL_TILE,
+        device=model.device,
+    )
+
+
+@wp.kernel
+def sort_spheres(
+    # Model:
+    sphere_radius: wp.array[float],
+    sphere_world: wp.array[int],
+    sphere_clump: wp.array[int],
+    # State in:
+    x: wp.array[wp.vec3],
+    active: wp.array[int],
+    # Options:
+    inv_cell: float,
+    # Out (cell_start_out[b + 1]: bucket b's next free slot, advanced: its end once all are in):
+    cell_start_out: wp.array[int],
+    slot_xr_out: wp.array[wp.vec4],
+    slot_sphere_out: wp.array[wp.vec3i],
+):
+    """Put each active sphere in a slot of its bucket, with what the walk reads of it (slots of one bucket in any
+    order)."""
+    i = wp.tid()
+    if active[i] == 0:
+        return
+    x_i = x[i]
+    world = sphere_world[i]
+    b = cell_bucket(cell_of(x_i, inv_cell), world, cell_start_out.shape[0] - 2)
+    s = wp.atomic_add(cell_start_out, b + 1, 1)
+    slot_xr_out[s] = wp.vec4(x_i[0], x_i[1], x_i[2], sphere_radius[i])
+    slot_sphere_out[s] = wp.vec3i(i, world, sphere_clump[i])
+
+
+def launch_sort_spheres(model, state, contacts, inv_cell: float) -> None:
+    """Sort the active spheres of ``state`` into the counted and scanned buckets of ``contacts``' cell grid."""
+    m, g = model, contacts.cells
+    wp.launch(
+        sort_spheres,
+        dim=m.sphere_count,
+        inputs=[m.sphere_radius, m.sphere_world, m.sphere_clump, state.sphere_x, state.sphere_active, inv_cell],
+        outputs=[g["start"], g["slot_xr"], g["slot_sphere"]],
         device=m.device,
     )
 
@@ -200,9 +351,10 @@ def build_contacts_kernel(features: StepFeatures):
         x: wp.array[wp.vec3],
         active: wp.array[int],
         wall_pose: wp.array[wp.transform],
-        # Contacts in (the cell grid and the current lists):
-        cell_head: wp.array[int],
-        cell_next: wp.array[int],
+        # Contacts in (the sorted cell grid and the current lists):
+        cell_start: wp.array[int],
+        slot_xr: wp.array[wp.vec4],
+        slot_sphere: wp.array[wp.vec3i],
         old_count: wp.array[int],
         old_index: wp.array2d[int],
         old_mesh_count: wp.array[int],
@@ -248,27 +400,30 @@ def build_contacts_kernel(features: StepFeatures):
         reach_i = r_i + radius_max + skin + contact_reach
         lo = cell_of(x_i - wp.vec3(reach_i), inv_cell)
         hi = cell_of(x_i + wp.vec3(reach_i), inv_cell)
-        mask = cell_head.shape[0] - 1
+        mask = cell_start.shape[0] - 2
         for cz in range(lo[2], hi[2] + 1):
             for cy in range(lo[1], hi[1] + 1):
                 for cx in range(lo[0], hi[0] + 1):
                     cell = wp.vec3i(cx, cy, cz)
-                    j = cell_head[cell_bucket(cell, world, mask)]
-                    while j >= 0:
-                        x_j = x[j]
-                        if wp.length(x_j - x_i) < r_i + sphere_radius[j] + skin + contact_reach:
+                    bucket = cell_bucket(cell, world, mask)
+                    # the bucket's slots are contiguous: centre and radius first, the rest only within reach
+                    for s in range(cell_start[bucket], cell_start[bucket + 1]):
+                        xr = slot_xr[s]
+                        x_j = wp.vec3(xr[0], xr[1], xr[2])
+                        if wp.length(x_j - x_i) < r_i + xr[3] + skin + contact_reach:
+                            tag = slot_sphere[s]
+                            j = tag[0]
                             # a bucket holds other cells and worlds too: take j only in its own cell (never twice)
-                            if j != i and sphere_world[j] == world and cell_of(x_j, inv_cell) == cell:
+                            if j != i and tag[1] == world and cell_of(x_j, inv_cell) == cell:
                                 own = False
                                 if wp.static(clumps):
-                                    own = clump >= 0 and sphere_clump[j] == clump
+                                    own = clump >= 0 and tag[2] == clump
                                 if not own:
                                     if count < capacity:
                                         new_index_out[count, i] = j
                                         count += 1
                                     else:
                                         wp.atomic_or(overflow_out, 0, Overflow.NEIGHBOR)
-                        j = cell_next[j]
         sort_column(new_index_out, count, i)
         neighbor_live_out[i] = carry_history(
             old_index, old_count[i], new_index_out, count, history_out, i, neighbor_live_out[i]
@@ -312,7 +467,7 @@ def build_contacts_kernel(features: StepFeatures):
 
 
 def launch_build_contacts(model, state, contacts, *, features: StepFeatures, inv_cell: float, skin: float) -> None:
-    """New candidate lists from the binned spheres of ``state`` into ``contacts.scratch``; the histories move in
+    """New candidate lists from the sorted spheres of ``state`` into ``contacts.scratch``; the histories move in
     place to their keys' new slots (see :func:`carry_history`). Records the build positions and any overflow (the
     kernel compiled for ``features``)."""
     m, c, s = model, contacts, contacts.scratch
@@ -332,8 +487,9 @@ def launch_build_contacts(model, state, contacts, *, features: StepFeatures, inv
             state.sphere_x,
             state.sphere_active,
             state.wall_pose,
-            c.cells["head"],
-            c.cells["next"],
+            c.cells["start"],
+            c.cells["slot_xr"],
+            c.cells["slot_sphere"],
             c.neighbor_count,
             c.neighbor_index,
             c.mesh_count,

@@ -366,8 +366,11 @@ class Contacts:
     """Second buffers of the candidate lists (counts and keys), written by a rebuild and copied back; the
     histories move in place (kernels/neighbors.py, carry_history)."""
     cells: dict = field(default_factory=dict)
-    """The cell grid of the last rebuild: ``head`` (bucket -> first sphere, -1 empty; a power-of-two length)
-    and ``next`` (sphere -> next sphere of its bucket), int32 arrays."""
+    """The cell grid of the last rebuild, the active spheres counting-sorted into B hash buckets of (cell, world)
+    (B a power of two): ``start`` (shape (B + 1,), int32: bucket b holds slots ``start[b] .. start[b + 1]``),
+    ``tile_sum`` (shape (B / 256,), int32: the scan's per-tile totals), and per slot ``slot_xr`` (shape
+    (sphere_count,), vec4: centre [m] and radius [m]) and ``slot_sphere`` (shape (sphere_count,), vec3i: sphere,
+    world and clump). See kernels/neighbors.py, ``cell_grid``."""
 
     def spring(self, kind: str = "neighbor") -> np.ndarray:
         """Tangential springs [m] of the ``kind`` ("neighbor", "plane" or "mesh") history slots, whichever layout
