@@ -14,6 +14,10 @@ import warp as wp
 from .enums import ContactLaw, RollingModel
 from .params import ContactHistory
 
+SMALL_CLUMP_SPHERES = 16
+"""A clump of at most this many spheres is reduced and integrated by one thread on CUDA (step.integrate_clumps);
+larger ones by a block of ``CLUMP_LANES`` threads, which would leave most lanes of a small clump idle."""
+
 
 @dataclass(frozen=True)
 class StepFeatures:
@@ -33,6 +37,8 @@ class StepFeatures:
     """Some pair has a rolling model and a rolling friction above zero."""
     rolling_spring: bool = True
     """Some pair has EPSD rolling resistance (a rolling friction above zero), whose spring is history."""
+    large_clumps: bool = True
+    """Some clump has more than ``SMALL_CLUMP_SPHERES`` spheres: on CUDA, clumps integrate over blocks of lanes."""
 
     @property
     def history_type(self):
@@ -44,11 +50,13 @@ class StepFeatures:
 
     @staticmethod
     def of(model, share_mass: bool) -> "StepFeatures":
-        """The features of ``model`` (duck-typed: clump_count, wall_count, attached_count, pair_params)."""
+        """The features of ``model`` (duck-typed: clump_count, clump_sphere_start/end, wall_count, attached_count,
+        pair_params)."""
         pairs = model.pair_params.numpy()
         rolling = (pairs["rolling_model"] != int(RollingModel.NONE)) & (pairs["mu_r"] != 0.0)
         epsd = (pairs["rolling_model"] == int(RollingModel.EPSD)) & (pairs["mu_r"] != 0.0)
         clumps = model.clump_count > 0
+        spheres = model.clump_sphere_end.numpy() - model.clump_sphere_start.numpy() if clumps else np.zeros(1)
         return StepFeatures(
             clumps=clumps,
             share_mass=clumps and bool(share_mass),
@@ -57,4 +65,5 @@ class StepFeatures:
             cohesive_laws=bool(np.any(pairs["law"] != int(ContactLaw.HERTZ_MINDLIN))),
             rolling=bool(np.any(rolling)),
             rolling_spring=bool(np.any(epsd)),
+            large_clumps=bool(spheres.max() > SMALL_CLUMP_SPHERES),
         )

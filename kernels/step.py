@@ -37,7 +37,7 @@ BLOWUP_NONE = wp.constant(2147483647)
 WALL_LANES = wp.constant(256)
 """Partial accumulators per wall: spreads the force atomics of thousands of spheres on one wall."""
 CLUMP_LANES = 32
-"""Threads per clump in integrate_clumps on CUDA (a tiled launch; Warp runs a CPU tile as one thread)."""
+"""Threads per large clump in integrate_clumps on CUDA (a tiled launch; see ``SMALL_CLUMP_SPHERES``)."""
 PARTNER_SLOTS = wp.constant(16)
 """Partner bodies a clump's table holds (a power of two): compact clumps touch at most about 14 bodies."""
 
@@ -737,122 +737,131 @@ def quat_step(q: wp.quat, w: wp.vec3, h: float):
     return wp.normalize(q)
 
 
-@wp.kernel
-def integrate_clumps(
-    # Model:
-    clump_sphere_start: wp.array[int],
-    clump_sphere_end: wp.array[int],
-    clump_material: wp.array[int],
-    clump_world: wp.array[int],
-    clump_volume: wp.array[float],
-    clump_inertia: wp.array[wp.vec3],
-    sphere_offset: wp.array[wp.vec3],
-    material_density: wp.array2d[float],
-    world_gravity: wp.array[wp.vec3],
-    # State in (sphere_f and sphere_t: this step's, from step_spheres):
-    active_in: wp.array[int],
-    sphere_f: wp.array[wp.vec3],
-    sphere_t: wp.array[wp.vec3],
-    x_in: wp.array[wp.vec3],
-    q_in: wp.array[wp.quat],
-    v_in: wp.array[wp.vec3],
-    angmom_in: wp.array[wp.vec3],
-    clock: wp.array[int],
-    # Contacts in:
-    build_x: wp.array[wp.vec3],
-    # Options:
-    dt: float,
-    kick: float,
-    skin: float,
-    velocity_limit: float,
-    lanes: int,
-    # Out:
-    x_out: wp.array[wp.vec3],
-    q_out: wp.array[wp.quat],
-    v_out: wp.array[wp.vec3],
-    angmom_out: wp.array[wp.vec3],
-    w_out: wp.array[wp.vec3],
-    f_out: wp.array[wp.vec3],
-    t_out: wp.array[wp.vec3],
-    sphere_x_out: wp.array[wp.vec3],
-    sphere_v_out: wp.array[wp.vec3],
-    sphere_w_out: wp.array[wp.vec3],
-    rebuild_out: wp.array[int],
-    blowup_out: wp.array[int],
-):
-    """Reduce component forces to each clump (r x f), integrate, place the components.
+@functools.cache
+def integrate_clumps_kernel(tiled: bool):
+    """:func:`integrate_clumps` for blocks of lanes per clump (``tiled``), or one thread per clump."""
 
-    Launched tiled, ``lanes`` threads per clump (``CLUMP_LANES`` on CUDA, 1 on CPU): each lane sums every
-    lanes-th component in order and a tile reduction adds the lanes in a fixed tree, so the sum is
-    deterministic; a clump of 141 spheres no longer waits on one thread's serial loop. Every lane
-    integrates the body (the same arithmetic, so the same numbers) and places its own components;
-    lane 0 writes the body.
+    @wp.kernel(module="unique", enable_backward=False)
+    def integrate_clumps(
+        # Model:
+        clump_sphere_start: wp.array[int],
+        clump_sphere_end: wp.array[int],
+        clump_material: wp.array[int],
+        clump_world: wp.array[int],
+        clump_volume: wp.array[float],
+        clump_inertia: wp.array[wp.vec3],
+        sphere_offset: wp.array[wp.vec3],
+        material_density: wp.array2d[float],
+        world_gravity: wp.array[wp.vec3],
+        # State in (sphere_f and sphere_t: this step's, from step_spheres):
+        active_in: wp.array[int],
+        sphere_f: wp.array[wp.vec3],
+        sphere_t: wp.array[wp.vec3],
+        x_in: wp.array[wp.vec3],
+        q_in: wp.array[wp.quat],
+        v_in: wp.array[wp.vec3],
+        angmom_in: wp.array[wp.vec3],
+        clock: wp.array[int],
+        # Contacts in:
+        build_x: wp.array[wp.vec3],
+        # Options:
+        dt: float,
+        kick: float,
+        skin: float,
+        velocity_limit: float,
+        lanes: int,
+        # Out:
+        x_out: wp.array[wp.vec3],
+        q_out: wp.array[wp.quat],
+        v_out: wp.array[wp.vec3],
+        angmom_out: wp.array[wp.vec3],
+        w_out: wp.array[wp.vec3],
+        f_out: wp.array[wp.vec3],
+        t_out: wp.array[wp.vec3],
+        sphere_x_out: wp.array[wp.vec3],
+        sphere_v_out: wp.array[wp.vec3],
+        sphere_w_out: wp.array[wp.vec3],
+        rebuild_out: wp.array[int],
+        blowup_out: wp.array[int],
+    ):
+        """Reduce component forces to each clump (r x f), integrate, place the components.
 
-    Leapfrog on momentum and on angular momentum L (world frame, so a torque-free body keeps L
-    exactly); the orientation advances by an explicit midpoint rule with L held at its half-step value.
-    """
-    c, lane = wp.tid()
-    first = clump_sphere_start[c]
-    last = clump_sphere_end[c]
-    x_c = x_in[c]
-    q_c = q_in[c]
-    if active_in[first] == 0:
-        if lane == 0:
-            x_out[c] = x_c
-            q_out[c] = q_c
-            v_out[c] = v_in[c]
-            angmom_out[c] = angmom_in[c]
-        # parked (not released yet) or removed (left the domain): at rest where it is
+        Tiled (large clumps on CUDA), ``lanes`` = ``CLUMP_LANES`` threads per clump: each lane sums every lanes-th
+        component in order and a tile reduction adds the lanes in a fixed tree, so the sum is deterministic; a
+        clump of 141 spheres does not wait on one thread's serial loop. Every lane integrates the body (the same
+        arithmetic, so the same numbers) and places its own components; lane 0 writes the body. Otherwise one
+        thread per clump (launched over (clump_count, 1), lanes = 1) sums its components in order.
+
+        Leapfrog on momentum and on angular momentum L (world frame, so a torque-free body keeps L
+        exactly); the orientation advances by an explicit midpoint rule with L held at its half-step value.
+        """
+        c, lane = wp.tid()
+        first = clump_sphere_start[c]
+        last = clump_sphere_end[c]
+        x_c = x_in[c]
+        q_c = q_in[c]
+        if active_in[first] == 0:
+            if lane == 0:
+                x_out[c] = x_c
+                q_out[c] = q_c
+                v_out[c] = v_in[c]
+                angmom_out[c] = angmom_in[c]
+            # parked (not released yet) or removed (left the domain): at rest where it is
+            for s in range(first + lane, last, lanes):
+                sphere_x_out[s] = x_c + wp.quat_rotate(q_c, sphere_offset[s])
+                sphere_v_out[s] = v_in[c]
+                sphere_w_out[s] = wp.vec3(0.0)
+            return
+        world = clump_world[c]
+        rho = material_density[world % material_density.shape[0], clump_material[c]]
+        mass = rho * clump_volume[c]
+        inertia = rho * clump_inertia[c]
+
+        f_lane = wp.vec3(0.0)
+        t_lane = wp.vec3(0.0)
         for s in range(first + lane, last, lanes):
-            sphere_x_out[s] = x_c + wp.quat_rotate(q_c, sphere_offset[s])
-            sphere_v_out[s] = v_in[c]
-            sphere_w_out[s] = wp.vec3(0.0)
-        return
-    world = clump_world[c]
-    rho = material_density[world % material_density.shape[0], clump_material[c]]
-    mass = rho * clump_volume[c]
-    inertia = rho * clump_inertia[c]
+            fs = sphere_f[s]
+            f_lane += fs
+            t_lane += sphere_t[s] + wp.cross(wp.quat_rotate(q_c, sphere_offset[s]), fs)
+        f = f_lane
+        t = t_lane
+        if wp.static(tiled):
+            f = wp.tile_extract(wp.tile_sum(wp.tile(f_lane, preserve_type=True)), 0)
+            t = wp.tile_extract(wp.tile_sum(wp.tile(t_lane, preserve_type=True)), 0)
 
-    f_lane = wp.vec3(0.0)
-    t_lane = wp.vec3(0.0)
-    for s in range(first + lane, last, lanes):
-        fs = sphere_f[s]
-        f_lane += fs
-        t_lane += sphere_t[s] + wp.cross(wp.quat_rotate(q_c, sphere_offset[s]), fs)
-    f = wp.tile_extract(wp.tile_sum(wp.tile(f_lane, preserve_type=True)), 0)
-    t = wp.tile_extract(wp.tile_sum(wp.tile(t_lane, preserve_type=True)), 0)
+        g = world_gravity[world % world_gravity.shape[0]]
+        v_new = v_in[c] + kick * (f / mass + g)
+        angmom = angmom_in[c] + kick * t
+        x_new = x_c + dt * v_new
+        w_start = body_angular_velocity(q_c, inertia, angmom)
+        q_mid = quat_step(q_c, w_start, 0.5 * dt)
+        w_mid = body_angular_velocity(q_mid, inertia, angmom)
+        q_new = quat_step(q_c, w_mid, dt)
 
-    g = world_gravity[world % world_gravity.shape[0]]
-    v_new = v_in[c] + kick * (f / mass + g)
-    angmom = angmom_in[c] + kick * t
-    x_new = x_c + dt * v_new
-    w_start = body_angular_velocity(q_c, inertia, angmom)
-    q_mid = quat_step(q_c, w_start, 0.5 * dt)
-    w_mid = body_angular_velocity(q_mid, inertia, angmom)
-    q_new = quat_step(q_c, w_mid, dt)
+        if lane == 0:
+            f_out[c] = f
+            t_out[c] = t
+            x_out[c] = x_new
+            q_out[c] = q_new
+            v_out[c] = v_new
+            angmom_out[c] = angmom
+            w_out[c] = w_mid
 
-    if lane == 0:
-        f_out[c] = f
-        t_out[c] = t
-        x_out[c] = x_new
-        q_out[c] = q_new
-        v_out[c] = v_new
-        angmom_out[c] = angmom
-        w_out[c] = w_mid
+        moved = float(0.0)
+        for s in range(first + lane, last, lanes):
+            arm = wp.quat_rotate(q_new, sphere_offset[s])
+            xs = x_new + arm
+            sphere_x_out[s] = xs
+            sphere_v_out[s] = v_new + wp.cross(w_mid, arm)
+            sphere_w_out[s] = w_mid
+            moved = wp.max(moved, wp.length(xs - build_x[s]))
+        if lane == 0:
+            if not (wp.length(v_new) <= velocity_limit) or not wp.isfinite(x_new) or not wp.isfinite(w_mid):
+                flag_blowup(blowup_out, clock[0], first)
+        if moved > 0.5 * skin:
+            rebuild_out[0] = 1
 
-    moved = float(0.0)
-    for s in range(first + lane, last, lanes):
-        arm = wp.quat_rotate(q_new, sphere_offset[s])
-        xs = x_new + arm
-        sphere_x_out[s] = xs
-        sphere_v_out[s] = v_new + wp.cross(w_mid, arm)
-        sphere_w_out[s] = w_mid
-        moved = wp.max(moved, wp.length(xs - build_x[s]))
-    if lane == 0:
-        if not (wp.length(v_new) <= velocity_limit) or not wp.isfinite(x_new) or not wp.isfinite(w_mid):
-            flag_blowup(blowup_out, clock[0], first)
-    if moved > 0.5 * skin:
-        rebuild_out[0] = 1
+    return integrate_clumps
 
 
 def launch_integrate_clumps(
@@ -862,19 +871,24 @@ def launch_integrate_clumps(
     state_out,
     buffers: StepBuffers,
     *,
+    features: StepFeatures,
     dt: float,
     kick: float,
     skin: float,
     velocity_limit: float,
 ) -> None:
-    """Reduce the forces :func:`launch_step_spheres` left on the clumps' spheres and step the clumps, tiled
-    with ``CLUMP_LANES`` threads per clump on CUDA (one on CPU)."""
+    """Reduce the forces :func:`launch_step_spheres` left on the clumps' spheres and step the clumps: tiled with
+    ``CLUMP_LANES`` threads per clump on CUDA where ``features.large_clumps``, else one thread per clump."""
     m, c, b = model, contacts, buffers
-    lanes = CLUMP_LANES if wp.get_device(m.device).is_cuda else 1
-    wp.launch_tiled(
-        integrate_clumps,
-        dim=[m.clump_count],
-        block_dim=lanes,
+    tiled = features.large_clumps and wp.get_device(m.device).is_cuda
+    lanes = CLUMP_LANES if tiled else 1
+    launch = (
+        functools.partial(wp.launch_tiled, dim=[m.clump_count], block_dim=lanes)
+        if tiled
+        else functools.partial(wp.launch, dim=(m.clump_count, 1))
+    )
+    launch(
+        integrate_clumps_kernel(tiled),
         inputs=[
             m.clump_sphere_start,
             m.clump_sphere_end,

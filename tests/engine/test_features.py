@@ -8,7 +8,7 @@ import warpdem as wd
 from warpdem.kernels.features import StepFeatures
 
 
-def _bed(kind: str):
+def _bed(kind: str, device: str = "cpu"):
     """A tiny scene of ``kind``: plain HM spheres on planes; JKR spheres with EPSD rolling friction; or
     8-sphere clumps on a mesh floor with a coated patch."""
     b = wd.ModelBuilder()
@@ -33,15 +33,15 @@ def _bed(kind: str):
     else:
         b.add_plane((0, 0, 0), (0, 0, 1), "a")
         b.add_spheres(pts, 0.005, "a")
-    return b.finalize("cpu")
+    return b.finalize(device)
 
 
 @pytest.mark.parametrize(
     "kind, expected",
     [
-        ("hm", StepFeatures(False, False, False, False, False, False, False)),
-        ("jkr", StepFeatures(False, False, False, False, True, True, True)),
-        ("clumps", StepFeatures(True, True, True, True, False, False, False)),
+        ("hm", StepFeatures(False, False, False, False, False, False, False, False)),
+        ("jkr", StepFeatures(False, False, False, False, True, True, True, False)),
+        ("clumps", StepFeatures(True, True, True, True, False, False, False, False)),
     ],
 )
 def test_features_follow_the_model(kind, expected):
@@ -127,3 +127,15 @@ def test_live_masks_mark_the_slots_with_history(kind):
     plane_live = (c.plane_live.numpy() & np.uint64(1)).astype(bool)
     assert floor.sum() >= 4 and np.array_equal(plane_live & (np.abs(x[:, 2] - r) > 1e-9), floor)
     assert not np.any(c.spring("plane")[0][~plane_live])
+
+
+def test_large_clumps_follow_the_templates():
+    """Only a clump of more than SMALL_CLUMP_SPHERES spheres (the 141-sphere pellet) takes the tiled integration."""
+    from warpdem.kernels.features import SMALL_CLUMP_SPHERES
+
+    b = wd.ModelBuilder()
+    b.add_material(wd.Material("a", density=1250, youngs_modulus=4e6, poisson_ratio=0.4))
+    b.add_clumps(wd.pellet_template(), [(0, 0, 0.01)], "a")
+    assert len(wd.pellet_template().sphere_radius) > SMALL_CLUMP_SPHERES
+    assert wd.Solver(b.finalize("cpu")).features.large_clumps
+    assert not wd.Solver(_bed("clumps")).features.large_clumps

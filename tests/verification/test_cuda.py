@@ -1,5 +1,7 @@
 """The same verification table on CUDA (skipped cleanly without a GPU)."""
 
+import dataclasses
+
 import pytest
 
 from tests.conftest import requires_cuda
@@ -39,3 +41,24 @@ def test_graph_blocks_match_host_reads():
         out.append((st.sphere_x.numpy(), st.sphere_v.numpy()))
     assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
     assert out[0][0][:, 2].min() < 0.0055, "the spheres never reached the plane"
+
+
+@requires_cuda
+def test_clump_integration_one_thread_or_a_block_per_clump():
+    """8-sphere clumps integrated by one thread each, or by a block of lanes each (the path of large clumps),
+    move the same way: the two differ only in the order of a clump's force sum (rounding)."""
+    import numpy as np
+
+    import warpdem as wd
+    from tests.engine.test_features import _bed
+
+    out = []
+    for large in (False, True):
+        m = _bed("clumps", device="cuda:0")
+        s = wd.Solver(m, wd.SolverOptions(dt=2e-5))
+        assert not s.features.large_clumps
+        s.features = dataclasses.replace(s.features, large_clumps=large)
+        st = s.run(m.state(), s.contacts(), 200)
+        out.append(st.sphere_x.numpy())
+    assert np.abs(out[0] - out[1]).max() < 1e-9
+    assert np.abs(out[0] - _bed("clumps").state().sphere_x.numpy()).max() > 1e-4, "the clumps should have moved"

@@ -279,7 +279,16 @@ class Solver:
             _st.launch_roll_partners(m, c, b)
         if m.clump_count:
             _st.launch_integrate_clumps(
-                m, c, state_in, state_out, b, dt=dt, kick=kick, skin=self.skin, velocity_limit=o.velocity_limit
+                m,
+                c,
+                state_in,
+                state_out,
+                b,
+                features=self.features,
+                dt=dt,
+                kick=kick,
+                skin=self.skin,
+                velocity_limit=o.velocity_limit,
             )
         if m.plane_count + m.wall_count:
             _st.launch_sum_wall_forces(m, state_in, state_out, b, dt)
