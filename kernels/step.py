@@ -762,12 +762,9 @@ def integrate_clumps_kernel(tiled: bool):
         v_in: wp.array[wp.vec3],
         angmom_in: wp.array[wp.vec3],
         clock: wp.array[int],
-        # Contacts in:
-        build_x: wp.array[wp.vec3],
         # Options:
         dt: float,
         kick: float,
-        skin: float,
         velocity_limit: float,
         lanes: int,
         # Out:
@@ -778,18 +775,15 @@ def integrate_clumps_kernel(tiled: bool):
         w_out: wp.array[wp.vec3],
         f_out: wp.array[wp.vec3],
         t_out: wp.array[wp.vec3],
-        sphere_x_out: wp.array[wp.vec3],
-        sphere_v_out: wp.array[wp.vec3],
-        sphere_w_out: wp.array[wp.vec3],
-        rebuild_out: wp.array[int],
         blowup_out: wp.array[int],
     ):
-        """Reduce component forces to each clump (r x f), integrate, place the components.
+        """Reduce component forces to each clump (r x f) and integrate it (:func:`place_clump_spheres` then places
+        the components).
 
         Tiled (large clumps on CUDA), ``lanes`` = ``CLUMP_LANES`` threads per clump: each lane sums every lanes-th
         component in order and a tile reduction adds the lanes in a fixed tree, so the sum is deterministic; a
         clump of 141 spheres does not wait on one thread's serial loop. Every lane integrates the body (the same
-        arithmetic, so the same numbers) and places its own components; lane 0 writes the body. Otherwise one
+        arithmetic, so the same numbers); lane 0 writes it. Otherwise one
         thread per clump (launched over (clump_count, 1), lanes = 1) sums its components in order.
 
         Leapfrog on momentum and on angular momentum L (world frame, so a torque-free body keeps L
@@ -807,10 +801,6 @@ def integrate_clumps_kernel(tiled: bool):
                 v_out[c] = v_in[c]
                 angmom_out[c] = angmom_in[c]
             # parked (not released yet) or removed (left the domain): at rest where it is
-            for s in range(first + lane, last, lanes):
-                sphere_x_out[s] = x_c + wp.quat_rotate(q_c, sphere_offset[s])
-                sphere_v_out[s] = v_in[c]
-                sphere_w_out[s] = wp.vec3(0.0)
             return
         world = clump_world[c]
         rho = material_density[world % material_density.shape[0], clump_material[c]]
@@ -847,19 +837,9 @@ def integrate_clumps_kernel(tiled: bool):
             angmom_out[c] = angmom
             w_out[c] = w_mid
 
-        moved = float(0.0)
-        for s in range(first + lane, last, lanes):
-            arm = wp.quat_rotate(q_new, sphere_offset[s])
-            xs = x_new + arm
-            sphere_x_out[s] = xs
-            sphere_v_out[s] = v_new + wp.cross(w_mid, arm)
-            sphere_w_out[s] = w_mid
-            moved = wp.max(moved, wp.length(xs - build_x[s]))
         if lane == 0:
             if not (wp.length(v_new) <= velocity_limit) or not wp.isfinite(x_new) or not wp.isfinite(w_mid):
                 flag_blowup(blowup_out, clock[0], first)
-        if moved > 0.5 * skin:
-            rebuild_out[0] = 1
 
     return integrate_clumps
 
@@ -877,8 +857,9 @@ def launch_integrate_clumps(
     skin: float,
     velocity_limit: float,
 ) -> None:
-    """Reduce the forces :func:`launch_step_spheres` left on the clumps' spheres and step the clumps: tiled with
-    ``CLUMP_LANES`` threads per clump on CUDA where ``features.large_clumps``, else one thread per clump."""
+    """Reduce the forces :func:`launch_step_spheres` left on the clumps' spheres and step the clumps (tiled with
+    ``CLUMP_LANES`` threads per clump on CUDA where ``features.large_clumps``, else one thread per clump), then
+    place their spheres (one thread per sphere)."""
     m, c, b = model, contacts, buffers
     tiled = features.large_clumps and wp.get_device(m.device).is_cuda
     lanes = CLUMP_LANES if tiled else 1
@@ -907,10 +888,8 @@ def launch_integrate_clumps(
             state_in.clump_v,
             state_in.clump_angmom,
             b.clock,
-            c.build_x,
             dt,
             kick,
-            skin,
             velocity_limit,
             lanes,
         ],
@@ -922,14 +901,74 @@ def launch_integrate_clumps(
             state_out.clump_w,
             state_out.clump_f,
             state_out.clump_t,
-            state_out.sphere_x,
-            state_out.sphere_v,
-            state_out.sphere_w,
-            c.rebuild,
             b.blowup,
         ],
         device=m.device,
     )
+    wp.launch(
+        place_clump_spheres,
+        dim=m.sphere_count,
+        inputs=[
+            m.sphere_clump,
+            m.clump_sphere_start,
+            m.sphere_offset,
+            state_in.sphere_active,
+            c.build_x,
+            state_out.clump_x,
+            state_out.clump_q,
+            state_out.clump_v,
+            state_out.clump_w,
+            skin,
+        ],
+        outputs=[state_out.sphere_x, state_out.sphere_v, state_out.sphere_w, c.rebuild],
+        device=m.device,
+    )
+
+
+@wp.kernel
+def place_clump_spheres(
+    # Model:
+    sphere_clump: wp.array[int],
+    clump_sphere_start: wp.array[int],
+    sphere_offset: wp.array[wp.vec3],
+    # State in:
+    active_in: wp.array[int],
+    # Contacts in:
+    build_x: wp.array[wp.vec3],
+    # State out (the clumps integrate_clumps just stepped; w: the midpoint angular velocity):
+    clump_x: wp.array[wp.vec3],
+    clump_q: wp.array[wp.quat],
+    clump_v: wp.array[wp.vec3],
+    clump_w: wp.array[wp.vec3],
+    # Options:
+    skin: float,
+    # Out:
+    sphere_x_out: wp.array[wp.vec3],
+    sphere_v_out: wp.array[wp.vec3],
+    sphere_w_out: wp.array[wp.vec3],
+    rebuild_out: wp.array[int],
+):
+    """Place each clump's spheres on its new pose, with the rigid body's velocity at their centres; flag a
+    rebuild once one has moved half the skin. One thread per sphere, so the reads and writes of the sphere
+    arrays are coalesced: a thread per clump walking its spheres strided them across a warp, and an H100 moved
+    most of its bytes as excess sectors."""
+    s = wp.tid()
+    c = sphere_clump[s]
+    if c < 0:
+        return
+    arm = wp.quat_rotate(clump_q[c], sphere_offset[s])
+    xs = clump_x[c] + arm
+    sphere_x_out[s] = xs
+    if active_in[clump_sphere_start[c]] == 0:
+        # parked (not released yet) or removed (left the domain): at rest where it is
+        sphere_v_out[s] = clump_v[c]
+        sphere_w_out[s] = wp.vec3(0.0)
+        return
+    w = clump_w[c]
+    sphere_v_out[s] = clump_v[c] + wp.cross(w, arm)
+    sphere_w_out[s] = w
+    if wp.length(xs - build_x[s]) > 0.5 * skin:
+        rebuild_out[0] = 1
 
 
 @wp.kernel
