@@ -139,3 +139,22 @@ def test_large_clumps_follow_the_templates():
     assert len(wd.pellet_template().sphere_radius) > SMALL_CLUMP_SPHERES
     assert wd.Solver(b.finalize("cpu")).features.large_clumps
     assert not wd.Solver(_bed("clumps")).features.large_clumps
+
+
+def test_contacts_refuse_rows_past_int32_strides(monkeypatch):
+    """Warp addresses a (slots, sphere_count) list array with int32 strides: a row of one 12-byte spring per
+    sphere fits up to 178,956,970 spheres, a 28-byte ContactHistory up to 76,695,844; past that, a clear error
+    (a GPU ran into a memory fault at 180 M spheres before this check)."""
+    import warp as wp
+
+    import warpdem.engine.solver as solver_module
+    from warpdem.kernels.params import ContactHistory
+
+    solver_module.check_row_bytes(178_956_970, wp.vec3)
+    with pytest.raises(ValueError, match="178,956,971 is not allowed.*at most 178,956,970 spheres"):
+        solver_module.check_row_bytes(178_956_971, wp.vec3)
+    with pytest.raises(ValueError, match="28-byte ContactHistory list slots; expected at most 76,695,844"):
+        solver_module.check_row_bytes(80_000_000, ContactHistory)
+    monkeypatch.setattr(solver_module, "ROW_BYTES_MAX", 100)  # the tiny bed's 18 spheres x 12 bytes pass it
+    with pytest.raises(ValueError, match="sphere_count = 18 is not allowed"):
+        wd.Solver(_bed("hm")).contacts()

@@ -90,6 +90,23 @@ class SolverOptions:
 CUDA_GRAPH_STEPS = 32
 
 
+ROW_BYTES_MAX = 2**31 - 1
+"""Warp keeps an array's strides as int32: a slot-major list array (slots, sphere_count) whose row of one slot
+per sphere passes 2 GiB would be addressed wrongly on the GPU (a memory fault, or silently wrong slots)."""
+
+
+def check_row_bytes(sphere_count: int, dtype) -> None:
+    """Refuse a list array whose row (one slot per sphere) is too long for Warp's int32 strides."""
+    size = wp.types.type_size_in_bytes(dtype)
+    if sphere_count * size > ROW_BYTES_MAX:
+        raise ValueError(
+            f"Solver.contacts: sphere_count = {sphere_count:,} is not allowed with {size}-byte "
+            f"{getattr(dtype, '__name__', dtype)} list slots; expected at most {ROW_BYTES_MAX // size:,} spheres "
+            "in one model (Warp addresses a row of one slot per sphere with int32 strides): split the launch "
+            "into fewer worlds"
+        )
+
+
 class Solver:
     """Hertz-Mindlin DEM on spheres, planes and static triangle meshes (see kernels/step.py).
 
@@ -152,6 +169,7 @@ class Solver:
         history = self.features.history_type
 
         def slots(k, dtype):
+            check_row_bytes(n, dtype)
             return wp.zeros((k, n), dtype=dtype, device=dev)
 
         partner_key, partner_count = _st.partner_tables(m.clump_count, dev)
