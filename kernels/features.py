@@ -43,10 +43,13 @@ class StepFeatures:
     @property
     def history_type(self):
         """What a list slot stores (kernels/params.py, ``history_load``/``history_store``): the whole
-        ``ContactHistory`` (28 bytes) when a cohesive law or an EPSD spring needs it, else only the tangential
-        spring, a ``wp.vec3`` (12 bytes). The history moves through memory twice per contact and step (the
-        bytes the step kernel waits on) and is most of a sphere's memory."""
-        return ContactHistory if self.cohesive_laws or self.rolling_spring else wp.vec3
+        ``ContactHistory`` (28 bytes) when an EPSD spring needs it; the tangential spring and the law's scalar,
+        a ``wp.vec4`` (16 bytes), for cohesive laws without EPSD; else only the spring, a ``wp.vec3`` (12 bytes).
+        The history moves through memory twice per contact and step (the bytes the step kernel waits on) and is
+        most of a sphere's memory."""
+        if self.rolling_spring:
+            return ContactHistory
+        return wp.vec4 if self.cohesive_laws else wp.vec3
 
     @staticmethod
     def of(model, share_mass: bool) -> "StepFeatures":

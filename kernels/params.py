@@ -46,8 +46,8 @@ class ContactHistory:
     spheres, the sphere against a wall). A zero struct is a new contact; a contact that ends is zeroed.
 
     A law that needs more history adds its field here, and says in ``StepFeatures.history_type``
-    (kernels/features.py) when a model needs it: the lists store the whole struct, or only ``spring`` (a
-    ``wp.vec3``) when nothing else is used. Kernels read and write slots through :func:`history_load` and
+    (kernels/features.py) when a model needs it: the lists store the whole struct, ``spring`` and ``aux`` (a
+    ``wp.vec4``) when no rolling spring is used, or only ``spring`` (a ``wp.vec3``) when nothing else is. Kernels read and write slots through :func:`history_load` and
     :func:`history_store`, which take either layout.
     """
 
@@ -70,6 +70,14 @@ def history_load(slots: wp.array2d[ContactHistory], k: int, i: int):
 def history_load(slots: wp.array2d[wp.vec3], k: int, i: int):  # noqa: F811 (a Warp overload)
     """Slot (k, i) of a spring-only history array: the rolling spring and ``aux`` read as zero."""
     return ContactHistory(slots[k, i], wp.vec3(0.0), 0.0)
+
+
+@wp.func
+def history_load(slots: wp.array2d[wp.vec4], k: int, i: int):  # noqa: F811
+    """Slot (k, i) of a spring-and-scalar history array (x, y, z: the spring; w: ``aux``): the rolling spring
+    reads as zero."""
+    s = slots[k, i]
+    return ContactHistory(wp.vec3(s[0], s[1], s[2]), wp.vec3(0.0), s[3])
 
 
 @wp.func
@@ -105,3 +113,10 @@ def slot_bit(k: int):
     if k >= LIVE_SLOTS:
         return wp.uint64(0)
     return wp.uint64(1) << wp.uint64(k)
+
+
+@wp.func
+def history_store(slots: wp.array2d[wp.vec4], k: int, i: int, h: ContactHistory):  # noqa: F811
+    """Write ``h``'s spring and ``aux`` to slot (k, i) of a spring-and-scalar history array (a model of that
+    layout keeps its rolling spring at zero)."""
+    slots[k, i] = wp.vec4(h.spring[0], h.spring[1], h.spring[2], h.aux)

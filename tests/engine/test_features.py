@@ -9,11 +9,11 @@ from warpdem.kernels.features import StepFeatures
 
 
 def _bed(kind: str, device: str = "cpu"):
-    """A tiny scene of ``kind``: plain HM spheres on planes; JKR spheres with EPSD rolling friction; or
-    8-sphere clumps on a mesh floor with a coated patch."""
+    """A tiny scene of ``kind``: plain HM spheres on planes; JKR spheres with EPSD rolling friction (``jkr``) or
+    without rolling friction (``jkr_plain``); or 8-sphere clumps on a mesh floor with a coated patch."""
     b = wd.ModelBuilder()
     b.add_material(wd.Material("a", density=2500, youngs_modulus=1e7, poisson_ratio=0.3))
-    law = {"law": "JKR", "surface_energy": 0.5} if kind == "jkr" else {}
+    law = {"law": "JKR", "surface_energy": 0.5} if kind in ("jkr", "jkr_plain") else {}
     rolling = {"rolling_friction": 0.1, "rolling_model": "epsd"} if kind == "jkr" else {}
     b.set_default_interaction(restitution=0.5, static_friction=0.5, **law, **rolling)
     rng = np.random.default_rng(3)
@@ -54,7 +54,8 @@ def test_features_follow_the_model(kind, expected):
         (StepFeatures(cohesive_laws=False, rolling=False, rolling_spring=False), 12),
         (StepFeatures(cohesive_laws=False, rolling=True, rolling_spring=False), 12),  # constant-torque rolling
         (StepFeatures(cohesive_laws=False, rolling=True, rolling_spring=True), 28),  # EPSD keeps its spring
-        (StepFeatures(cohesive_laws=True, rolling=False, rolling_spring=False), 28),  # JKR/EEPA keep aux
+        (StepFeatures(cohesive_laws=True, rolling=False, rolling_spring=False), 16),  # JKR/EEPA keep aux
+        (StepFeatures(cohesive_laws=True, rolling=True, rolling_spring=True), 28),
     ],
 )
 def test_history_slot_holds_only_what_the_laws_use(features, slot_bytes):
@@ -80,19 +81,20 @@ def test_body_contact_mass_needs_no_partner_tables():
     assert not wd.Solver(_bed("clumps"), opts).features.share_mass
 
 
-@pytest.mark.parametrize("kind", ["hm", "jkr", "clumps"])
+@pytest.mark.parametrize("kind", ["hm", "jkr", "jkr_plain", "clumps"])
 def test_specialised_kernels_compute_what_the_general_ones_do(kind):
-    """Positions, velocities and wall forces after 300 steps (several rebuilds) equal those of the kernels
-    compiled with every feature, to the last bit."""
+    """Positions, angular velocities and wall impulses after 1,000 steps (several rebuilds; the lower layer lands)
+    equal those of the kernels compiled with every feature, to the last bit."""
     runs = []
     for features in (None, StepFeatures()):
         m = _bed(kind)
         s = wd.Solver(m, wd.SolverOptions(dt=2e-5))
         if features is not None:
             s.features = features
-        st = s.run(m.state(), s.contacts(), 300)
-        runs.append((st.sphere_x.numpy(), st.sphere_w.numpy(), st.wall_f.numpy(), s.rebuild_count))
+        st = s.run(m.state(), s.contacts(), 1000)
+        runs.append((st.sphere_x.numpy(), st.sphere_w.numpy(), st.wall_impulse.numpy(), s.rebuild_count))
     assert runs[0][3] >= 2, "the run should rebuild its lists"
+    assert np.abs(runs[0][2]).max() > 0.0, "the spheres should have touched a wall"
     for a, b in zip(runs[0][:3], runs[1][:3]):
         assert np.array_equal(a, b)
     assert np.abs(runs[0][0][:, 2] - 0.006).max() > 1e-4, "the spheres should have moved"

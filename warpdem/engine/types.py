@@ -331,7 +331,8 @@ class Contacts:
     neighbor_history: wp.array
     """History of the pair (canonical order), shape (neighbor_capacity, sphere_count): ``ContactHistory``
     (kernels/params.py: tangential spring [m], rolling spring torque [N m], the law's scalar), or only the
-    tangential spring [m] as a ``wp.vec3`` when the model has no cohesive law and no EPSD rolling
+    tangential spring [m] as a ``wp.vec3`` when the model has no cohesive law and no EPSD rolling, or the
+    spring and the law's scalar as a ``wp.vec4`` when it has cohesive laws but no EPSD rolling
     (``StepFeatures.history_type``)."""
     plane_history: wp.array
     """History per sphere and plane, shape (max(plane_count, 1), sphere_count), the same type."""
@@ -376,4 +377,4 @@ class Contacts:
         """Tangential springs [m] of the ``kind`` ("neighbor", "plane" or "mesh") history slots, whichever layout
         they are stored in: a host array of shape (slots, sphere_count, 3)."""
         slots = getattr(self, f"{kind}_history").numpy()
-        return slots["spring"] if slots.dtype.names else slots
+        return slots["spring"] if slots.dtype.names else slots[..., :3]
