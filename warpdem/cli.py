@@ -78,6 +78,7 @@ def cmd_bench(args) -> int:
         walls=args.walls,
         law=args.law,
         worlds=args.worlds,
+        shuffle=args.shuffle,
     )
     rows = [(k, f"{v:.4g}" if isinstance(v, float) else str(v)) for k, v in res.items()]
     _table("warpdem bench: settled bed, Hertz-Mindlin with history", ["figure", "value"], rows)
@@ -312,6 +313,7 @@ def main(argv=None) -> int:
     b.add_argument("--walls", default="planes", choices=["planes", "mesh"], help="box as planes or one mesh")
     b.add_argument("--law", default="HM", choices=["HM", "JKR", "EEPA"], help="contact law of every pair")
     b.add_argument("--worlds", type=int, default=1, help="identical copies of the bed, batched in one model")
+    b.add_argument("--shuffle", action="store_true", help="number the bodies in a random order (not row by row)")
     b.set_defaults(fn=cmd_bench)
     au = sub.add_parser("audit", help="recompute the seed papers' published statistics from their own data")
     au.add_argument("--json", help="write the records to this file ('-': JSON to stdout instead of the table)")

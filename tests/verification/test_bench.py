@@ -2,6 +2,8 @@
 
 import warnings
 
+import numpy as np
+
 from warpdem.verify.bench import DT, build_bed, run_bench
 
 TINY = {"device": "cpu", "count": 100, "steps": 10, "settle_steps": 10}
@@ -25,3 +27,11 @@ def test_clump_bed_runs_within_rayleigh_limit():
         res = run_bench(**TINY, clumps=8)
     assert res["dt"] <= 0.2 * rayleigh < DT
     assert res["spheres"] == 8 * res["clumps"]
+
+
+def test_shuffled_bed_is_the_same_bed_in_another_order():
+    """--shuffle renumbers the spheres, nothing else: the same positions, a different order."""
+    x = build_bed(200, "cpu")[0].initial["sphere_x"]
+    y = build_bed(200, "cpu", shuffle=True)[0].initial["sphere_x"]
+    assert not np.array_equal(x, y)
+    assert np.array_equal(x[np.lexsort(x.T)], y[np.lexsort(y.T)])

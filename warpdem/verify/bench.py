@@ -83,13 +83,16 @@ def build_bed(
     law: str = "HM",
     mesh_cells: int = 40,
     worlds: int = 1,
+    shuffle: bool = False,
 ):
     """Model of ``count`` bodies per world (rounded to full 5-layer lattices) in a square box, replicated into
     ``worlds`` identical worlds; returns (model, side [m]).
 
     ``clumps`` = 8 makes each body an 8-sphere clump (random orientation) instead of a sphere; ``walls`` =
     "mesh" replaces the five planes by one triangle mesh of 10 mesh_cells^2 triangles (a funnel-sized mesh);
-    ``law`` (HM, JKR, EEPA) sets the contact law of every pair, with moderate cohesion.
+    ``law`` (HM, JKR, EEPA) sets the contact law of every pair, with moderate cohesion. ``shuffle`` numbers the
+    same bodies in a random order (a lattice is numbered row by row, so neighbours are near in memory; a poured
+    or flowing bed's numbering is not).
     """
     layers = 5
     per_side = max(2, int(round(math.sqrt(count / layers))))
@@ -100,6 +103,8 @@ def build_bed(
         [(i + 0.5) * DIAMETER, (j + 0.5) * DIAMETER, 0.5 * DIAMETER + k * 1.1 * DIAMETER + 0.0005], axis=-1
     ).reshape(-1, 3)
     pts[:, :2] += rng.uniform(-2e-4, 2e-4, (len(pts), 2))
+    if shuffle:
+        pts = pts[np.random.default_rng(seed + 1).permutation(len(pts))]
     b = ModelBuilder()
     b.add_material(Material("bed", density=2500.0, youngs_modulus=1e8, poisson_ratio=0.3))
     cohesion = {
@@ -188,6 +193,7 @@ def run_bench(
     walls: str = "planes",
     law: str = "HM",
     worlds: int = 1,
+    shuffle: bool = False,
 ) -> dict:
     """Settle the bed, then time ``steps`` steps; returns the figures.
 
@@ -197,7 +203,7 @@ def run_bench(
     is_cuda = wp.get_device(device).is_cuda
     count = count or (1_000_000 if is_cuda else 2000)
     steps = steps or (2000 if is_cuda else 5000)
-    model, side = build_bed(count, device, clumps=clumps, walls=walls, law=law, worlds=worlds)
+    model, side = build_bed(count, device, clumps=clumps, walls=walls, law=law, worlds=worlds, shuffle=shuffle)
     mesh_capacity = 32 if walls == "mesh" else 16
     solver = Solver(model, SolverOptions(dt=None, mesh_capacity=mesh_capacity))
     if solver.dt > DT:
@@ -227,6 +233,7 @@ def run_bench(
         "device": str(wp.get_device(device).name if is_cuda else "cpu"),
         "law": law,
         "worlds": model.world_count,
+        "shuffled": shuffle,
         "dt": solver.dt,
         "walls": walls if walls == "planes" else f"mesh ({model.triangle_wall.shape[0]} triangles)",
         "clumps": model.clump_count,
