@@ -100,7 +100,7 @@ def test_specialised_kernels_compute_what_the_general_ones_do(kind):
     assert np.abs(runs[0][0][:, 2] - 0.006).max() > 1e-4, "the spheres should have moved"
 
 
-@pytest.mark.parametrize("kind", ["hm", "jkr"])
+@pytest.mark.parametrize("kind", ["hm", "jkr", "jkr_plain"])
 def test_live_masks_mark_the_slots_with_history(kind):
     """A neighbour or plane slot whose live bit is clear holds a zero history (the step skips reading it), and the
     bits mark exactly the contacts of the last step (recomputed here from its positions, x - dt v): touching
