@@ -1,6 +1,6 @@
 """The structs of the contact laws: per-pair parameters (derived on the host from the materials and the
 interaction table) and per-contact history (carried from step to step and across list rebuilds), with the
-functions that load and store a history slot in either of its layouts and those that read a sphere's live-slot
+functions that load and store a history slot in any of its layouts and those that read a sphere's live-slot
 mask."""
 
 import warp as wp
@@ -46,9 +46,9 @@ class ContactHistory:
     spheres, the sphere against a wall). A zero struct is a new contact; a contact that ends is zeroed.
 
     A law that needs more history adds its field here, and says in ``StepFeatures.history_type``
-    (kernels/features.py) when a model needs it: the lists store the whole struct, ``spring`` and ``aux`` (a
-    ``wp.vec4``) when no rolling spring is used, or only ``spring`` (a ``wp.vec3``) when nothing else is. Kernels read and write slots through :func:`history_load` and
-    :func:`history_store`, which take either layout.
+    (kernels/features.py) when a model needs it: that property picks what a list slot stores (this struct, or
+    the part of it the model's laws use). Kernels read and write slots through :func:`history_load` and
+    :func:`history_store`, which take any of those layouts.
     """
 
     spring: wp.vec3
@@ -93,6 +93,13 @@ def history_store(slots: wp.array2d[wp.vec3], k: int, i: int, h: ContactHistory)
     slots[k, i] = h.spring
 
 
+@wp.func
+def history_store(slots: wp.array2d[wp.vec4], k: int, i: int, h: ContactHistory):  # noqa: F811
+    """Write ``h``'s spring and ``aux`` to slot (k, i) of a spring-and-scalar history array (a model of that
+    layout keeps its rolling spring at zero)."""
+    slots[k, i] = wp.vec4(h.spring[0], h.spring[1], h.spring[2], h.aux)
+
+
 LIVE_SLOTS = wp.constant(64)
 """Slots of a sphere's list that its live mask covers (one ``wp.uint64`` per sphere); later slots count as live."""
 
@@ -113,10 +120,3 @@ def slot_bit(k: int):
     if k >= LIVE_SLOTS:
         return wp.uint64(0)
     return wp.uint64(1) << wp.uint64(k)
-
-
-@wp.func
-def history_store(slots: wp.array2d[wp.vec4], k: int, i: int, h: ContactHistory):  # noqa: F811
-    """Write ``h``'s spring and ``aux`` to slot (k, i) of a spring-and-scalar history array (a model of that
-    layout keeps its rolling spring at zero)."""
-    slots[k, i] = wp.vec4(h.spring[0], h.spring[1], h.spring[2], h.aux)

@@ -783,8 +783,8 @@ def integrate_clumps_kernel(tiled: bool):
         Tiled (large clumps on CUDA), ``lanes`` = ``CLUMP_LANES`` threads per clump: each lane sums every lanes-th
         component in order and a tile reduction adds the lanes in a fixed tree, so the sum is deterministic; a
         clump of 141 spheres does not wait on one thread's serial loop. Every lane integrates the body (the same
-        arithmetic, so the same numbers); lane 0 writes it. Otherwise one
-        thread per clump (launched over (clump_count, 1), lanes = 1) sums its components in order.
+        arithmetic, so the same numbers); lane 0 writes it. Otherwise one thread per clump (launched over
+        (clump_count, 1), lanes = 1) sums its components in order.
 
         Leapfrog on momentum and on angular momentum L (world frame, so a torque-free body keeps L
         exactly); the orientation advances by an explicit midpoint rule with L held at its half-step value.

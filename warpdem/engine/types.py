@@ -329,11 +329,10 @@ class Contacts:
     neighbor_index: wp.array
     """Candidate partner, shape (neighbor_capacity, sphere_count), int32, ascending per sphere."""
     neighbor_history: wp.array
-    """History of the pair (canonical order), shape (neighbor_capacity, sphere_count): ``ContactHistory``
-    (kernels/params.py: tangential spring [m], rolling spring torque [N m], the law's scalar), or only the
-    tangential spring [m] as a ``wp.vec3`` when the model has no cohesive law and no EPSD rolling, or the
-    spring and the law's scalar as a ``wp.vec4`` when it has cohesive laws but no EPSD rolling
-    (``StepFeatures.history_type``)."""
+    """History of the pair (canonical order), shape (neighbor_capacity, sphere_count), of the slot type
+    ``StepFeatures.history_type`` picks for the model: ``ContactHistory`` (kernels/params.py: tangential spring
+    [m], rolling spring torque [N m], the law's scalar) or the part of it the model's laws use (see
+    :meth:`spring`)."""
     plane_history: wp.array
     """History per sphere and plane, shape (max(plane_count, 1), sphere_count), the same type."""
     mesh_count: wp.array

@@ -423,8 +423,8 @@ def _fingerprint(spec, device, world_count, variations, world_seeds) -> str:
 
 
 CHECKPOINT_FORMAT = 4
-"""Version of the arrays a checkpoint holds (4: contact history as one ContactHistory record per slot, its spring
-and scalar, or its spring only, see ``StepFeatures.history_type``; live masks of the neighbour and plane slots).
+"""Version of the arrays a checkpoint holds (4: contact history in the slot type of ``StepFeatures.history_type``;
+live masks of the neighbour and plane slots).
 A checkpoint of another version, or one whose history slot has another layout, belongs to other code: the run
 starts afresh instead of resuming from it."""
 
