@@ -406,14 +406,20 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
         # sphere-sphere (a slot not live holds a zero history: it is neither read nor rewritten)
         live_in = neighbor_live_out[i]
         live = wp.uint64(0)
+        key_i = int(-1)
+        if wp.static(share_mass):
+            key_i = body_key(i, sphere_clump, clump_total)
         for k in range(neighbor_count[i]):
             was_live = slot_live(live_in, k)
             j = neighbor_index[k, i]
-            a = wp.min(i, j)
-            b = wp.max(i, j)
-            r_a = sphere_radius[a]
-            r_b = sphere_radius[b]
-            d = x_in[b] - x_in[a]
+            # the pair in canonical order (a: the lower index), from the partner's loads alone: this sphere's
+            # own values are already in registers and equal what a load of them would give
+            i_low = i < j
+            x_j = x_in[j]
+            r_j = sphere_radius[j]
+            r_a = wp.where(i_low, r_i, r_j)
+            r_b = wp.where(i_low, r_j, r_i)
+            d = wp.where(i_low, x_j - x_i, x_i - x_j)
             dist = wp.length(d)
             overlap = r_a + r_b - dist
             # apart and without history: no law acts (a JKR pair keeps aux = 1 while it hangs on in a gap;
@@ -428,37 +434,48 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                 if wp.static(share_mass):
                     # a contact due within one step counts already, so a clump's mass is shared from its
                     # first step
-                    if tally >= 0 and dist > 0.0 and overlap + dt * wp.dot(v_in[a] - v_in[b], d / dist) > 0.0:
-                        run_key, run_n = partner_tally(
-                            partner_key_out,
-                            partner_count_out,
-                            tally,
-                            run_key,
-                            run_n,
-                            body_key(j, sphere_clump, clump_total),
-                        )
+                    if tally >= 0 and dist > 0.0:
+                        v_j = v_in[j]
+                        v_ab = wp.where(i_low, v_i - v_j, v_j - v_i)
+                        if overlap + dt * wp.dot(v_ab, d / dist) > 0.0:
+                            run_key, run_n = partner_tally(
+                                partner_key_out,
+                                partner_count_out,
+                                tally,
+                                run_key,
+                                run_n,
+                                body_key(j, sphere_clump, clump_total),
+                            )
                 continue
             if dist <= 0.0 or active_in[j] == 0:
                 if was_live:
                     history_store(neighbor_history_out, k, i, ContactHistory())
                 continue
             n = d / dist
-            mat_a = sphere_material[a]
-            mat_b = sphere_material[b]
-            m_a = material_density[mw, mat_a] * sphere_body_volume[a]
-            m_b = material_density[mw, mat_b] * sphere_body_volume[b]
+            mat_j = sphere_material[j]
+            m_j = material_density[mw, mat_j] * sphere_body_volume[j]
             if wp.static(share_mass):
-                key_a = body_key(a, sphere_clump, clump_total)
-                key_b = body_key(b, sphere_clump, clump_total)
-                m_a = contact_mass(m_a, sphere_clump[a], key_b, partner_key, partner_count)
-                m_b = contact_mass(m_b, sphere_clump[b], key_a, partner_key, partner_count)
+                key_j = body_key(j, sphere_clump, clump_total)
+                mc_i = contact_mass(m_i, clump, key_j, partner_key, partner_count)
+                mc_j = contact_mass(m_j, sphere_clump[j], key_i, partner_key, partner_count)
+                m_a = wp.where(i_low, mc_i, mc_j)
+                m_b = wp.where(i_low, mc_j, mc_i)
+            else:
+                m_a = wp.where(i_low, m_i, m_j)
+                m_b = wp.where(i_low, m_j, m_i)
+            mat_a = wp.where(i_low, mat_i, mat_j)
+            mat_b = wp.where(i_low, mat_j, mat_i)
             r_star = r_a * r_b / (r_a + r_b)
             m_star = m_a * m_b / (m_a + m_b)
             arm_a = r_a - 0.5 * overlap
             arm_b = r_b - 0.5 * overlap
-            w_a = w_in[a]
-            w_b = w_in[b]
-            v_rel = (v_in[a] + wp.cross(w_a, arm_a * n)) - (v_in[b] - wp.cross(w_b, arm_b * n))
+            v_j = v_in[j]
+            w_j = w_in[j]
+            w_a = wp.where(i_low, w_i, w_j)
+            w_b = wp.where(i_low, w_j, w_i)
+            v_rel = (wp.where(i_low, v_i, v_j) + wp.cross(w_a, arm_a * n)) - (
+                wp.where(i_low, v_j, v_i) - wp.cross(w_b, arm_b * n)
+            )
             p = pair_params[pw, mat_a, mat_b]
             h_last = ContactHistory()
             if was_live:
@@ -484,7 +501,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             history_store(neighbor_history_out, k, i, ContactHistory(h.spring, roll, h.aux))
             live = live | slot_bit(k)
             f_i = f_a
-            if i == a:
+            if i_low:
                 t += wp.cross(arm_a * n, f_t) + m_roll
             else:
                 f_i = -f_a
@@ -495,7 +512,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                 if glued >= 0:
                     # a particle-coated wall feels the reaction on its glued sphere
                     origin_j = wp.transform_get_translation(wall_pose[glued])
-                    c_pt = x_in[a] + arm_a * n
+                    c_pt = wp.where(i_low, x_i, x_j) + arm_a * n
                     wp.atomic_add(wall_f_lanes_out, plane_point.shape[0] + glued, i % WALL_LANES, -f_i)
                     wp.atomic_add(
                         wall_t_lanes_out,
