@@ -42,7 +42,9 @@ load is measured from the adhesive branch, so it is zero on that branch).
 
 import warp as wp
 
-wp.set_module_options({"enable_backward": False})
+from .features import MODULE_OPTIONS
+
+wp.set_module_options(MODULE_OPTIONS)
 
 PI = wp.constant(3.141592653589793)
 SQRT_5_6 = wp.constant(0.9128709291752769)

@@ -34,7 +34,9 @@ P_c = 3 pi gamma R*, i.e. twice this offset; we follow EDEM.)
 
 import warp as wp
 
-wp.set_module_options({"enable_backward": False})
+from .features import MODULE_OPTIONS
+
+wp.set_module_options(MODULE_OPTIONS)
 
 JKR_NEWTON_STEPS = wp.constant(8)
 """Newton steps on t = sqrt(a/A); float32 relative error of a < 1e-6 for every delta >= delta_c (tested)."""

@@ -23,11 +23,11 @@ from typing import Any
 import warp as wp
 
 from .enums import Overflow
-from .features import StepFeatures
+from .features import MODULE_OPTIONS, StepFeatures
 from .geometry import closest_point_triangle
 from .params import ContactHistory, history_store, slot_bit, slot_live
 
-wp.set_module_options({"enable_backward": False})
+wp.set_module_options(MODULE_OPTIONS)
 
 CELLS_PER_REACH = 1.0
 """Neighbour cells per longest reach (2 r_max + skin + cohesive reach). The candidate lists do not depend on it
@@ -337,7 +337,7 @@ def build_contacts_kernel(features: StepFeatures):
     coated_walls = features.coated_walls
     History = features.history_type
 
-    @wp.kernel(module="unique", enable_backward=False)
+    @wp.kernel(module="unique", module_options=MODULE_OPTIONS)
     def build_contacts(
         # Model:
         sphere_radius: wp.array[float],

@@ -24,13 +24,13 @@ import numpy as np
 import warp as wp
 
 from .enums import RollingModel
-from .features import StepFeatures
+from .features import MODULE_OPTIONS, StepFeatures
 from .geometry import FEATURE_FACE, closest_point_triangle
 from .law_contact import contact_force_for
 from .law_rolling import rolling_resistance
 from .params import ContactHistory, PairParams, history_load, history_store, slot_bit, slot_live
 
-wp.set_module_options({"enable_backward": False})
+wp.set_module_options(MODULE_OPTIONS)
 
 BLOWUP_NONE = wp.constant(2147483647)
 """``StepBuffers.blowup`` while no sphere has blown up (the largest int32, so atomic_min records the first)."""
@@ -299,7 +299,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
     wall_contact = wall_contact_for(cohesive, rolling)
     History = features.history_type
 
-    @wp.kernel(module="unique", enable_backward=False, cuda_max_registers=max_registers)
+    @wp.kernel(module="unique", module_options=MODULE_OPTIONS, cuda_max_registers=max_registers)
     def step_spheres(
         # Model:
         sphere_radius: wp.array[float],
@@ -758,7 +758,7 @@ def quat_step(q: wp.quat, w: wp.vec3, h: float):
 def integrate_clumps_kernel(tiled: bool):
     """:func:`integrate_clumps` for blocks of lanes per clump (``tiled``), or one thread per clump."""
 
-    @wp.kernel(module="unique", enable_backward=False)
+    @wp.kernel(module="unique", module_options=MODULE_OPTIONS)
     def integrate_clumps(
         # Model:
         clump_sphere_start: wp.array[int],
