@@ -278,11 +278,20 @@ def flag_blowup(blowup_out: wp.array[int], step: int, i: int):
         wp.atomic_min(blowup_out, 0, i)
 
 
-STEP_MAX_REGISTERS = 64
-"""Register cap of the step kernel on CUDA (``__maxnreg__``; None: the compiler's choice). The compiler's own
-choice (88) leaves room for two blocks of 256 threads per SM: 25 % occupancy for a kernel that waits on
-memory. On an H100, 64 gave 1.69e9 sphere-steps/s on the HM bed against 1.57e9 uncapped, and 9.7e8 against
-6.7e8 on the clump bed; 48 and 40 spill and are slower."""
+STEP_BLOCK_DIM = 128
+"""Threads per block of the step kernel on CUDA. Measured on an H100 with fast math (kernels/features.py):
+128 beat Warp's 256 by 1-6 % on the HM and the 8-sphere clump beds at every register cap tried."""
+
+
+def step_max_registers(features: StepFeatures) -> int | None:
+    """Register cap of the step kernel on CUDA (``__maxnreg__``; None: the compiler's choice) for ``features``.
+
+    A cap trades spills for occupancy, and the kernel issues instructions more than it waits on memory since
+    fast math. Measured on an H100 (sphere-steps/s, blocks of 128): plain spheres 3.05e9 uncapped against
+    2.90e9 at 72 and 2.78e9 at 64; the 8-sphere clump bed, whose mass tables and clump branches need more
+    registers, 2.12e9 at 72 against 2.07e9 at 64, 2.09e9 at 80 and 1.47e9 uncapped (two blocks per SM).
+    """
+    return 72 if features.clumps else None
 
 
 @functools.cache
@@ -672,8 +681,9 @@ def launch_step_spheres(
     """
     m, c, b = model, contacts, buffers
     wp.launch(
-        step_spheres_kernel(features, STEP_MAX_REGISTERS),
+        step_spheres_kernel(features, step_max_registers(features)),
         dim=m.sphere_count,
+        block_dim=STEP_BLOCK_DIM,
         inputs=[
             m.sphere_radius,
             m.sphere_material,
