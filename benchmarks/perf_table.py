@@ -130,7 +130,7 @@ def markdown(record: dict) -> str:
     more = f", then {resumed} more call{'s' * (resumed > 1)} with --resume" if resumed else ""
     lines = [
         f"Measured {str(record.get('date', '?'))[:10]} on {record.get('device') or '?'}, Warp {record.get('warp') or '?'}, "
-        f"commit {sha}; medians of {repeats} repeat{'s' * (repeats > 1)} (`{command}`{more})",
+        f"commit {sha}; {f'medians of {repeats} repeats' if repeats > 1 else 'one run of each'} (`{command}`{more})",
         "",
     ]
     header = ["case"] + [f"{_tree_name(label, trees[label])} sphere-steps/s" for label in labels]

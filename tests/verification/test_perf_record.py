@@ -79,6 +79,15 @@ def test_table_rows_and_ratios():
     assert perf_table.markdown(copy.deepcopy(RECORD)) == perf_table.markdown(RECORD)
 
 
+def test_table_says_one_run_without_repeats():
+    record = copy.deepcopy(RECORD)
+    record["runs"] = [r for r in record["runs"] if r["repeat"] == 0]
+    record["deme"] = [d for d in record["deme"] if d["repeat"] == 0]
+    header = perf_table.markdown(record).splitlines()[0]
+    assert "; one run of each (`python" in header
+    assert "medians" not in header
+
+
 def test_readme_block_replaced_and_rest_kept(tmp_path, capsys):
     record = tmp_path / "record.json"
     record.write_text(json.dumps(RECORD))
