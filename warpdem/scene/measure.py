@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 import numbers
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -35,7 +36,10 @@ __all__ = [
     "angle_cone",
     "angle_image",
     "angle_surface_fit",
+    "BoxRegion",
+    "CylinderRegion",
     "impact_summary",
+    "packing_fraction",
     "plot_angles",
     "plot_press",
     "press_curve",
@@ -634,6 +638,162 @@ def synthetic_cone(
 # --------------------------------------------------------------------------------------------------
 # die press
 # --------------------------------------------------------------------------------------------------
+
+
+# --------------------------------------------------------------------------------------------------
+# packing fraction and bulk density
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class BoxRegion:
+    """An axis-aligned box [m] from ``lo`` to ``hi`` (each (x, y, z)), where a packing is measured."""
+
+    lo: tuple
+    hi: tuple
+
+    def __post_init__(self):
+        lo = _point3("lo", self.lo)
+        hi = _point3("hi", self.hi)
+        if not np.all(hi > lo):
+            _bad("hi", self.hi, f"a corner above lo = {tuple(lo)} along x, y and z")
+        object.__setattr__(self, "lo", tuple(lo))
+        object.__setattr__(self, "hi", tuple(hi))
+
+    @property
+    def volume(self) -> float:
+        """[m^3]"""
+        return float(np.prod(np.subtract(self.hi, self.lo)))
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.array(self.lo), np.array(self.hi)
+
+    def from_unit(self, u: np.ndarray) -> np.ndarray:
+        """Points of the unit cube, shape (n, 3), mapped onto the box uniformly."""
+        lo, hi = self.bounds()
+        return lo + u * (hi - lo)
+
+
+@dataclass(frozen=True)
+class CylinderRegion:
+    """A vertical cylinder [m] of ``radius`` about the axis through ``center`` (x, y), from ``z_low`` to
+    ``z_high``, where a packing is measured."""
+
+    center: tuple
+    radius: float
+    z_low: float
+    z_high: float
+
+    def __post_init__(self):
+        try:
+            cx, cy = (float(c) for c in self.center)
+        except (TypeError, ValueError):
+            _bad("center", self.center, "(cx, cy) in m")
+        if not (math.isfinite(cx) and math.isfinite(cy)):
+            _bad("center", self.center, "finite (cx, cy) in m")
+        object.__setattr__(self, "center", (cx, cy))
+        object.__setattr__(self, "radius", _positive("radius", self.radius, "m"))
+        z0 = _finite_number("z_low", self.z_low, "m")
+        z1 = _finite_number("z_high", self.z_high, "m")
+        if not z1 > z0:
+            _bad("z_high", self.z_high, f"a height above z_low = {z0} m")
+        object.__setattr__(self, "z_low", z0)
+        object.__setattr__(self, "z_high", z1)
+
+    @property
+    def volume(self) -> float:
+        """[m^3]"""
+        return math.pi * self.radius**2 * (self.z_high - self.z_low)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        cx, cy = self.center
+        return (
+            np.array([cx - self.radius, cy - self.radius, self.z_low]),
+            np.array([cx + self.radius, cy + self.radius, self.z_high]),
+        )
+
+    def from_unit(self, u: np.ndarray) -> np.ndarray:
+        """Points of the unit cube, shape (n, 3), mapped onto the cylinder uniformly (an area-preserving map,
+        so low-discrepancy points stay evenly spread)."""
+        rho = self.radius * np.sqrt(u[:, 0])
+        phi = 2.0 * math.pi * u[:, 1]
+        return np.column_stack(
+            (
+                self.center[0] + rho * np.cos(phi),
+                self.center[1] + rho * np.sin(phi),
+                self.z_low + u[:, 2] * (self.z_high - self.z_low),
+            )
+        )
+
+
+def _point3(name: str, value) -> np.ndarray:
+    try:
+        a = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        _bad(name, value, "(x, y, z) in m")
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        _bad(name, value, "finite (x, y, z) in m")
+    return a
+
+
+def packing_fraction(x, r, region, density=None, samples_log2: int = 17, seed: int = 0) -> dict:
+    """Solid fraction of a packing inside ``region``, and its bulk density.
+
+    The solid is the union of the spheres, so the overlapping spheres of a clump count once (their union
+    volume) and polydisperse spheres their own volumes; spheres cut by the region's boundary count only
+    their part inside. The region is sampled by 2**``samples_log2`` scrambled Sobol points (scipy.stats.qmc,
+    seeded by ``seed``, so repeatable); the fraction is the share of points inside some sphere. Its error
+    falls nearly as 1/points for a smooth solid (far below 0.1 % at the default), not as 1/sqrt(points).
+
+    Args:
+        x: sphere centres [m], shape (n, 3).
+        r: radii [m], shape (n,).
+        region: a :class:`BoxRegion` or :class:`CylinderRegion`, e.g. a core away from the walls and the free
+            surface (about two particle diameters from each).
+        density: solid density of each sphere [kg/m^3], shape (n,) (a clump's spheres share their material's);
+            None: no bulk density.
+        samples_log2: base-2 logarithm of the number of sample points, 10..24.
+        seed: the Sobol scrambling seed.
+
+    Returns:
+        dict with ``packing_fraction`` [-], ``bulk_density_kg_m3`` (None without ``density``),
+        ``region_volume_m3``, ``solid_volume_m3``, ``samples`` and ``spheres`` (those reaching into the region).
+    """
+    from scipy.spatial import cKDTree
+    from scipy.stats import qmc
+
+    x, r = _spheres(x, r)
+    if not isinstance(region, (BoxRegion, CylinderRegion)):
+        _bad("region", region, "a BoxRegion or CylinderRegion")
+    m = _int_at_least("samples_log2", samples_log2, 10)
+    if m > 24:
+        _bad("samples_log2", samples_log2, "an integer in 10..24")
+    rho = None
+    if density is not None:
+        rho = np.asarray(density, dtype=float)
+        if rho.shape != r.shape or not np.all(np.isfinite(rho) & (rho > 0)):
+            _bad("density", density, f"finite densities > 0 kg/m^3 of shape {r.shape}, one per sphere")
+    u = qmc.Sobol(d=3, scramble=True, seed=_int_at_least("seed", seed, 0)).random_base2(m)
+    points = region.from_unit(u)
+    lo, hi = region.bounds()
+    near = np.flatnonzero(np.all((x + r[:, None] > lo) & (x - r[:, None] < hi), axis=1))
+    owner = np.full(len(points), -1)
+    if near.size:
+        hits = cKDTree(points).query_ball_point(x[near], r[near])
+        lengths = np.fromiter((len(h) for h in hits), dtype=int, count=len(hits))
+        if lengths.sum():
+            owner[np.concatenate([np.asarray(h, dtype=int) for h in hits if h])] = np.repeat(near, lengths)
+    solid = owner >= 0
+    phi = float(solid.mean())
+    bulk = None if rho is None else float(rho[owner[solid]].sum() / len(points))
+    return {
+        "packing_fraction": phi,
+        "bulk_density_kg_m3": bulk,
+        "region_volume_m3": region.volume,
+        "solid_volume_m3": phi * region.volume,
+        "samples": len(points),
+        "spheres": int(np.count_nonzero(lengths)) if near.size else 0,
+    }
 
 
 def _press_arrays(piston_z, piston_force) -> tuple[np.ndarray, np.ndarray]:
