@@ -15,6 +15,7 @@ from warpdem.scene.measure import (
     angle_image,
     angle_surface_fit,
     impact_summary,
+    packing_core,
     packing_fraction,
     plot_angles,
     plot_press,
@@ -491,3 +492,24 @@ def test_packing_fraction_refuses_bad_input():
         CylinderRegion((0, 0), 0.0, 0.0, 1.0)
     with pytest.raises(ValueError, match="z_high"):
         CylinderRegion((0, 0), 1.0, 1.0, 1.0)
+
+
+def test_packing_core_of_a_bed_in_a_cylinder():
+    """An FCC bed cut to a cylinder (radius 0.04 m) with a flat top 0.05 m above its base: the core stands two
+    diameters inside the wall, above the base and below the top, and holds the lattice's 0.7405 within 1 %;
+    a bed shallower than five diameters leaves no core."""
+    a = 0.01
+    x = _lattice(12, [(0, 0, 0), (0.5, 0.5, 0), (0.5, 0, 0.5), (0, 0.5, 0.5)], a) - (0.06, 0.06, 0.0)
+    r = np.full(len(x), a / (2 * math.sqrt(2)))
+    keep = (np.hypot(x[:, 0], x[:, 1]) + r <= 0.04) & (x[:, 2] - r >= 0.0) & (x[:, 2] + r <= 0.05)
+    x, r = x[keep], r[keep]
+    top = float((x[:, 2] + r).max())
+    d = 2 * r[0]
+    core = packing_core(x, r, (0.0, 0.0), 0.04, 0.0)
+    assert core.radius == pytest.approx(0.04 - 2 * d)
+    assert core.z_low == pytest.approx(2 * d)
+    assert core.z_high == pytest.approx(top - 2 * d)
+    assert packing_fraction(x, r, core)["packing_fraction"] == pytest.approx(math.pi / (3 * math.sqrt(2)), rel=0.01)
+    shallow = x[:, 2] + r <= 4.5 * d
+    with pytest.raises(ValueError, match="deeper than 5 diameters"):
+        packing_core(x[shallow], r[shallow], (0.0, 0.0), 0.04, 0.0)

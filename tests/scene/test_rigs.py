@@ -260,6 +260,17 @@ def test_lifting_cylinder_lift_and_angle(rig_run):
     m = run["metrics"]["metrics"][0]
     assert "angle_error" not in m, m.get("angle_error")
     assert 5.0 < m["angle_fit_deg"] < 60.0
+    # the poured bed before the lift, in its core one diameter from wall, base and surface: a random packing of
+    # equal frictional spheres, between random loose (0.55) less the small core's scatter and random close
+    # (0.64); its bulk density is that fraction of the solid's (the smoke's spheres are the ore, 2404 kg/m^3)
+    assert "packing_error" not in m, m.get("packing_error")
+    assert 0.50 < m["packing_fraction"] < 0.65
+    assert m["bulk_density_kg_m3"] == pytest.approx(2404.0 * m["packing_fraction"], rel=1e-9)
+    core = m["packing_core"]
+    # one largest diameter (radii up to 1 + 2 x 10 % of the mean) inside the coated wall (a one-diameter coat)
+    wall = p.inner_diameter / 2 - 2 * p.particle_radius
+    assert wall - 2.4 * p.particle_radius - 1e-12 <= core["radius_m"] <= wall - 2.0 * p.particle_radius
+    assert core["z_high_m"] - core["z_low_m"] >= 2.0 * p.particle_radius
 
 
 def test_die_press_compaction(rig_run):
@@ -364,6 +375,30 @@ def test_stage_clump_contact_mass(funnel_stage):
     assert apply_overrides(spec, {"run.clump_contact_mass": "body"}).run.clump_contact_mass == "body"
     with pytest.raises(StageError, match="'half' is not allowed; expected shared or body"):
         apply_overrides(spec, {"run.clump_contact_mass": "half"})
+
+
+def test_stage_packing_settings(tmp_path):
+    """The lifting cylinder's stage carries the packing measurement (time, container radius, margin), read back
+    as written; a negative time or margin, or a time without a radius, names /World and the attribute."""
+    path = tmp_path / "cyl.usda"
+    rigs.new("lifting_cylinder", path, smoke=True)
+    p = rigs.params("lifting_cylinder", rigs.SMOKE["lifting_cylinder"])
+    m = read_stage(str(path)).measure
+    assert m.packing_radius == pytest.approx(p.inner_diameter / 2 - 2 * p.particle_radius)
+    assert m.packing_margin == 1.0 and m.packing_time > p.settle_time
+    stage = Usd.Stage.Open(str(path))
+    world = stage.GetPrimAtPath("/World")
+    for name, value, says in (
+        ("packingTime", -1.0, ">= 0 s"),
+        ("packingMargin", -0.5, ">= 0 diameters"),
+        ("packingRadius", 0.0, "inner radius > 0 m"),
+    ):
+        attr = world.GetAttribute("warpdem:measure:" + name)
+        good = attr.Get()
+        attr.Set(value)
+        msg = _read_error(path, stage)
+        assert "/World" in msg and "warpdem:measure:" + name in msg and says in msg, msg
+        attr.Set(good)
 
 
 def test_stage_skin_fraction(funnel_stage):

@@ -39,6 +39,7 @@ __all__ = [
     "BoxRegion",
     "CylinderRegion",
     "impact_summary",
+    "packing_core",
     "packing_fraction",
     "plot_angles",
     "plot_press",
@@ -794,6 +795,63 @@ def packing_fraction(x, r, region, density=None, samples_log2: int = 17, seed: i
         "samples": len(points),
         "spheres": int(np.count_nonzero(lengths)) if near.size else 0,
     }
+
+
+def packing_core(x, r, center, radius: float, base_z: float, margin: float = 2.0) -> CylinderRegion:
+    """The core of a bed filling a vertical cylindrical container: ``margin`` particle diameters inside its wall,
+    above its base and below the lowest point of the free surface (wall and surface loosen a packing over a
+    few diameters).
+
+    The free surface is the highest sphere top in each square column, two diameters wide, that lies wholly
+    inside the core's disc; the core ends ``margin`` diameters below the lowest of them.
+
+    Args:
+        x: sphere centres [m], shape (n, 3); r: radii [m], shape (n,).
+        center: the container's axis (cx, cy) [m]; radius: its inner radius [m], > 0.
+        base_z: the height of its base [m]; margin: in diameters of the largest sphere, >= 0.
+
+    Raises:
+        ValueError: when the bed is too narrow or too shallow to leave a core (naming the sizes).
+    """
+    x, r = _spheres(x, r)
+    cx, cy = _axis(x, r, center)
+    radius = _positive("radius", radius, "m")
+    base_z = _finite_number("base_z", base_z, "m")
+    margin = _finite_number("margin", margin, "diameters")
+    if margin < 0:
+        _bad("margin", margin, "a number of particle diameters >= 0")
+    d = 2.0 * float(r.max())
+    core_r = radius - margin * d
+    width = 2.0 * d
+    if core_r < width:
+        _bad("radius", radius, f"a container wider than {margin} diameters ({margin * d:.4g} m) a side plus two")
+    # square columns of the core disc, all four corners inside it
+    k = int(math.ceil(core_r / width))
+    edges = np.arange(-k, k + 1) * width
+    ix = np.floor((x[:, 0] - cx) / width).astype(int)
+    iy = np.floor((x[:, 1] - cy) / width).astype(int)
+    tops = {}
+    for i, j, top in zip(ix, iy, x[:, 2] + r):
+        if tops.get((i, j), -math.inf) < top:
+            tops[(i, j)] = top
+    inside = [
+        tops.get((i, j), base_z)
+        for i in range(-k, k)
+        for j in range(-k, k)
+        if max(abs(edges[i + k]), abs(edges[i + k + 1])) ** 2 + max(abs(edges[j + k]), abs(edges[j + k + 1])) ** 2
+        <= core_r**2
+    ]
+    if not inside:
+        _bad("radius", radius, f"a container wide enough for a column {width:.4g} m wide inside its core")
+    surface = min(inside)
+    z_low, z_high = base_z + margin * d, surface - margin * d
+    if z_high - z_low < d:
+        _bad(
+            "x",
+            f"a bed whose free surface is {surface - base_z:.4g} m above the base",
+            f"a bed deeper than {2 * margin + 1:g} diameters ({(2 * margin + 1) * d:.4g} m) everywhere in its core",
+        )
+    return CylinderRegion((cx, cy), core_r, z_low, z_high)
 
 
 def _press_arrays(piston_z, piston_force) -> tuple[np.ndarray, np.ndarray]:

@@ -342,7 +342,8 @@ class LiftingCylinder:
     The cylinder stands on a base plate, is filled by a pour from a region ``pour_height`` tall just above its
     rim (particles leave it at ``pour_speed`` downward, so none falls more than the cylinder's height plus
     that region), settles for ``settle_time``, and is lifted by ``lift_height`` (default: its height + 20 mm)
-    at ``lift_speed``. With ``coated`` the cylinder's
+    at ``lift_speed``; just before it lifts, the bed's packing fraction and bulk density are measured in a core
+    ``packing_margin`` particle diameters from the wall, the base and the free surface. With ``coated`` the cylinder's
     inside and the base carry glued particles of the ore (seed 002 glues grains on both). Ore: seed 002's
     phosphate (2404 kg/m^3, G = 2.5 MPa, nu = 0.25; printed E = 1 MPa conflicts with G, so G is kept), EEPA
     between particles at seed 002's optimum (mu_s 0.7, mu_r 0.3, surface energy 1.0 J/m^2), 15-sphere clumps
@@ -371,6 +372,7 @@ class LiftingCylinder:
     cell: float = 0.02
     dt_fraction: float = 0.2
     seed: int = 1
+    packing_margin: float = 2.0
     _may_be_zero = (
         "count",
         "mass",
@@ -441,7 +443,13 @@ class LiftingCylinder:
                 settle_after=t1,
                 output_interval=0.05,
             ),
-            measure=MeasureSpec("angle_of_repose", base_height=2 * coat_r if self.coated else 0.0),
+            measure=MeasureSpec(
+                "angle_of_repose",
+                base_height=2 * coat_r if self.coated else 0.0,
+                packing_time=t0,
+                packing_radius=R - (2 * coat_r if self.coated else 0.0),
+                packing_margin=self.packing_margin,
+            ),
             domain=_plate_domain(
                 self.base_size, self.base_size, (0.0, 0.0, 0.0), margin, H + lift + self.pour_height + 0.5
             ),
@@ -719,6 +727,7 @@ SMOKE = {
         "cell": 0.01,
         "surface_energy": 0.0,
         "pull_off_force": 0.0,
+        "packing_margin": 1.0,
     },
     "die_press": {
         "particle_radius": 0.0005,

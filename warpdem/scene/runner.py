@@ -225,6 +225,7 @@ def run_scene(
     m = spec.measure
     piston = names.index(m.piston) if m.kind == "press" else None
     phase_ends = list(m.phase_ends) if m.kind == "impacts" else []
+    packing_time = m.packing_time if m.kind == "angle_of_repose" and m.packing_time > 0 else None
     phase_snap = []
     # tick_wall_s and rebuilds say where the wall time of a long run went (a dense pile, a flowing stream)
     series = {"time": [], "kinetic_energy": [], "wall_force": [], "tick_wall_s": [], "rebuilds": []}
@@ -260,7 +261,7 @@ def run_scene(
     while state.time < run.duration - eps:
         t_tick = time.perf_counter()
         t_next = min(state.time + run.output_interval, run.duration)
-        for te in phase_ends:
+        for te in phase_ends + ([packing_time] if packing_time is not None else []):
             if state.time + eps < te < t_next - eps:
                 t_next = te
         step0 = state.step
@@ -291,6 +292,8 @@ def run_scene(
                     }
                 )
                 state.reset_impacts()
+        if packing_time is not None and abs(t - packing_time) <= eps and "packing" not in series:
+            series["packing"] = [_packing_metrics(model, state, h, w, m) for w in range(W)]
         if writer is not None:
             _frame(writer, model, state, h, spec, t)
         if progress:
@@ -360,6 +363,8 @@ def run_scene(
                 )
             except ValueError as e:
                 mw["angle_error"] = str(e)
+            if packing_time is not None:
+                mw.update(series.get("packing", [{"packing_error": "the run ended before the packing time"}] * W)[w])
         elif m.kind == "press":
             z = np.asarray(series["piston_z"])
             f = np.asarray(series["piston_force"])
@@ -516,6 +521,27 @@ def _json_default(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
     return str(o)
+
+
+def _packing_metrics(model, state, h, w: int, m) -> dict:
+    """Packing fraction and bulk density of world ``w``'s bed in its container's core (``MeasureSpec.packing_*``)."""
+    x, r = _particles(model, state, h, w)
+    if not len(r):
+        return {"packing_error": "no particles in the container"}
+    act = state.sphere_active.numpy().astype(bool)
+    sel = act & (h["glued"] < 0) & (h["world"] == w)
+    dens = model.material_density.numpy()
+    rho = dens[w % dens.shape[0], h["material"][sel]]
+    try:
+        core = ms.packing_core(x, r, m.center, m.packing_radius, m.base_height, m.packing_margin)
+    except ValueError as e:
+        return {"packing_error": str(e)}
+    got = ms.packing_fraction(x, r, core, density=rho)
+    return {
+        "packing_fraction": got["packing_fraction"],
+        "bulk_density_kg_m3": got["bulk_density_kg_m3"],
+        "packing_core": {"radius_m": core.radius, "z_low_m": core.z_low, "z_high_m": core.z_high},
+    }
 
 
 def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:

@@ -144,6 +144,14 @@ class MeasureSpec:
     walls: list = field(default_factory=list)
     phase_names: list = field(default_factory=list)
     phase_ends: list = field(default_factory=list)
+    packing_time: float = 0.0
+    """Angle of repose: the time [s] at which the bed's packing fraction and bulk density are measured, in the
+    container it was poured into (the lifting cylinder before it lifts); 0: not measured."""
+    packing_radius: float = 0.0
+    """The container's inner radius [m] about ``center`` (see ``measure.packing_core``)."""
+    packing_margin: float = 2.0
+    """How far the measured core stays from the container's wall, its base and the free surface [particle
+    diameters]."""
 
 
 @dataclass
@@ -286,6 +294,13 @@ def write_stage(spec: SceneSpec, path=None):
     wp_.CreateAttribute(NS + "measure:center", Sdf.ValueTypeNames.Double2).Set(Gf.Vec2d(*m.center))
     wp_.CreateAttribute(NS + "measure:forceLimit", Sdf.ValueTypeNames.Double).Set(float(m.force_limit))
     wp_.CreateAttribute(NS + "measure:backstopHeight", Sdf.ValueTypeNames.Double).Set(float(m.backstop_height))
+    if m.packing_time > 0:
+        for name, value in (
+            ("packingTime", m.packing_time),
+            ("packingRadius", m.packing_radius),
+            ("packingMargin", m.packing_margin),
+        ):
+            wp_.CreateAttribute(NS + "measure:" + name, Sdf.ValueTypeNames.Double).Set(float(value))
     if m.piston:
         wp_.CreateRelationship(NS + "measure:piston").SetTargets([Sdf.Path(f"/World/Walls/{_ident(m.piston)}")])
     if m.walls:
@@ -601,7 +616,22 @@ def read_stage(path_or_stage) -> SceneSpec:
         backstop_height=r.get(world, NS + "measure:backstopHeight", required=False, default=0.0),
         phase_names=r.get(world, NS + "measure:phaseNames", "string[]", required=False, default=[]),
         phase_ends=r.get(world, NS + "measure:phaseEnds", "double[]", required=False, default=[]),
+        packing_time=r.get(world, NS + "measure:packingTime", required=False, default=0.0),
+        packing_radius=r.get(world, NS + "measure:packingRadius", required=False, default=0.0),
+        packing_margin=r.get(world, NS + "measure:packingMargin", required=False, default=2.0),
     )
+    if measure.packing_time < 0:
+        r.fail(world, NS + "measure:packingTime", f"= {measure.packing_time} is not allowed; expected >= 0 s")
+    if measure.packing_time > 0 and measure.packing_radius <= 0:
+        r.fail(
+            world,
+            NS + "measure:packingRadius",
+            f"= {measure.packing_radius} is not allowed; expected the container's inner radius > 0 m",
+        )
+    if measure.packing_margin < 0:
+        r.fail(
+            world, NS + "measure:packingMargin", f"= {measure.packing_margin} is not allowed; expected >= 0 diameters"
+        )
     if kind not in ("angle_of_repose", "press", "impacts", "none"):
         r.fail(world, NS + "measure:kind", f"= {kind!r} is not allowed; expected angle_of_repose, press, impacts")
     if kind == "press":

@@ -170,6 +170,8 @@ MEASURES = (
     "angle_cone_deg",
     "pile_height_m",
     "particles",
+    "packing_fraction",
+    "bulk_density_kg_m3",
     "max_displacement_m",
     "compression_ratio",
     "max_force_n",
