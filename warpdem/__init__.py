@@ -19,7 +19,7 @@ from .engine.factories import (
     random_quaternions,
 )
 from .engine.materials import Interaction, InteractionTable, Material, effective_moduli
-from .engine.motion import Segment, WallMotion
+from .engine.motion import MotionTable, Segment, WallMotion
 from .engine.solver import SimulationError, Solver, SolverOptions
 from .engine.types import ContactLaw, Contacts, Control, Model, Overflow, RollingModel, State
 from .scene import measure, rigs
@@ -51,6 +51,7 @@ __all__ = [
     "DynamicFactory",
     "FixedSize",
     "LogNormal",
+    "MotionTable",
     "Segment",
     "SieveTable",
     "TruncatedNormal",

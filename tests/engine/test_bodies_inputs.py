@@ -92,3 +92,30 @@ def test_clump_factory_needs_the_template_bounding_ratio():
     fac = wd.DynamicFactory(wd.Box((0, 0, 0), (0.01, 0.01, 0.01)), wd.FixedSize(1e-3), rate=100, count=5, seed=1)
     with pytest.raises(ValueError, match="bounding_ratio = 1.0"):
         b.add_factory(fac, "m", template=grain)
+
+
+def test_control_assign_moves_a_wall_by_the_new_table_in_place():
+    """A wall keyframed along +x is switched to -z after 0.1 s: at 0.2 s its pose is the new motion's, (0, 0,
+    -0.2) m, to float32, through the same device arrays; a table of another segment count is refused."""
+    b = wd.ModelBuilder()
+    b.add_material(wd.Material("m", density=1000, youngs_modulus=1e7, poisson_ratio=0.3))
+    b.add_wall_mesh(
+        [(0, 0, 0), (1, 0, 0), (0, 1, 0)],
+        [(0, 1, 2)],
+        "m",
+        motion=wd.WallMotion.keyframes([0.0, 1.0], [(0, 0, 0), (1, 0, 0)]),
+    )
+    b.add_spheres([(5.0, 5.0, 5.0)], 0.1, "m")
+    m = b.finalize("cpu")
+    s = wd.Solver(m, wd.SolverOptions(dt=1e-3))
+    c = s.contacts()
+    st = s.run(m.state(), c, 100)
+    assert st.wall_pose.numpy()[0, :3] == pytest.approx([0.1, 0.0, 0.0], abs=1e-6)
+    arrays = [s.control.segment_t0, s.control.segment_v]
+    table = wd.MotionTable.build([wd.WallMotion.keyframes([0.0, 1.0], [(0, 0, 0), (0, 0, -1)])])
+    s.control.assign(table)
+    assert [s.control.segment_t0, s.control.segment_v] == arrays
+    st = s.run(st, c, 100)
+    assert st.wall_pose.numpy()[0, :3] == pytest.approx([0.0, 0.0, -0.2], abs=1e-6)
+    with pytest.raises(ValueError, match="segments per wall"):
+        s.control.assign(wd.MotionTable.build([wd.WallMotion.keyframes([0.0, 1.0, 2.0], [(0, 0, 0)] * 3)]))

@@ -286,27 +286,55 @@ class Control:
     """Wall pose at the segment's start, shape (segment_count,), transform."""
 
     @staticmethod
-    def from_table(table, device) -> Control:
+    def _columns(table) -> dict:
+        """The table's columns as host arrays of the device arrays' types (one row at least)."""
         pose = np.concatenate([table.pose_translation, table.pose_rotation], axis=1).astype(np.float32)
         if len(pose) == 0:
             pose = np.array([[0, 0, 0, 0, 0, 0, 1]], dtype=np.float32)
 
         def vec(a):
             a = np.asarray(a, dtype=np.float32).reshape(-1, 3)
-            return wp.array(a if len(a) else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=device)
+            return a if len(a) else np.zeros((1, 3), np.float32)
 
         def f64(a):
-            return wp.array(np.asarray(a, dtype=np.float64) if len(a) else np.zeros(1), dtype=wp.float64, device=device)
+            return np.asarray(a, dtype=np.float64) if len(a) else np.zeros(1)
 
+        return {
+            "segment_start": np.asarray(table.start, dtype=np.int32),
+            "segment_t0": f64(table.t0),
+            "segment_t1": f64(table.t1),
+            "segment_v": vec(table.velocity),
+            "segment_w": vec(table.angular_velocity),
+            "segment_pivot": vec(table.pivot),
+            "segment_pose": pose,
+        }
+
+    @staticmethod
+    def from_table(table, device) -> Control:
+        dtypes = {
+            "segment_start": int,
+            "segment_t0": wp.float64,
+            "segment_t1": wp.float64,
+            "segment_pose": wp.transform,
+        }
         return Control(
-            segment_start=wp.array(table.start, dtype=int, device=device),
-            segment_t0=f64(table.t0),
-            segment_t1=f64(table.t1),
-            segment_v=vec(table.velocity),
-            segment_w=vec(table.angular_velocity),
-            segment_pivot=vec(table.pivot),
-            segment_pose=wp.array(pose, dtype=wp.transform, device=device),
+            **{k: wp.array(v, dtype=dtypes.get(k, wp.vec3), device=device) for k, v in Control._columns(table).items()}
         )
+
+    def assign(self, table) -> None:
+        """Replace the motion with ``table``'s in place (the same arrays, so a captured CUDA graph follows it).
+
+        Raises:
+            ValueError: when ``table`` has other segment counts per wall than this Control.
+        """
+        cols = Control._columns(table)
+        if not np.array_equal(cols["segment_start"], self.segment_start.numpy()):
+            raise ValueError(
+                f"Control.assign: segments per wall {np.diff(cols['segment_start']).tolist()} are not allowed; "
+                f"expected this Control's {np.diff(self.segment_start.numpy()).tolist()}"
+            )
+        for k, v in cols.items():
+            getattr(self, k).assign(v)
 
 
 @dataclass
