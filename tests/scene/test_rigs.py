@@ -282,7 +282,7 @@ def test_die_press_compaction(rig_run):
     m = run["metrics"]["metrics"][0]
     p = rigs.params("die_press", rigs.SMOKE["die_press"])
     assert "press_error" not in m, m.get("press_error")
-    assert m["stop"] == "force_limit"
+    assert m["stop"] == "unloaded"
     assert 0.0 < m["compression_ratio"] < 0.8
     assert m["fill_height_m"] == pytest.approx(p.fill_height, rel=0.25)
     assert m["max_force_n"] >= p.force_limit * 0.99
@@ -291,6 +291,29 @@ def test_die_press_compaction(rig_run):
     # within one output interval of the maximum displacement
     assert 0.0 <= m["displacement_m"][0] <= p.gap / 8 + 1e-9
     assert abs(m["displacement_m"][-1] - m["max_displacement_m"]) <= p.gap / 8 + 1e-9
+
+
+def test_die_press_unloading_branch(rig_run):
+    """Die press, unloading: the bar returns at the pressing speed from where the force limit stopped it (the
+    unloading branch starts at the loading branch's last sample) to where the stroke began, so the force falls
+    from the limit to nothing. The set left is at most the compaction under load and, as the soft wet-feed
+    spheres (G = 10 MPa) deform elastically, far below it; one output interval of travel (gap / 8) bounds how
+    well either is read. The unloading stiffness exceeds the loading secant F_max / d_max (an unloading line
+    steeper than the loading curve, as for any bed that does not fully spring back along its loading path).
+    press.png is written."""
+    run = rig_run("die_press")
+    m = run["metrics"]["metrics"][0]
+    p = rigs.params("die_press", rigs.SMOKE["die_press"])
+    step = p.gap / 8 + 1e-9
+    assert m["unload_displacement_m"][0] == pytest.approx(m["displacement_m"][-1], abs=1e-12)
+    assert m["unload_force_n"][0] == pytest.approx(m["force_n"][-1], abs=1e-12)
+    assert m["unload_force_n"][0] >= p.force_limit and m["unload_force_n"][-1] <= 0.01 * p.force_limit
+    assert -step <= m["residual_set_m"] <= m["max_displacement_m"] + step
+    assert m["residual_set_m"] < 0.5 * m["max_displacement_m"]
+    assert m["residual_set_ratio"] == pytest.approx(m["residual_set_m"] / m["fill_height_m"])
+    assert m["unloading_stiffness_n_m"] > m["max_force_n"] / m["max_displacement_m"]
+    assert m["loading_exponent"] > 1.0
+    assert (run["out"] / "press.png").stat().st_size > 0
 
 
 def test_truck_tipper_impacts(rig_run):
@@ -398,6 +421,34 @@ def test_stage_packing_settings(tmp_path):
         attr.Set(value)
         msg = _read_error(path, stage)
         assert "/World" in msg and "warpdem:measure:" + name in msg and says in msg, msg
+        attr.Set(good)
+
+
+def test_stage_press_unloading_settings(tmp_path):
+    """The die press's stage carries the unloading (speed, hold) and the stroke's return as two keyframes past
+    its end; a negative speed or hold names /World and the attribute."""
+    path = tmp_path / "press.usda"
+    rigs.new("die_press", path, smoke=True, values={"hold_time": 0.01})
+    p = rigs.params("die_press", {**rigs.SMOKE["die_press"], "hold_time": 0.01})
+    spec = read_stage(str(path))
+    assert spec.measure.unload_speed == pytest.approx(p.piston_speed)
+    assert spec.measure.hold_time == pytest.approx(0.01)
+    piston = next(w for w in spec.walls if w.name == "Piston")
+    # park, approach, stroke end, hold end, back where the stroke began
+    assert len(piston.times) == 6
+    assert piston.translations[4] == pytest.approx(piston.translations[3])
+    assert piston.translations[5] == pytest.approx(piston.translations[2])
+    assert piston.times[5] - piston.times[4] == pytest.approx(
+        (piston.translations[2][2] - piston.translations[3][2]) / p.piston_speed
+    )
+    stage = Usd.Stage.Open(str(path))
+    world = stage.GetPrimAtPath("/World")
+    for name in ("unloadSpeed", "holdTime"):
+        attr = world.GetAttribute("warpdem:measure:" + name)
+        good = attr.Get()
+        attr.Set(-1.0)
+        msg = _read_error(path, stage)
+        assert "/World" in msg and "warpdem:measure:" + name in msg and ">= 0" in msg, msg
         attr.Set(good)
 
 

@@ -45,6 +45,7 @@ __all__ = [
     "plot_press",
     "press_curve",
     "press_summary",
+    "press_unload",
     "silhouette",
     "synthetic_cone",
 ]
@@ -959,6 +960,74 @@ def press_summary(
 # --------------------------------------------------------------------------------------------------
 
 
+def press_unload(load_z, load_force, unload_z, unload_force, contact_z: float, fill_height: float) -> dict:
+    """The unloading branch of a press cycle against its loading branch.
+
+    Displacements are ``contact_z`` minus the piston height. The loading exponent n is the slope of
+    log F against log displacement over the upper part of the loading branch (F from 20 % of its maximum on);
+    the unloading stiffness the slope of F against displacement over the upper half of the unloading branch
+    after any hold (from its first sample down to half of that force); the residual set the displacement at
+    which the unloading force first reaches zero (linear between samples), as a ratio of ``fill_height``: the
+    permanent compaction. An elastic bed returns to (nearly) zero set; a plastic one does not.
+
+    Args:
+        load_z, load_force: piston height [m] and force [N] of the loading branch, shape (k,), z non-increasing.
+        unload_z, unload_force: the same after the stop, shape (u,), z non-decreasing (a hold repeats a height);
+            its first sample is the loading branch's last.
+        contact_z: the piston height at first contact [m]; fill_height: the loose fill's height [m], > 0.
+
+    Returns:
+        dict with ``loading_exponent``, ``unloading_stiffness_n_m`` [N/m], ``residual_set_m`` [m] and
+        ``residual_set_ratio`` (None where the force did not reach zero), ``max_displacement_m`` and the unloading
+        curve ``unload_displacement_m``, ``unload_force_n`` (shape (u,)).
+    """
+    lz, lf = _press_arrays(load_z, load_force)
+    uz = np.asarray(unload_z, dtype=float)
+    uf = np.asarray(unload_force, dtype=float)
+    if uz.ndim != 1 or uz.size < 2 or uf.shape != uz.shape:
+        _bad("unload_z", uz, "piston heights [m] of shape (u,), u >= 2, one per unload_force sample")
+    if not (np.all(np.isfinite(uz)) and np.all(np.isfinite(uf))):
+        _bad("unload_force", uf, "finite heights and forces (found NaN or inf)")
+    tol = 1e-9 * max(float(np.ptp(uz)), 1e-300)
+    down = np.flatnonzero(np.diff(uz) < -tol)
+    if down.size:
+        _bad("unload_z", uz, f"a retraction that never moves down (it falls after sample {int(down[0])})")
+    zc = _finite_number("contact_z", contact_z, "m")
+    fill = _positive("fill_height", fill_height, "m")
+    ld, ud = zc - lz, zc - uz
+    upper = (lf >= 0.2 * lf.max()) & (ld > 0)
+    exponent = float(np.polyfit(np.log(ld[upper]), np.log(lf[upper]), 1)[0]) if upper.sum() >= 2 else None
+    # the retraction starts at the last sample at the stop's height (after any hold)
+    moving = np.flatnonzero(uz > uz[0] + tol)
+    start = int(moving[0]) - 1 if moving.size else len(uz) - 1
+    f0 = uf[start]
+    top = np.arange(start, len(uf))
+    top = top[: int(np.argmax(uf[top] < 0.5 * f0)) if np.any(uf[top] < 0.5 * f0) else len(top)]
+    stiffness = float(np.polyfit(ud[top], uf[top], 1)[0]) if len(top) >= 2 and f0 > 0 else None
+    zero = np.flatnonzero(uf[start:] <= 0.0)
+    residual = None
+    if zero.size and f0 > 0:
+        j = start + int(zero[0])
+        a, b = uf[j - 1], uf[j]
+        if b < 0 or j - 2 < start or uf[j - 2] <= a:
+            # the force crossed zero (an adhesive bed pulls on the piston): where the line through them does
+            residual = float(ud[j - 1] + (ud[j] - ud[j - 1]) * a / (a - b))
+        else:
+            # the piston left the bed between the samples (a force of exactly zero after it): where the last two
+            # positive samples' line reaches zero, kept between the samples
+            slope = (uf[j - 2] - a) / (ud[j - 2] - ud[j - 1])
+            residual = float(np.clip(ud[j - 1] - a / slope, min(ud[j], ud[j - 1]), max(ud[j], ud[j - 1])))
+    return {
+        "loading_exponent": exponent,
+        "unloading_stiffness_n_m": stiffness,
+        "residual_set_m": residual,
+        "residual_set_ratio": None if residual is None else residual / fill,
+        "max_displacement_m": float(ld.max()),
+        "unload_displacement_m": ud,
+        "unload_force_n": uf.copy(),
+    }
+
+
 def _impact_arrays(face_count, face_energy, face_max_speed, face_area):
     c = np.asarray(face_count)
     if c.ndim != 1 or c.size == 0:
@@ -1098,15 +1167,25 @@ def _pyplot():
     return plt
 
 
-def plot_press(curve: dict, path) -> str:
-    """Write the force-displacement curve of :func:`press_curve` as a PNG (mm vs kN) to ``path``."""
-    if not isinstance(curve, Mapping) or "displacement_m" not in curve or "force_n" not in curve:
-        _bad("curve", type(curve).__name__, "the dict of press_curve (displacement_m, force_n)")
+def plot_press(curve: dict, path, unload: dict | None = None, force_limit: float | None = None) -> str:
+    """Write the force-displacement curve of :func:`press_curve` as a PNG (mm vs N) to ``path``, with the
+    unloading branch of :func:`press_unload` and the force limit [N] when given."""
+    for name, value, keys in (("curve", curve, "press_curve"), ("unload", unload, "press_unload")):
+        if name == "unload" and value is None:
+            continue
+        if not isinstance(value, Mapping) or "displacement_m" not in value or "force_n" not in value:
+            _bad(name, type(value).__name__, f"the dict of {keys} (displacement_m, force_n)")
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5, 3.5), dpi=120)
-    ax.plot(1e3 * np.asarray(curve["displacement_m"]), 1e-3 * np.asarray(curve["force_n"]), lw=1.5)
+    ax.plot(1e3 * np.asarray(curve["displacement_m"]), np.asarray(curve["force_n"]), lw=1.5, label="loading")
+    if unload is not None:
+        ax.plot(1e3 * np.asarray(unload["displacement_m"]), np.asarray(unload["force_n"]), lw=1.5, label="unloading")
+    if force_limit:
+        ax.axhline(force_limit, color="0.4", ls="--", lw=1, label=f"force limit {force_limit:g} N")
+    if unload is not None or force_limit:
+        ax.legend(frameon=False, fontsize=8)
     ax.set_xlabel("piston displacement since contact [mm]")
-    ax.set_ylabel("piston force [kN]")
+    ax.set_ylabel("piston force [N]")
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path)

@@ -28,7 +28,7 @@ from warpdem.engine.keys import is_rig_key
 from warpdem.engine.materials import Interaction, Material
 from warpdem.engine.types import ContactLaw, RollingModel
 
-from .stage import FactorySpec, MeasureSpec, RunSpec, SceneSpec, ShapeSpec, StageError, WallSpec
+from .stage import FactorySpec, MeasureSpec, RunSpec, SceneSpec, ShapeSpec, StageError, WallSpec, unload_keyframes
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -460,7 +460,9 @@ class LiftingCylinder:
 class DiePress:
     """Single pellet press (seed 001): die hole with a feeding inlet, a backstop under the die and a pressure
     bar (piston) driven down at ``piston_speed`` until the force reaches ``force_limit`` or the bar has
-    travelled ``max_travel`` x the fill height.
+    travelled ``max_travel`` x the fill height. With ``unload`` (the default) the bar then holds for
+    ``hold_time`` and retracts at ``piston_speed`` to where its stroke began, so the run records the unloading
+    branch too (residual set, unloading stiffness); without it the run stops at the force limit.
 
     Wet feed of seed 001 (440 kg/m^3, G = 10 MPa, nu = 0.25, JKR at the calibrated optimum mu_s 0.51,
     mu_r 0.21, surface energy 0.65 J/m^2); the 0.1 mm particles are coarse-grained to ``particle_radius``.
@@ -485,7 +487,9 @@ class DiePress:
     cell: float = 0.002
     dt_fraction: float = 0.2
     seed: int = 1
-    _may_be_zero = ("radius_spread", "seed")
+    unload: bool = True
+    hold_time: float = 0.0
+    _may_be_zero = ("radius_spread", "seed", "hold_time")
 
     def __post_init__(self):
         _check_params(self)
@@ -528,16 +532,12 @@ class DiePress:
         t_b = t_a + (park - start) / (10 * self.piston_speed)
         travel = self.max_travel * self.fill_height + self.gap
         t_c = t_b + travel / self.piston_speed
-        ident = np.tile([0.0, 0.0, 0.0, 1.0], (4, 1))
-        piston = WallSpec(
-            "Piston",
-            pv,
-            pt,
-            "steel",
-            np.array([0.0, t_a, t_b, t_c]),
-            np.array([[0, 0, park], [0, 0, park], [0, 0, start], [0, 0, start - travel]]),
-            ident,
-        )
+        times = np.array([0.0, t_a, t_b, t_c])
+        heights = np.array([[0, 0, park], [0, 0, park], [0, 0, start], [0, 0, start - travel]], float)
+        if self.unload:
+            # the return as keyframes, which the runner moves to wherever the force limit ends the stroke
+            times, heights = unload_keyframes(times, heights, t_c, heights[-1], self.hold_time, self.piston_speed)
+        piston = WallSpec("Piston", pv, pt, "steel", times, heights, np.tile([0.0, 0.0, 0.0, 1.0], (len(times), 1)))
         fac = FactorySpec(
             "fill",
             "fill",
@@ -559,8 +559,19 @@ class DiePress:
                 piston,
             ],
             factories=[fac],
-            run=RunSpec(duration=t_c, dt_fraction=self.dt_fraction, output_interval=self.gap / self.piston_speed / 8),
-            measure=MeasureSpec("press", piston="Piston", force_limit=self.force_limit, backstop_height=0.0),
+            run=RunSpec(
+                duration=float(times[-1]),
+                dt_fraction=self.dt_fraction,
+                output_interval=self.gap / self.piston_speed / 8,
+            ),
+            measure=MeasureSpec(
+                "press",
+                piston="Piston",
+                force_limit=self.force_limit,
+                backstop_height=0.0,
+                unload_speed=self.piston_speed if self.unload else 0.0,
+                hold_time=self.hold_time,
+            ),
         )
 
 

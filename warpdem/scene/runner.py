@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import measure as ms
-from .stage import SceneSpec, build
+from .stage import SceneSpec, StageError, build, unload_keyframes
 
 
 @dataclass
@@ -252,6 +252,8 @@ def run_scene(
             if settle is not None:
                 settle.streak = book["settled_since"]
             resumed_from = state.time
+            if "unload_start_s" in series:
+                _start_unloading(spec, model, solver, piston, series["unload_start_s"])
             series.setdefault("tick_wall_s", [])
             series.setdefault("rebuilds", [])
     t_ckpt = time.perf_counter()
@@ -303,8 +305,17 @@ def run_scene(
                 f"t = {t:.3f} s, {steps / max(series['tick_wall_s'][-1], 1e-9):.0f} steps/s, "
                 f"a rebuild every {steps / max(rebuilds, 1):.1f} steps",
             )
-        if piston is not None and m.force_limit > 0 and series["piston_force"][-1] >= m.force_limit:
-            stop_reason = "force_limit"
+        loading = piston is not None and "unload_start_s" not in series
+        if loading and m.force_limit > 0 and series["piston_force"][-1] >= m.force_limit:
+            if m.unload_speed <= 0:
+                stop_reason = "force_limit"
+                break
+            # the stroke ends here: the piston holds, then returns (the rest of the run is the unloading branch)
+            series["unload_index"] = len(series["piston_z"]) - 1
+            series["unload_start_s"] = t
+            series["unload_end_s"] = _start_unloading(spec, model, solver, piston, t)
+        if "unload_end_s" in series and t >= series["unload_end_s"] - eps:
+            stop_reason = "unloaded"
             break
         factories_done = all(
             state.released.get(f, {}).get("count", 0) >= rec["count"] for f, rec in enumerate(model.factories)
@@ -544,9 +555,34 @@ def _packing_metrics(model, state, h, w: int, m) -> dict:
     }
 
 
+def _start_unloading(spec, model, solver, piston: int, t_stop: float) -> float:
+    """Move the piston's last keyframes so that its stroke ends at ``t_stop`` [s] where it is then, holds for
+    ``measure.hold_time`` and returns at ``measure.unload_speed`` (``stage.unload_keyframes``), in the solver's
+    Control in place; returns the time [s] the return ends."""
+    from warpdem.engine.motion import MotionTable, WallMotion
+
+    m = spec.measure
+    wall = next(w for w in spec.walls if w.name == m.piston)
+    if wall.times is None or len(wall.times) < 4:
+        raise StageError(
+            f"/World/Walls/{m.piston}: keyframes = {0 if wall.times is None else len(wall.times)} are not allowed "
+            "with warpdem:measure:unloadSpeed > 0; expected at least 4 (the stroke, its end, the hold and return)"
+        )
+    stop, _ = model.wall_motions[piston].pose(t_stop)
+    times, tr = unload_keyframes(wall.times[:-2], wall.translations[:-2], t_stop, stop, m.hold_time, m.unload_speed)
+    motions = list(model.wall_motions)
+    motions[piston] = WallMotion.keyframes(times, tr, np.tile(wall.rotations[0], (len(times), 1)))
+    solver.control.assign(MotionTable.build(motions))
+    return float(times[-1])
+
+
 def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
     """Force-displacement of the bar, fill height and compression ratio, and the inertial number."""
     m = spec.measure
+    z_all, f_all = z, f
+    stop = series.get("unload_index")
+    if stop is not None:
+        z, f = z[: stop + 1], f[: stop + 1]
     # the bed top just before the bar first pushes with 5 % of the force limit (a settling particle that
     # grazes the approaching bar stays below that); its own particles' 99th-percentile top
     limit = m.force_limit if m.force_limit > 0 else f.max()
@@ -561,7 +597,7 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
     mat = model.materials[int(h["material"][h["world"] == w][0])]
     d = 2.0 * float(np.mean(h["radius"][(h["world"] == w) & h["free"]]))
     area = math.pi * _piston_radius(model, m.piston) ** 2
-    t = np.asarray(series["time"])
+    t = np.asarray(series["time"])[: len(z)]
     speed = np.abs(np.gradient(z, t)) if len(z) > 2 else np.zeros_like(z)
     height = np.maximum(z - m.backstop_height, 1e-9)
     p = np.maximum(f, 0) / area
@@ -574,6 +610,15 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
         displacement_m=list(map(float, curve["displacement_m"])),
         force_n=list(map(float, curve["force_n"])),
     )
+    if stop is not None:
+        cycle = ms.press_unload(
+            z - m.backstop_height, f, z_all[stop:] - m.backstop_height, f_all[stop:], contact_z=fill, fill_height=fill
+        )
+        out.update(
+            {k: v for k, v in cycle.items() if not k.startswith("unload_") and k != "max_displacement_m"},
+            unload_displacement_m=list(map(float, cycle["unload_displacement_m"])),
+            unload_force_n=list(map(float, cycle["unload_force_n"])),
+        )
     return out
 
 
@@ -645,9 +690,14 @@ def _pictures(out: Path, spec, model, state, h, result) -> dict:
         title += f": angle of repose {m0['angle_fit_deg']:.1f} deg (fit), {m0['angle_image_deg']:.1f} deg (image)"
     files["pile_png"] = side_view_png(str(out / "pile.png"), xs, rs, walls_world=walls, axis="y", title=title)
     if spec.measure.kind == "press" and "force_n" in m0:
+        unload = None
+        if "unload_force_n" in m0:
+            unload = {"displacement_m": m0["unload_displacement_m"], "force_n": m0["unload_force_n"]}
         ms.plot_press(
             {"displacement_m": np.asarray(m0["displacement_m"]), "force_n": np.asarray(m0["force_n"])},
             str(out / "press.png"),
+            unload=unload,
+            force_limit=spec.measure.force_limit or None,
         )
         files["press_png"] = str(out / "press.png")
     return files

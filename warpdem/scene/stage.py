@@ -152,6 +152,36 @@ class MeasureSpec:
     packing_margin: float = 2.0
     """How far the measured core stays from the container's wall, its base and the free surface [particle
     diameters]."""
+    unload_speed: float = 0.0
+    """Press: the speed [m/s] at which the piston retracts once the force reaches ``force_limit``, back to
+    where its stroke began, recording the unloading branch; 0: the run stops at the force limit."""
+    hold_time: float = 0.0
+    """Press: how long [s] the piston holds still at the force limit before it retracts."""
+
+
+def unload_keyframes(times, translations, t_stop: float, stop, hold: float, speed: float):
+    """Keyframes of a press stroke that ends at time ``t_stop`` [s] at ``stop`` (x, y, z) [m], holds for ``hold``
+    [s] and returns at ``speed`` [m/s] to where the stroke began.
+
+    ``times`` (K,) and ``translations`` (K, 3) are the keyframes up to the stroke's planned end: the last one
+    is replaced by the stop, and the stroke began at the one before it. Two keyframes follow the stop (the hold's
+    end and the return; with no hold, the return's midpoint and end), so the count is K + 2 whatever the stop:
+    the runner can move them to where the force limit ends a stroke without changing the wall's segments.
+
+    Returns:
+        (times (K + 2,) [s], translations (K + 2, 3) [m]).
+    """
+    t = [float(x) for x in times][:-1]
+    tr = [np.asarray(x, dtype=float) for x in translations][:-1]
+    start, stop = tr[-1], np.asarray(stop, dtype=float)
+    back = float(np.linalg.norm(start - stop)) / speed
+    if hold > 0:
+        t += [t_stop, t_stop + hold, t_stop + hold + back]
+        tr += [stop, stop, start]
+    else:
+        t += [t_stop, t_stop + back / 2, t_stop + back]
+        tr += [stop, (stop + start) / 2, start]
+    return np.array(t), np.array(tr)
 
 
 @dataclass
@@ -294,6 +324,9 @@ def write_stage(spec: SceneSpec, path=None):
     wp_.CreateAttribute(NS + "measure:center", Sdf.ValueTypeNames.Double2).Set(Gf.Vec2d(*m.center))
     wp_.CreateAttribute(NS + "measure:forceLimit", Sdf.ValueTypeNames.Double).Set(float(m.force_limit))
     wp_.CreateAttribute(NS + "measure:backstopHeight", Sdf.ValueTypeNames.Double).Set(float(m.backstop_height))
+    if m.unload_speed > 0:
+        for name, value in (("unloadSpeed", m.unload_speed), ("holdTime", m.hold_time)):
+            wp_.CreateAttribute(NS + "measure:" + name, Sdf.ValueTypeNames.Double).Set(float(value))
     if m.packing_time > 0:
         for name, value in (
             ("packingTime", m.packing_time),
@@ -619,7 +652,12 @@ def read_stage(path_or_stage) -> SceneSpec:
         packing_time=r.get(world, NS + "measure:packingTime", required=False, default=0.0),
         packing_radius=r.get(world, NS + "measure:packingRadius", required=False, default=0.0),
         packing_margin=r.get(world, NS + "measure:packingMargin", required=False, default=2.0),
+        unload_speed=r.get(world, NS + "measure:unloadSpeed", required=False, default=0.0),
+        hold_time=r.get(world, NS + "measure:holdTime", required=False, default=0.0),
     )
+    for name, value, unit in (("unloadSpeed", measure.unload_speed, "m/s"), ("holdTime", measure.hold_time, "s")):
+        if value < 0:
+            r.fail(world, NS + "measure:" + name, f"= {value} is not allowed; expected >= 0 {unit}")
     if measure.packing_time < 0:
         r.fail(world, NS + "measure:packingTime", f"= {measure.packing_time} is not allowed; expected >= 0 s")
     if measure.packing_time > 0 and measure.packing_radius <= 0:
