@@ -697,6 +697,34 @@ def test_run_resumes_from_checkpoint_bit_identical(tmp_path):
     assert c.info["resumed_from_s"] is None
 
 
+def test_press_resumed_while_unloading_ends_bit_identical(tmp_path):
+    """A press killed two outputs into its unloading resumes with the bar's return re-applied and ends as the
+    run that was never killed: the same final positions, bit for bit, and the same unloading branch (to the
+    rounding of the tick times)."""
+    spec = rigs.spec("die_press", smoke=True)
+    a = runner.run_scene(spec, out_dir=tmp_path / "a", frames=False, checkpoint_every=1e-9)
+    t_kill = a.metrics[0]["unload_start_s"] + 2.5 * spec.run.output_interval
+
+    class Crash(Exception):
+        pass
+
+    def kill(frac, msg):
+        if frac * spec.run.duration > t_kill:
+            raise Crash
+
+    with pytest.raises(Crash):
+        runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9, progress=kill)
+    b = runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9)
+    assert b.info["resumed_from_s"] > a.metrics[0]["unload_start_s"]
+    assert b.metrics[0]["stop"] == "unloaded"
+    assert np.array_equal(
+        np.load(tmp_path / "a" / "final.npz")["sphere_x"], np.load(tmp_path / "b" / "final.npz")["sphere_x"]
+    )
+    # the forces are impulse differences over tick times, whose sums may round an ulp apart across a resume
+    for key in ("unload_force_n", "unload_displacement_m", "residual_set_m"):
+        assert b.metrics[0][key] == pytest.approx(a.metrics[0][key], rel=1e-12, abs=1e-15)
+
+
 def test_stop_after_stops_before_the_tick_that_would_overrun(tmp_path, monkeypatch):
     """With a clock on which every output tick takes exactly T seconds and stop_after = 2.5 T, the run stops
     after its second tick (2 T, since a third would end at 3 T), not after the first tick past the limit."""

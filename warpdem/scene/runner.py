@@ -616,6 +616,7 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
         )
         out.update(
             {k: v for k, v in cycle.items() if not k.startswith("unload_") and k != "max_displacement_m"},
+            unload_start_s=float(series["unload_start_s"]),
             unload_displacement_m=list(map(float, cycle["unload_displacement_m"])),
             unload_force_n=list(map(float, cycle["unload_force_n"])),
         )
