@@ -519,25 +519,28 @@ def test_packing_core_of_a_bed_in_a_cylinder():
 @pytest.mark.parametrize("adhesive", [False, True])
 def test_press_unload_reads_back_a_synthetic_cycle(adhesive):
     """Loading F = k d^1.7 to 12 N; a hold at the stop that relaxes the force to 10 N; linear unloading of
-    stiffness 4e4 N/m from there, so a residual set 0.25 mm short of the stop, where the piston leaves the bed
-    (zero force after) or, for an adhesive bed, pulls on it (the line goes on below zero). Exponent, stiffness
-    and set come back exactly."""
+    stiffness 4e4 N/m from there, to zero force and beyond, where the piston leaves the bed (zero force after)
+    or, for an adhesive bed, pulls on it (the line goes on below zero). Exponent, stiffness and set (between the
+    branches' crossings of 5 % of the largest force, each at a sample) come back exactly."""
     zc, fill, n, k = 0.01, 0.01, 1.7, 2.0e4
-    d_load = np.linspace(0.0, (12.0 / k) ** (1 / n), 40)
+    d_max = (12.0 / k) ** (1 / n)
+    d_on = (0.6 / k) ** (1 / n)
+    d_load = np.sort(np.concatenate([np.linspace(0.0, d_max, 40), [d_on]]))
     f_load = k * d_load**n
-    d_max, f_hold, s = d_load[-1], 10.0, 4.0e4
-    d_res = d_max - f_hold / s
-    d_back = np.linspace(d_max, d_res - 1.0e-3, 25)[1:]
+    f_hold, s = 10.0, 4.0e4
+    d_off = d_max - (f_hold - 0.6) / s
+    d_back = np.sort(np.concatenate([np.linspace(d_max, d_max - 1.5e-3, 25)[1:], [d_off]]))[::-1]
     f_back = f_hold - s * (d_max - d_back)
     if not adhesive:
         f_back = np.maximum(f_back, 0.0)
     uz = zc - np.concatenate([[d_max] * 3, d_back])
     uf = np.concatenate([[f_load[-1], 11.0, f_hold], f_back])
+    d_res = d_off - d_on
     got = press_unload(zc - d_load, f_load, uz, uf, contact_z=zc, fill_height=fill)
     assert got["loading_exponent"] == pytest.approx(n, rel=1e-9)
     assert got["unloading_stiffness_n_m"] == pytest.approx(s, rel=1e-6)
-    assert got["residual_set_m"] == pytest.approx(d_res, rel=1e-6)
-    assert got["residual_set_ratio"] == pytest.approx(d_res / fill, rel=1e-6)
+    assert got["residual_set_m"] == pytest.approx(d_res, rel=1e-9)
+    assert got["residual_set_ratio"] == pytest.approx(d_res / fill, rel=1e-9)
     assert got["max_displacement_m"] == pytest.approx(d_max)
 
 

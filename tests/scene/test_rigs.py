@@ -293,6 +293,22 @@ def test_die_press_compaction(rig_run):
     assert abs(m["displacement_m"][-1] - m["max_displacement_m"]) <= p.gap / 8 + 1e-9
 
 
+def test_die_press_tells_plastic_from_elastic_contacts():
+    """The same smoke press with elastic Hertz-Mindlin contacts and with EEPA at plasticity ratio 0.5 (no
+    adhesion). EEPA's unloading keeps a plastic overlap of lambda_p times the largest one at every contact, so
+    the bed keeps a set of at least about half its compaction under load (0.4 of it allows for the output
+    interval); the elastic bed keeps only what its grains rearranged, less than one particle radius."""
+    got = {}
+    for law in ("hertz_mindlin", "eepa"):
+        spec = rigs.spec("die_press", {"law": law, "surface_energy": 0.0}, smoke=True)
+        got[law] = runner.run_scene(spec, frames=False).metrics[0]
+        assert got[law]["stop"] == "unloaded", got[law].get("press_error")
+    p = rigs.params("die_press", rigs.SMOKE["die_press"])
+    assert got["hertz_mindlin"]["residual_set_m"] < p.particle_radius
+    assert got["eepa"]["residual_set_m"] > 0.4 * got["eepa"]["max_displacement_m"]
+    assert got["eepa"]["residual_set_m"] > 4 * got["hertz_mindlin"]["residual_set_m"]
+
+
 def test_die_press_unloading_branch(rig_run):
     """Die press, unloading: the bar returns at the pressing speed from where the force limit stopped it (the
     unloading branch starts at the loading branch's last sample) to where the stroke began, so the force falls
@@ -534,6 +550,15 @@ def test_params_outlet_wider_than_top():
     """An outlet wider than the funnel's top is refused as a StageError."""
     with pytest.raises(StageError, match="outlet_diameter"):
         rigs.spec("funnel", {"outlet_diameter": 0.2, "top_diameter": 0.1})
+
+
+def test_params_press_law_and_plasticity():
+    """The press's law is one of its three, its plasticity ratio below 1; both refused as StageErrors naming
+    the parameter and what is allowed."""
+    with pytest.raises(StageError, match="law = 'plastic' is not allowed; expected jkr, hertz_mindlin, eepa"):
+        rigs.spec("die_press", {"law": "plastic"}, smoke=True)
+    with pytest.raises(StageError, match=r"plasticity_ratio = 1.0 is not allowed; expected a ratio in \[0, 1\)"):
+        rigs.spec("die_press", {"law": "eepa", "plasticity_ratio": 1.0}, smoke=True)
 
 
 def test_load_regenerates_from_rig_parameter(tmp_path):

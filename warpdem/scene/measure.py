@@ -960,25 +960,31 @@ def press_summary(
 # --------------------------------------------------------------------------------------------------
 
 
-def press_unload(load_z, load_force, unload_z, unload_force, contact_z: float, fill_height: float) -> dict:
+def press_unload(
+    load_z, load_force, unload_z, unload_force, contact_z: float, fill_height: float, contact_fraction: float = 0.05
+) -> dict:
     """The unloading branch of a press cycle against its loading branch.
 
     Displacements are ``contact_z`` minus the piston height. The loading exponent n is the slope of
     log F against log displacement over the upper part of the loading branch (F from 20 % of its maximum on);
     the unloading stiffness the slope of F against displacement over the upper half of the unloading branch
-    after any hold (from its first sample down to half of that force); the residual set the displacement at
-    which the unloading force first reaches zero (linear between samples), as a ratio of ``fill_height``: the
-    permanent compaction. An elastic bed returns to (nearly) zero set; a plastic one does not.
+    after any hold (from its first sample down to half of that force); the residual set the travel between
+    where the loading force first rises through ``contact_fraction`` of its maximum and where the unloading
+    force falls through it again (linear between samples; the same rule on both branches, so that the
+    particles the bar meets first do not count), also as a ratio of ``fill_height``: the permanent compaction.
+    An elastic bed returns to (nearly) zero set; a plastic one does not.
 
     Args:
         load_z, load_force: piston height [m] and force [N] of the loading branch, shape (k,), z non-increasing.
         unload_z, unload_force: the same after the stop, shape (u,), z non-decreasing (a hold repeats a height);
             its first sample is the loading branch's last.
-        contact_z: the piston height at first contact [m]; fill_height: the loose fill's height [m], > 0.
+        contact_z: the piston height at first contact [m], the origin of the displacements; fill_height: the
+            loose fill's height [m], > 0.
+        contact_fraction: the force that counts as contact, as a fraction of the largest loading force, in (0, 1).
 
     Returns:
         dict with ``loading_exponent``, ``unloading_stiffness_n_m`` [N/m], ``residual_set_m`` [m] and
-        ``residual_set_ratio`` (None where the force did not reach zero), ``max_displacement_m`` and the unloading
+        ``residual_set_ratio`` (None where the force never fell through the threshold), ``max_displacement_m`` and the unloading
         curve ``unload_displacement_m``, ``unload_force_n`` (shape (u,)).
     """
     lz, lf = _press_arrays(load_z, load_force)
@@ -994,6 +1000,9 @@ def press_unload(load_z, load_force, unload_z, unload_force, contact_z: float, f
         _bad("unload_z", uz, f"a retraction that never moves down (it falls after sample {int(down[0])})")
     zc = _finite_number("contact_z", contact_z, "m")
     fill = _positive("fill_height", fill_height, "m")
+    contact_fraction = _finite_number("contact_fraction", contact_fraction, "")
+    if not 0 < contact_fraction < 1:
+        _bad("contact_fraction", contact_fraction, "a fraction of the largest force in (0, 1)")
     ld, ud = zc - lz, zc - uz
     upper = (lf >= 0.2 * lf.max()) & (ld > 0)
     exponent = float(np.polyfit(np.log(ld[upper]), np.log(lf[upper]), 1)[0]) if upper.sum() >= 2 else None
@@ -1004,19 +1013,17 @@ def press_unload(load_z, load_force, unload_z, unload_force, contact_z: float, f
     top = np.arange(start, len(uf))
     top = top[: int(np.argmax(uf[top] < 0.5 * f0)) if np.any(uf[top] < 0.5 * f0) else len(top)]
     stiffness = float(np.polyfit(ud[top], uf[top], 1)[0]) if len(top) >= 2 and f0 > 0 else None
-    zero = np.flatnonzero(uf[start:] <= 0.0)
+    # the set: between where the loading force first rose through the contact threshold and where the unloading
+    # force falls through it again (the same rule on both branches, so an elastic bed shows none)
+    threshold = contact_fraction * float(lf.max())
     residual = None
-    if zero.size and f0 > 0:
-        j = start + int(zero[0])
-        a, b = uf[j - 1], uf[j]
-        if b < 0 or j - 2 < start or uf[j - 2] <= a:
-            # the force crossed zero (an adhesive bed pulls on the piston): where the line through them does
-            residual = float(ud[j - 1] + (ud[j] - ud[j - 1]) * a / (a - b))
-        else:
-            # the piston left the bed between the samples (a force of exactly zero after it): where the last two
-            # positive samples' line reaches zero, kept between the samples
-            slope = (uf[j - 2] - a) / (ud[j - 2] - ud[j - 1])
-            residual = float(np.clip(ud[j - 1] - a / slope, min(ud[j], ud[j - 1]), max(ud[j], ud[j - 1])))
+    rise = np.flatnonzero(lf > threshold)
+    fall = np.flatnonzero(uf[start:] <= threshold)
+    if rise.size and rise[0] > 0 and fall.size and f0 > threshold:
+        i, j = int(rise[0]), start + int(fall[0])
+        d_on = ld[i - 1] + (ld[i] - ld[i - 1]) * (threshold - lf[i - 1]) / (lf[i] - lf[i - 1])
+        d_off = ud[j - 1] + (ud[j] - ud[j - 1]) * (uf[j - 1] - threshold) / (uf[j - 1] - uf[j])
+        residual = float(d_off - d_on)
     return {
         "loading_exponent": exponent,
         "unloading_stiffness_n_m": stiffness,

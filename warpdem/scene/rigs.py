@@ -456,6 +456,18 @@ class LiftingCylinder:
         )
 
 
+PRESS_LAWS = {
+    "jkr": lambda p: {"law": ContactLaw.JKR, "surface_energy": p.surface_energy},
+    "hertz_mindlin": lambda p: {"law": ContactLaw.HERTZ_MINDLIN},
+    "eepa": lambda p: {
+        "law": ContactLaw.EEPA,
+        "surface_energy": p.surface_energy,
+        "plasticity_ratio": p.plasticity_ratio,
+    },
+}
+"""The die press's feed-feed laws (``DiePress.law``) and the Interaction fields each takes from the rig."""
+
+
 @dataclass(frozen=True)
 class DiePress:
     """Single pellet press (seed 001): die hole with a feeding inlet, a backstop under the die and a pressure
@@ -466,6 +478,9 @@ class DiePress:
 
     Wet feed of seed 001 (440 kg/m^3, G = 10 MPa, nu = 0.25, JKR at the calibrated optimum mu_s 0.51,
     mu_r 0.21, surface energy 0.65 J/m^2); the 0.1 mm particles are coarse-grained to ``particle_radius``.
+    ``law`` swaps the feed-feed normal law to tell mechanisms apart: ``hertz_mindlin`` (elastic, no cohesion)
+    or ``eepa`` (elasto-plastic, ``plasticity_ratio``, with ``surface_energy`` its adhesion; EEPA's other
+    constants at their defaults), with the same friction.
     Speed-up: the seed presses at 20 mm/min; we press at ``piston_speed`` (0.1 m/s by default) and report the
     inertial number I = (v / H) d / sqrt(p / rho) of the compaction, which must stay below 1e-3 for
     quasi-static flow. The fill (``fill_height`` of settled bed) is made by a static fill of the die and
@@ -489,13 +504,22 @@ class DiePress:
     seed: int = 1
     unload: bool = True
     hold_time: float = 0.0
-    _may_be_zero = ("radius_spread", "seed", "hold_time")
+    law: str = "jkr"
+    surface_energy: float = 0.65
+    plasticity_ratio: float = 0.5
+    _may_be_zero = ("radius_spread", "seed", "hold_time", "surface_energy", "plasticity_ratio")
 
     def __post_init__(self):
         _check_params(self)
         _check_order(self, "inlet_diameter", "more than", "die_diameter", self.die_diameter)
         if not 0 < self.max_travel < 1:
             raise ValueError(f"DiePress: max_travel = {self.max_travel} is not allowed; expected a fraction in (0, 1)")
+        if self.law not in PRESS_LAWS:
+            raise ValueError(f"DiePress: law = {self.law!r} is not allowed; expected {', '.join(PRESS_LAWS)}")
+        if not self.plasticity_ratio < 1:
+            raise ValueError(
+                f"DiePress: plasticity_ratio = {self.plasticity_ratio} is not allowed; expected a ratio in [0, 1)"
+            )
 
     def spec(self) -> SceneSpec:
         r = self.particle_radius
@@ -509,9 +533,8 @@ class DiePress:
                 restitution=0.15,
                 static_friction=0.51,
                 rolling_friction=0.21,
-                law=ContactLaw.JKR,
-                surface_energy=0.65,
                 rolling_model=ct,
+                **PRESS_LAWS[self.law](self),
             ),
             Interaction(restitution=0.1, static_friction=0.45, rolling_friction=0.2, rolling_model=ct),
         )
