@@ -561,6 +561,27 @@ def test_params_press_law_and_plasticity():
         rigs.spec("die_press", {"law": "eepa", "plasticity_ratio": 1.0}, smoke=True)
 
 
+@pytest.mark.parametrize("rig, particle, wall", [("funnel", "grain", "Plate"), ("lifting_cylinder", "ore", "Base")])
+def test_plate_friction_reaches_the_stage(tmp_path, rig, particle, wall):
+    """The base plate is a material of its own: by default its contact with the particles is the other walls',
+    with plate_static_friction / plate_rolling_friction its own, through the stage and back; the other walls
+    keep theirs."""
+
+    def pairs(values):
+        path = tmp_path / f"{rig}.usda"
+        rigs.new(rig, path, values=values, smoke=True)
+        spec = read_stage(str(path))
+        assert next(w for w in spec.walls if w.name == wall).material == "plate"
+        return {(a, b): i for a, b, i in spec.pairs}
+
+    plain = pairs({})
+    assert plain[(particle, "plate")] == plain[(particle, "steel")]
+    mine = pairs({"plate_static_friction": 0.2, "plate_rolling_friction": 0.0})
+    assert mine[(particle, "plate")].static_friction == pytest.approx(0.2)
+    assert mine[(particle, "plate")].rolling_friction == 0.0
+    assert mine[(particle, "steel")] == plain[(particle, "steel")]
+
+
 def test_load_regenerates_from_rig_parameter(tmp_path):
     """rigs.load with a rig parameter (as a string) regenerates the scene from the stage's recorded
     parameters: the funnel's outlet (its lowest vertex) moves to 0.03 m, the other smoke settings stay."""

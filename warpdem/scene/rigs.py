@@ -203,6 +203,27 @@ def _pairs(particle: str, wall: str, particle_particle: Interaction, particle_wa
     ]
 
 
+PLATE = dataclasses.replace(STEEL, name="plate")
+"""The base plate of the angle-of-repose rigs: steel's solid, a material of its own so that its contact with the
+particles (``plate_static_friction``, ``plate_rolling_friction``) can differ from the other walls'."""
+
+
+def _plate_pairs(p, particle: str, wall: str, particle_wall: Interaction) -> tuple[list, list]:
+    """The plate material and its pairs with the particles (the walls' interaction with the rig's plate
+    friction and rolling friction where they are >= 0), the walls and itself."""
+    changes = {}
+    if p.plate_static_friction >= 0:
+        changes["static_friction"] = p.plate_static_friction
+    if p.plate_rolling_friction >= 0:
+        changes["rolling_friction"] = p.plate_rolling_friction
+    walls = Interaction(restitution=0.5, static_friction=0.3)
+    return [PLATE], [
+        (particle, "plate", dataclasses.replace(particle_wall, **changes)),
+        (wall, "plate", walls),
+        ("plate", "plate", walls),
+    ]
+
+
 def _pour(name: str, region: tuple, material: str, shape: str, radius: float, spread: float, **kw) -> FactorySpec:
     """A dynamic factory releasing particles of ``radius`` [m] (relative SD ``spread``) into ``region`` in
     batches every POUR_INTERVAL; ``kw``: count or mass, rate, seed, initial_velocity as in FactorySpec."""
@@ -231,6 +252,9 @@ def _ore_pour(p, name: str, region: tuple, shape: ShapeSpec, rate: float, **amou
 class Funnel:
     """Funnel angle of repose onto a 304 stainless plate (seeds 000 and 001).
 
+    ``plate_static_friction`` and ``plate_rolling_friction`` (negative: the funnel's values) set the particles'
+    contact with the plate, so that a data set can vary the base's friction alone.
+
     Geometry from ISO 4324:1977 (outlet 75 mm above the plate) with a 60 deg laboratory funnel; the outlet
     (10 mm in ISO, for powders) is 40 mm by default for the 6.3 mm pellets of seed 000. Particles (``count``
     of them at ``rate`` per second) rain into the funnel from above and pile on the plate; the run stops when
@@ -256,7 +280,10 @@ class Funnel:
     duration: float = 2.5
     dt_fraction: float = 0.2
     seed: int = 1
+    plate_static_friction: float = -1.0
+    plate_rolling_friction: float = -1.0
     _may_be_zero = ("particle_radius", "radius_spread", "stem_length", "seed", "surface_energy")
+    _may_be_negative = ("plate_static_friction", "plate_rolling_friction")
 
     def __post_init__(self):
         _check_params(self)
@@ -316,12 +343,13 @@ class Funnel:
             rate=self.rate,
             seed=int(self.seed),
         )
+        plate, plate_pairs = _plate_pairs(self, "grain", "steel", pw)
         return SceneSpec(
             rig="funnel",
-            materials=[grain, STEEL],
-            pairs=_pairs("grain", "steel", pp, pw),
+            materials=[grain, STEEL, *plate],
+            pairs=_pairs("grain", "steel", pp, pw) + plate_pairs,
             shapes=[shape],
-            walls=[WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "steel")],
+            walls=[WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "plate")],
             factories=[fac],
             run=RunSpec(
                 duration=self.duration,
@@ -343,7 +371,9 @@ class LiftingCylinder:
     rim (particles leave it at ``pour_speed`` downward, so none falls more than the cylinder's height plus
     that region), settles for ``settle_time``, and is lifted by ``lift_height`` (default: its height + 20 mm)
     at ``lift_speed``; just before it lifts, the bed's packing fraction and bulk density are measured in a core
-    ``packing_margin`` particle diameters from the wall, the base and the free surface. With ``coated`` the cylinder's
+    ``packing_margin`` particle diameters from the wall, the base and the free surface. ``plate_static_friction`` and
+    ``plate_rolling_friction`` (negative: the cylinder's values) set the particles' contact with the base plate
+    (with ``coated``, only where the glued grains leave it bare). With ``coated`` the cylinder's
     inside and the base carry glued particles of the ore (seed 002 glues grains on both). Ore: seed 002's
     phosphate (2404 kg/m^3, G = 2.5 MPa, nu = 0.25; printed E = 1 MPa conflicts with G, so G is kept), EEPA
     between particles at seed 002's optimum (mu_s 0.7, mu_r 0.3, surface energy 1.0 J/m^2), 15-sphere clumps
@@ -373,6 +403,8 @@ class LiftingCylinder:
     dt_fraction: float = 0.2
     seed: int = 1
     packing_margin: float = 2.0
+    plate_static_friction: float = -1.0
+    plate_rolling_friction: float = -1.0
     _may_be_zero = (
         "count",
         "mass",
@@ -383,7 +415,7 @@ class LiftingCylinder:
         "surface_energy",
         "pour_speed",
     )
-    _may_be_negative = ("pull_off_force",)
+    _may_be_negative = ("pull_off_force", "plate_static_friction", "plate_rolling_friction")
 
     def __post_init__(self):
         _check_params(self)
@@ -393,12 +425,9 @@ class LiftingCylinder:
     def spec(self) -> SceneSpec:
         shape, _ = _shape(self.particle, "LiftingCylinder")
         r = self.particle_radius
-        pairs = _pairs(
-            "ore",
-            "steel",
-            _ore_eepa(self.surface_energy, self.pull_off_force),
-            Interaction(restitution=0.15, static_friction=0.5, rolling_friction=0.1),
-        )
+        ore_steel = Interaction(restitution=0.15, static_friction=0.5, rolling_friction=0.1)
+        plate, plate_pairs = _plate_pairs(self, "ore", "steel", ore_steel)
+        pairs = _pairs("ore", "steel", _ore_eepa(self.surface_energy, self.pull_off_force), ore_steel) + plate_pairs
         R, H = self.inner_diameter / 2, self.height
         lift = self.lift_height or H + 0.02
         coat_r = self.coat_radius or r
@@ -423,7 +452,7 @@ class LiftingCylinder:
             np.array([[0, 0, 0], [0, 0, 0], [0, 0, lift]], float),
             np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)),
         )
-        base = WallSpec("Base", bv, bt, "steel")
+        base = WallSpec("Base", bv, bt, "plate")
         if self.coated:
             cyl.coat = {"radius": coat_r, "material": "ore", "side": 1, "seed": self.seed}
             base.coat = {"radius": coat_r, "material": "ore", "side": 1, "seed": self.seed + 1}
@@ -431,7 +460,7 @@ class LiftingCylinder:
         fac = _ore_pour(self, "pour", region, shape, rate, count=self.count or None, mass=self.mass or None)
         return SceneSpec(
             rig="lifting_cylinder",
-            materials=[ORE, STEEL],
+            materials=[ORE, STEEL, *plate],
             pairs=pairs,
             shapes=[shape],
             walls=[cyl, base],
