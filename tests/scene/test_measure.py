@@ -14,6 +14,7 @@ from warpdem.scene.measure import (
     angle_cone,
     angle_image,
     angle_surface_fit,
+    discharge_rate,
     impact_summary,
     packing_core,
     packing_fraction,
@@ -549,3 +550,23 @@ def test_press_unload_refuses_a_retraction_that_moves_down():
     f = np.array([0.0, 1.0, 2.0])
     with pytest.raises(ValueError, match="unload_z"):
         press_unload(z, f, [0.008, 0.0085, 0.0082], [2.0, 1.0, 0.5], contact_z=0.01, fill_height=0.01)
+
+
+def test_discharge_rate_fits_the_steady_part():
+    """Discharged mass: nothing for 0.1 s, a quadratic start-up, 0.05 kg/s steady, then a stop at 0.4 kg. The
+    fit over 20-80 % of the final mass (all steady here) gives 0.05 kg/s exactly; too few steady samples and
+    bad input are refused."""
+    t = np.linspace(0.0, 10.0, 201)
+    m = np.where(t < 0.1, 0.0, np.where(t < 1.1, 0.025 * (t - 0.1) ** 2, 0.025 + 0.05 * (t - 1.1)))
+    m = np.minimum(m, 0.4)
+    got = discharge_rate(t, m)
+    assert got["discharge_rate_kg_s"] == pytest.approx(0.05, rel=1e-9)
+    assert got["discharged_kg"] == pytest.approx(0.4)
+    # 20 % and 80 % of 0.4 kg are reached at 2.2 s and 7.0 s, within one 0.05 s sample
+    assert got["steady_from_s"] == pytest.approx(2.2, abs=0.05) and got["steady_to_s"] == pytest.approx(7.0, abs=0.05)
+    with pytest.raises(ValueError, match="at least 3"):
+        discharge_rate([0.0, 1.0, 2.0, 3.0], [0.0, 0.0, 1.0, 1.0])
+    with pytest.raises(ValueError, match="increasing"):
+        discharge_rate([0.0, 2.0, 1.0], [0.0, 1.0, 2.0])
+    with pytest.raises(ValueError, match="some mass"):
+        discharge_rate([0.0, 1.0, 2.0], [0.0, 0.0, 0.0])

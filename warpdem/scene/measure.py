@@ -38,6 +38,7 @@ __all__ = [
     "angle_surface_fit",
     "BoxRegion",
     "CylinderRegion",
+    "discharge_rate",
     "impact_summary",
     "packing_core",
     "packing_fraction",
@@ -853,6 +854,54 @@ def packing_core(x, r, center, radius: float, base_z: float, margin: float = 2.0
             f"a bed deeper than {2 * margin + 1:g} diameters ({(2 * margin + 1) * d:.4g} m) everywhere in its core",
         )
     return CylinderRegion((cx, cy), core_r, z_low, z_high)
+
+
+def discharge_rate(time_s, mass_kg, low: float = 0.2, high: float = 0.8) -> dict:
+    """Steady mass flow out of an outlet from the discharged mass over time.
+
+    The steady part is where the discharged mass lies between ``low`` and ``high`` of its final value: the
+    start-up (the first particles reaching the outlet) and the end (the last of the heap, or a jam) are left
+    out. The rate is the slope of a least-squares line through it.
+
+    Args:
+        time_s: sample times [s], shape (k,), increasing.
+        mass_kg: mass discharged by each time [kg], shape (k,).
+        low, high: the steady part's bounds as fractions of the final mass, 0 <= low < high <= 1.
+
+    Returns:
+        dict with ``discharge_rate_kg_s``, ``discharged_kg`` (final), ``steady_from_s`` and ``steady_to_s`` (the
+        part fitted) and ``samples`` (in it).
+    """
+    t = np.asarray(time_s, dtype=float)
+    m = np.asarray(mass_kg, dtype=float)
+    if t.ndim != 1 or t.size < 3 or m.shape != t.shape:
+        _bad("mass_kg", m, "discharged masses [kg] of shape (k,), k >= 3, one per time_s sample")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(m))):
+        _bad("time_s", t, "finite times and masses (found NaN or inf)")
+    if np.any(np.diff(t) <= 0):
+        _bad("time_s", t, "increasing sample times [s]")
+    low = _finite_number("low", low, "")
+    high = _finite_number("high", high, "")
+    if not 0 <= low < high <= 1:
+        _bad("high", high, f"a fraction in (low = {low}, 1]")
+    final = float(m[-1])
+    if final <= 0:
+        _bad("mass_kg", m, "some mass discharged by the last sample")
+    steady = (m >= low * final) & (m <= high * final)
+    if steady.sum() < 3:
+        _bad(
+            "time_s",
+            f"{int(steady.sum())} samples between {low:g} and {high:g} of the discharged mass",
+            "at least 3 (sample more often)",
+        )
+    slope = float(np.polyfit(t[steady], m[steady], 1)[0])
+    return {
+        "discharge_rate_kg_s": slope,
+        "discharged_kg": final,
+        "steady_from_s": float(t[steady][0]),
+        "steady_to_s": float(t[steady][-1]),
+        "samples": int(steady.sum()),
+    }
 
 
 def _press_arrays(piston_z, piston_force) -> tuple[np.ndarray, np.ndarray]:

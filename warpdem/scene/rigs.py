@@ -358,7 +358,9 @@ class Funnel:
                 settle_after=self.count / self.rate,
                 output_interval=0.05,
             ),
-            measure=MeasureSpec("angle_of_repose", base_height=0.0, center=(0.0, 0.0)),
+            measure=MeasureSpec(
+                "angle_of_repose", base_height=0.0, center=(0.0, 0.0), outlet_height=self.outlet_height
+            ),
             domain=_plate_domain(self.plate_size, self.plate_size, (0.0, 0.0, 0.0), bound, top_z + 0.5),
         )
 

@@ -276,6 +276,8 @@ def run_scene(
         force = (imp - impulse_prev) / max(t - t_prev, 1e-300)
         impulse_prev, t_prev = imp.copy(), t
         ke = _kinetic_energy(model, state, h)
+        if m.outlet_height is not None:
+            series.setdefault("discharged_kg", []).append(_discharged_mass(model, state, h, m.outlet_height).tolist())
         series["time"].append(t)
         series["kinetic_energy"].append(ke.tolist())
         series["wall_force"].append(force[:, 2].tolist())
@@ -374,6 +376,8 @@ def run_scene(
                 )
             except ValueError as e:
                 mw["angle_error"] = str(e)
+            if m.outlet_height is not None:
+                mw.update(_discharge_metrics(series, w))
             if packing_time is not None:
                 mw.update(series.get("packing", [{"packing_error": "the run ended before the packing time"}] * W)[w])
         elif m.kind == "press":
@@ -532,6 +536,30 @@ def _json_default(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
     return str(o)
+
+
+def _discharged_mass(model, state, h, outlet_height: float) -> np.ndarray:
+    """Mass [kg] of the bodies below ``outlet_height`` [m] (by their centres) in each world, shape (world_count,)."""
+    act = state.sphere_active.numpy().astype(bool)
+    x = state.sphere_x.numpy()
+    out = np.zeros(model.world_count)
+    sel = act & h["free"] & (x[:, 2] < outlet_height)
+    np.add.at(out, h["world"][sel], h["mass"][sel])
+    if model.clump_count:
+        cx = state.clump_x.numpy()
+        csel = act[model.clump_sphere_start.numpy()[: len(cx)]] & (cx[:, 2] < outlet_height)
+        np.add.at(out, h["clump_world"][csel], h["clump_mass"][csel])
+    return out
+
+
+def _discharge_metrics(series, w: int) -> dict:
+    """The steady discharge rate of world ``w`` from the discharged mass per output (``measure.discharge_rate``)."""
+    mass = np.asarray(series.get("discharged_kg", []), dtype=float)
+    try:
+        got = ms.discharge_rate(series["time"], mass[:, w] if mass.ndim == 2 else mass)
+    except ValueError as e:
+        return {"discharge_error": str(e)}
+    return {k: got[k] for k in ("discharge_rate_kg_s", "discharged_kg", "steady_from_s", "steady_to_s")}
 
 
 def _packing_metrics(model, state, h, w: int, m) -> dict:

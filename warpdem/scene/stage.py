@@ -157,6 +157,10 @@ class MeasureSpec:
     where its stroke began, recording the unloading branch; 0: the run stops at the force limit."""
     hold_time: float = 0.0
     """Press: how long [s] the piston holds still at the force limit before it retracts."""
+    outlet_height: float | None = None
+    """Angle of repose from a funnel: the height [m] of its outlet's lower edge; a body whose centre is below it
+    has discharged, and the run reports the steady discharge rate (``measure.discharge_rate``). None: not
+    measured."""
 
 
 def unload_keyframes(times, translations, t_stop: float, stop, hold: float, speed: float):
@@ -324,6 +328,8 @@ def write_stage(spec: SceneSpec, path=None):
     wp_.CreateAttribute(NS + "measure:center", Sdf.ValueTypeNames.Double2).Set(Gf.Vec2d(*m.center))
     wp_.CreateAttribute(NS + "measure:forceLimit", Sdf.ValueTypeNames.Double).Set(float(m.force_limit))
     wp_.CreateAttribute(NS + "measure:backstopHeight", Sdf.ValueTypeNames.Double).Set(float(m.backstop_height))
+    if m.outlet_height is not None:
+        wp_.CreateAttribute(NS + "measure:outletHeight", Sdf.ValueTypeNames.Double).Set(float(m.outlet_height))
     if m.unload_speed > 0:
         for name, value in (("unloadSpeed", m.unload_speed), ("holdTime", m.hold_time)):
             wp_.CreateAttribute(NS + "measure:" + name, Sdf.ValueTypeNames.Double).Set(float(value))
@@ -654,6 +660,7 @@ def read_stage(path_or_stage) -> SceneSpec:
         packing_margin=r.get(world, NS + "measure:packingMargin", required=False, default=2.0),
         unload_speed=r.get(world, NS + "measure:unloadSpeed", required=False, default=0.0),
         hold_time=r.get(world, NS + "measure:holdTime", required=False, default=0.0),
+        outlet_height=r.get(world, NS + "measure:outletHeight", required=False, default=None),
     )
     for name, value, unit in (("unloadSpeed", measure.unload_speed, "m/s"), ("holdTime", measure.hold_time, "s")):
         if value < 0:
