@@ -872,12 +872,7 @@ def discharge_rate(time_s, mass_kg, low: float = 0.2, high: float = 0.8) -> dict
         dict with ``discharge_rate_kg_s``, ``discharged_kg`` (final), ``steady_from_s`` and ``steady_to_s`` (the
         part fitted) and ``samples`` (in it).
     """
-    t = np.asarray(time_s, dtype=float)
-    m = np.asarray(mass_kg, dtype=float)
-    if t.ndim != 1 or t.size < 3 or m.shape != t.shape:
-        _bad("mass_kg", m, "discharged masses [kg] of shape (k,), k >= 3, one per time_s sample")
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(m))):
-        _bad("time_s", t, "finite times and masses (found NaN or inf)")
+    t, m = _paired("time_s", time_s, "sample times [s]", "mass_kg", mass_kg, "discharged masses [kg]", 3)
     if np.any(np.diff(t) <= 0):
         _bad("time_s", t, "increasing sample times [s]")
     low = _finite_number("low", low, "")
@@ -904,17 +899,23 @@ def discharge_rate(time_s, mass_kg, low: float = 0.2, high: float = 0.8) -> dict
     }
 
 
+def _paired(x_name: str, x, x_what: str, y_name: str, y, y_what: str, k_min: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two finite 1-D series of equal length (at least ``k_min``), refused naming the one at fault; ``*_what``
+    says what each holds, with its unit (e.g. "piston face heights [m]")."""
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if x.ndim != 1 or x.size < k_min:
+        _bad(x_name, x, f"{x_what} of shape (k,) with k >= {k_min}")
+    if y.shape != x.shape:
+        _bad(y_name, y, f"{y_what} of shape {x.shape}, one per {x_name} sample")
+    for name, a, what in ((x_name, x, x_what), (y_name, y, y_what)):
+        if not np.all(np.isfinite(a)):
+            _bad(name, a, f"finite {what} (found NaN or inf)")
+    return x, y
+
+
 def _press_arrays(piston_z, piston_force) -> tuple[np.ndarray, np.ndarray]:
-    z = np.asarray(piston_z, dtype=float)
-    f = np.asarray(piston_force, dtype=float)
-    if z.ndim != 1 or z.size < 2:
-        _bad("piston_z", z, "piston face heights [m] of shape (k,) with k >= 2")
-    if f.shape != z.shape:
-        _bad("piston_force", f, f"axial forces [N] of shape {z.shape}, one per piston_z sample")
-    if not np.all(np.isfinite(z)):
-        _bad("piston_z", z, "finite heights (found NaN or inf)")
-    if not np.all(np.isfinite(f)):
-        _bad("piston_force", f, "finite forces (found NaN or inf)")
+    z, f = _paired("piston_z", piston_z, "piston face heights [m]", "piston_force", piston_force, "axial forces [N]", 2)
     # the stroke is a loading curve: an upward step means unloading or mixed-up samples
     tol = 1e-9 * max(float(np.ptp(z)), 1e-300)
     up = np.flatnonzero(np.diff(z) > tol)
@@ -1033,16 +1034,11 @@ def press_unload(
 
     Returns:
         dict with ``loading_exponent``, ``unloading_stiffness_n_m`` [N/m], ``residual_set_m`` [m] and
-        ``residual_set_ratio`` (None where the force never fell through the threshold), ``max_displacement_m`` and the unloading
-        curve ``unload_displacement_m``, ``unload_force_n`` (shape (u,)).
+        ``residual_set_ratio`` (None where the force never fell through the threshold), ``max_displacement_m``
+        and the unloading curve ``unload_displacement_m``, ``unload_force_n`` (shape (u,)).
     """
     lz, lf = _press_arrays(load_z, load_force)
-    uz = np.asarray(unload_z, dtype=float)
-    uf = np.asarray(unload_force, dtype=float)
-    if uz.ndim != 1 or uz.size < 2 or uf.shape != uz.shape:
-        _bad("unload_z", uz, "piston heights [m] of shape (u,), u >= 2, one per unload_force sample")
-    if not (np.all(np.isfinite(uz)) and np.all(np.isfinite(uf))):
-        _bad("unload_force", uf, "finite heights and forces (found NaN or inf)")
+    uz, uf = _paired("unload_z", unload_z, "piston heights [m]", "unload_force", unload_force, "axial forces [N]", 2)
     tol = 1e-9 * max(float(np.ptp(uz)), 1e-300)
     down = np.flatnonzero(np.diff(uz) < -tol)
     if down.size:
