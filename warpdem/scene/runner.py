@@ -40,7 +40,8 @@ def _host(model):
     }
     dens = model.material_density.numpy()
     w_of = h["world"] % dens.shape[0]
-    h["mass"] = dens[w_of, h["material"]] * model.sphere_body_volume.numpy()
+    h["density"] = dens[w_of, h["material"]]
+    h["mass"] = h["density"] * model.sphere_body_volume.numpy()
     h["free"] = (h["clump"] < 0) & (h["glued"] < 0)
     if model.clump_count:
         cd = dens[model.clump_world.numpy() % dens.shape[0], model.clump_material.numpy()]
@@ -68,10 +69,14 @@ def _kinetic_energy(model, state, h) -> np.ndarray:
     return e / np.maximum(n, 1)
 
 
+def _particle_mask(state, h, world: int) -> np.ndarray:
+    """Mask of the active particle spheres (glued ones excluded) of ``world``, shape (sphere_count,)."""
+    return state.sphere_active.numpy().astype(bool) & (h["glued"] < 0) & (h["world"] == world)
+
+
 def _particles(model, state, h, world: int):
     """Centres (n, 3) and radii (n,) of the active particle spheres (glued ones excluded) of ``world``."""
-    act = state.sphere_active.numpy().astype(bool)
-    sel = act & (h["glued"] < 0) & (h["world"] == world)
+    sel = _particle_mask(state, h, world)
     return state.sphere_x.numpy()[sel].astype(np.float64), h["radius"][sel]
 
 
@@ -564,13 +569,10 @@ def _discharge_metrics(series, w: int) -> dict:
 
 def _packing_metrics(model, state, h, w: int, m) -> dict:
     """Packing fraction and bulk density of world ``w``'s bed in its container's core (``MeasureSpec.packing_*``)."""
-    x, r = _particles(model, state, h, w)
-    if not len(r):
+    sel = _particle_mask(state, h, w)
+    if not sel.any():
         return {"packing_error": "no particles in the container"}
-    act = state.sphere_active.numpy().astype(bool)
-    sel = act & (h["glued"] < 0) & (h["world"] == w)
-    dens = model.material_density.numpy()
-    rho = dens[w % dens.shape[0], h["material"][sel]]
+    x, r, rho = state.sphere_x.numpy()[sel].astype(np.float64), h["radius"][sel], h["density"][sel]
     try:
         core = ms.packing_core(x, r, m.center, m.packing_radius, m.base_height, m.packing_margin)
     except ValueError as e:
