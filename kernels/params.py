@@ -38,6 +38,11 @@ class PairParams:
     """EEPA adhesive branch exponent [-]."""
     ks_fac: float
     """EEPA tangential stiffness multiplier [-]."""
+    stable_n: float
+    """Squared stable-step frequency per unit normal stiffness and inverse mass [-], dashpot included
+    (``law_hertz_mindlin.stable_factors``)."""
+    stable_t: float
+    """The same for the tangential stiffness, on the tangential mode's mass [-]."""
 
 
 @wp.struct

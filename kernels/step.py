@@ -72,6 +72,9 @@ class StepBuffers:
     int32."""
     rebuild_count: wp.array
     """Neighbour-list rebuilds made, shape (1,), int32."""
+    stiffness_max: wp.array
+    """The largest sum of squared stable-step frequencies over one sphere's contacts [1/s^2] since the solver's
+    last ``run`` began, shape (1,), float32 (``Solver.step_margin``)."""
     no_rebuild: wp.array
     """A rebuild flag nothing reads (moving the walls to a fresh state's time must not flag one), shape (1,),
     int32."""
@@ -91,6 +94,7 @@ class StepBuffers:
             partner_count_next=count_next,
             blowup=wp.array([BLOWUP_NONE, BLOWUP_NONE], dtype=int, device=dev),
             rebuild_count=wp.zeros(1, dtype=int, device=dev),
+            stiffness_max=wp.zeros(1, dtype=float, device=dev),
             no_rebuild=wp.zeros(1, dtype=int, device=dev),
         )
 
@@ -183,19 +187,19 @@ def wall_contact_for(cohesive_laws: bool, rolling: bool):
 
         Returns:
             (active, force on the sphere [N], torque on the sphere [N m], updated history (zero once the contact
-            ended)).
+            ended), squared stable-step frequency [1/s^2] (0 once the contact ended)).
         """
         arm = r_i - 0.5 * overlap
         v_rel = v_i + wp.cross(w_i, arm * n) - v_wall
-        active, f_a, f_n, f_t, h, k_n = wp.static(force_law)(overlap, n, v_rel, history, r_i, m_i, p, dt)
+        active, f_a, f_n, f_t, h, k_n, k_s = wp.static(force_law)(overlap, n, v_rel, history, r_i, m_i, p, dt)
         if active == 0:
-            return int(0), wp.vec3(0.0), wp.vec3(0.0), h
+            return int(0), wp.vec3(0.0), wp.vec3(0.0), h, 0.0
         if wp.static(rolling):
             m_roll, roll = rolling_resistance(
                 p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i, p.rolling_damping, h.roll, dt
             )
-            return int(1), f_a, wp.cross(arm * n, f_t) + m_roll, ContactHistory(h.spring, roll, h.aux)
-        return int(1), f_a, wp.cross(arm * n, f_t), ContactHistory(h.spring, h.roll * 0.0, h.aux)
+            return int(1), f_a, wp.cross(arm * n, f_t) + m_roll, ContactHistory(h.spring, roll, h.aux), k_s
+        return int(1), f_a, wp.cross(arm * n, f_t), ContactHistory(h.spring, h.roll * 0.0, h.aux), k_s
 
     return wall_contact
 
@@ -358,6 +362,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
         neighbor_live_out: wp.array[wp.uint64],
         plane_live_out: wp.array[wp.uint64],
         # Out:
+        stiffness_max_out: wp.array[float],
         x_out: wp.array[wp.vec3],
         v_out: wp.array[wp.vec3],
         w_out: wp.array[wp.vec3],
@@ -411,6 +416,9 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
 
         f = wp.vec3(0.0)
         t = wp.vec3(0.0)
+        # sum of the contacts' squared stable-step frequencies [1/s^2]: a Gershgorin bound on the fastest mode
+        # this sphere takes part in (see SolverOptions.dt_margin)
+        stiff = float(0.0)
 
         # sphere-sphere (a slot not live holds a zero history: it is neither read nor rewritten)
         live_in = neighbor_live_out[i]
@@ -489,11 +497,12 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             h_last = ContactHistory()
             if was_live:
                 h_last = history_load(neighbor_history_out, k, i)
-            active, f_a, f_n, f_t, h, k_n = wp.static(force_law)(overlap, n, v_rel, h_last, r_star, m_star, p, dt)
+            active, f_a, f_n, f_t, h, k_n, k_s = wp.static(force_law)(overlap, n, v_rel, h_last, r_star, m_star, p, dt)
             if active == 0:
                 if was_live:
                     history_store(neighbor_history_out, k, i, h)
                 continue
+            stiff += k_s
             if wp.static(share_mass):
                 run_key, run_n = partner_tally(
                     partner_key_out, partner_count_out, tally, run_key, run_n, body_key(j, sphere_clump, clump_total)
@@ -553,9 +562,10 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                 h_last = ContactHistory()
                 if was_live:
                     h_last = history_load(plane_history_out, p_id, i)
-                active, f_a, t_a, h = wp.static(wall_contact)(
+                active, f_a, t_a, h, k_s = wp.static(wall_contact)(
                     r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, h_last, dt
                 )
+                stiff += k_s
                 if active != 0 or was_live:
                     history_store(plane_history_out, p_id, i, h)
                 if active != 0:
@@ -606,9 +616,10 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                 mc_i = m_i
                 if wp.static(share_mass):
                     mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count)
-                active, f_a, t_a, h = wp.static(wall_contact)(
+                active, f_a, t_a, h, k_s = wp.static(wall_contact)(
                     r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, history_load(mesh_history_out, k, i), dt
                 )
+                stiff += k_s
                 history_store(mesh_history_out, k, i, h)
                 if wp.static(share_mass):
                     if tally >= 0 and (active != 0 or r_i - gap + dt * wp.dot(v_i - v_wall, dq / -gap) > 0.0):
@@ -633,6 +644,9 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
         plane_live_out[i] = plane_live
         f_out[i] = f
         t_out[i] = t
+        # a broadcast load spares the atomic once the largest value has settled
+        if stiff > stiffness_max_out[0]:
+            wp.atomic_max(stiffness_max_out, 0, stiff)
         if wp.static(share_mass):
             if run_n > 0:
                 partner_add(partner_key_out, partner_count_out, tally, run_key, run_n)
@@ -729,6 +743,7 @@ def launch_step_spheres(
             c.mesh_history,
             c.neighbor_live,
             c.plane_live,
+            b.stiffness_max,
             state_out.sphere_x,
             state_out.sphere_v,
             state_out.sphere_w,

@@ -83,7 +83,7 @@ def _path_kernel(
     n = wp.vec3(0.0, 0.0, 1.0)
     h = ContactHistory()
     for i in range(overlap.shape[0]):
-        active, f_a, load, f_t, h_new, k_n = contact_force(overlap[i], n, wp.vec3(0.0), h, r_star, 1.0, p, 1.0e-6)
+        active, f_a, load, f_t, h_new, k_n, k_s = contact_force(overlap[i], n, wp.vec3(0.0), h, r_star, 1.0, p, 1.0e-6)
         h = h_new
         active_out[i] = active
         f_out[i] = -wp.dot(f_a, n)

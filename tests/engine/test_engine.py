@@ -23,7 +23,7 @@ def _hm_kernel(
     xi_out: wp.array[wp.vec3],
 ):
     i = wp.tid()
-    f, fn, ft, xi, kn = hertz_mindlin(overlap[i], n[i], v[i], s[i], 0.002, 1e-4, p, dt)
+    f, fn, ft, xi, kn, ks = hertz_mindlin(overlap[i], n[i], v[i], s[i], 0.002, 1e-4, p, dt)
     f_out[i] = f
     xi_out[i] = xi
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from warpdem.kernels.law_hertz_mindlin import stable_factors
 from warpdem.kernels.params import PairParams
 
 from .checks import check, check_number, enum_value, number_fields
@@ -193,6 +194,13 @@ class Interaction:
         return {k: int(v) if isinstance(v, enum.Enum) else v for k, v in out.items()}
 
     @property
+    def dashpot_factor(self) -> float:
+        """damp [-] of the pair's dashpots c = damp sqrt(S m*): -2 sqrt(5/6) beta (Tsuji, as Hertz-Mindlin, JKR
+        and non-linear EEPA apply it), -2 beta for linear EEPA (n = 1)."""
+        linear = self.law == ContactLaw.EEPA and self.slope_exponent == 1.0
+        return -2.0 * self.beta * (1.0 if linear else math.sqrt(5.0 / 6.0))
+
+    @property
     def beta(self) -> float:
         """Damping factor beta = ln e / sqrt(ln^2 e + pi^2) (0 for e = 1) of this pair's restitution."""
         return damping_factor(self.restitution)
@@ -247,6 +255,8 @@ def pair_table(materials_per_world: list[list[Material]], tables_per_world: list
         for a in range(m_count):
             for b in range(m_count):
                 e_star, g_star = effective_moduli(mats[a], mats[b])
-                fields = {"e_star": e_star, "g_star": g_star, **table.get(mats[a].name, mats[b].name).pair_fields()}
+                inter = table.get(mats[a].name, mats[b].name)
+                fields = {"e_star": e_star, "g_star": g_star, **inter.pair_fields()}
+                fields["stable_n"], fields["stable_t"] = stable_factors(inter.dashpot_factor)
                 out[w, a, b] = tuple(fields[name] for name in dtype.names)
     return out

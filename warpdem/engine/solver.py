@@ -49,6 +49,18 @@ class SolverOptions:
             "body" gives every sub-contact the whole clump mass (EDEM's convention): such a face is then
             about sqrt(n) times overdamped (a 3 x 3 raft dropped flat rebounds at 0.02 for e = 0.45) and,
             with tens of sub-contacts, the damping outgrows the time step and the clump spins up.
+        dt_margin: the step may use at most this fraction of the stiffest contact's stable step, in (0, 1].
+            Every step finds, without a host read, the largest sum over one sphere's contacts of each contact's
+            squared stable-step frequency (its law's current tangent stiffness and dashpot, normal on m* and
+            tangential on the tangential mode's 2/7 m*: kernels/law_hertz_mindlin.py ``stable_rate``), a
+            Gershgorin bound on the fastest mode, Omega^2; leapfrog is stable while the margin dt Omega / 2 < 1.
+            The Rayleigh time covers an impact, not a Hertz contact compressed deep (S grows as sqrt(overlap)),
+            EEPA's unloading branch or a strong dashpot. :attr:`Solver.step_margin` reports each ``run``'s margin.
+        dt_levels: how many times :meth:`Solver.advance` may halve the step when a ``run`` exceeded
+            ``dt_margin`` (and double it back, never above the Rayleigh or given step, when the margin has
+            fallen well below), so dt is that step / 2^k with 0 <= k <= dt_levels; 0 keeps dt fixed and only
+            reports. The choice is made between runs from what the last run met, so a run stays deterministic
+            and bit-reproducible from its inputs; a batch steps at the dt its stiffest world needs.
     """
 
     dt: float | None = None
@@ -60,6 +72,8 @@ class SolverOptions:
     velocity_limit: float = 500.0
     impact_speed_min: float = 0.05
     clump_contact_mass: str = "shared"
+    dt_margin: float = 0.5
+    dt_levels: int = 6
 
     def __post_init__(self):
         def bad(name, value, allowed):
@@ -83,7 +97,19 @@ class SolverOptions:
             bad("impact_speed_min", self.impact_speed_min, "a speed >= 0 m/s")
         if self.clump_contact_mass not in CLUMP_CONTACT_MASSES:
             bad("clump_contact_mass", self.clump_contact_mass, '"shared" or "body"')
+        if not (math.isfinite(self.dt_margin) and 0 < self.dt_margin <= 1):
+            bad("dt_margin", self.dt_margin, "a fraction of the stable step in (0, 1]")
+        if not (
+            isinstance(self.dt_levels, (int, float))
+            and float(self.dt_levels).is_integer()
+            and 0 <= self.dt_levels <= 20
+        ):
+            bad("dt_levels", self.dt_levels, "an integer from 0 (fixed step) to 20")
 
+
+DT_RAISE = 2.0 / 3.0
+"""Solver.advance doubles the step only when the doubled margin stays below this fraction of dt_margin, so the
+step does not flip between two levels at every output."""
 
 # steps in one replayed CUDA graph: long enough to hide the launch cost, short enough for a remainder
 # stepped eagerly to stay cheap
@@ -135,6 +161,15 @@ class Solver:
                     f"({model.rayleigh_time:.3g} s): contacts may be under-resolved",
                     stacklevel=2,
                 )
+        self.dt_base = self.dt
+        """The Rayleigh or given step [s]: :meth:`advance` steps at ``dt_base / 2**dt_level``."""
+        self.dt_level = 0
+        self.step_margin: float | None = None
+        """dt Omega / 2 over the last ``run`` (None before the first): below 1 leapfrog is stable (SolverOptions.
+        dt_margin)."""
+        self.step_margin_max = 0.0
+        """The largest ``step_margin`` of this solver's runs."""
+        self._kick_next: float | None = None
         self.skin = (
             self.options.skin if self.options.skin is not None else self.options.skin_fraction * model.radius_min
         )
@@ -278,6 +313,11 @@ class Solver:
         m, c = self.model, contacts
         dt = self.dt if dt is None else float(dt)
         kick = dt if state_in.half_step else 0.5 * dt
+        if self._kick_next is not None:
+            # the step changed: leapfrog's kick spans half of each (v lives at half steps); a fresh state has
+            # no half step to span
+            kick = self._kick_next if state_in.half_step else kick
+            self._kick_next = None
         o, b = self.options, self._buffers
         _st.launch_begin_step(m, b, dt)
         _st.launch_step_spheres(
@@ -340,6 +380,7 @@ class Solver:
         if steps <= 0:
             return state
         t0, step0 = state.time, state.step
+        self._buffers.stiffness_max.zero_()
         if self._spare is None or self._spare.sphere_x.shape != state.sphere_x.shape:
             self._spare = self.model.state()
         # the twin shares the activity flags (they change only at a release or a removal, never within a
@@ -353,8 +394,9 @@ class Solver:
             use_graph = steps >= 64
         self._set_time(state.time)
         done = 0
-        # the first step runs eagerly: it applies the half kick, which a replayed step does not
-        if not a.half_step or (use_graph and self._graph is None):
+        # the first step runs eagerly: it applies the half kick (or the kick across a change of step), which a
+        # replayed step does not
+        if not a.half_step or self._kick_next is not None or (use_graph and self._graph is None):
             self._step(a, b, control, contacts)
             a, b = b, a
             done = 1
@@ -479,8 +521,9 @@ class Solver:
         has released so far.
         """
         end = state.time + float(duration)
-        eps = 0.5 * self.dt
         while True:
+            self._adapt_dt()
+            eps = 0.5 * self.dt
             due = {
                 f: t
                 for f in range(len(self.model.factories))
@@ -496,6 +539,43 @@ class Solver:
             for f, t in due.items():
                 if t <= state.time + eps:
                     self._release_factory(state, contacts, f)
+
+    def _adapt_dt(self) -> None:
+        """Halve the step while the last run's margin exceeded ``dt_margin`` (at most ``dt_levels`` halvings), or
+        double it when doubling leaves a third of ``dt_margin`` spare; the margin scales with dt."""
+        levels, target, margin = int(self.options.dt_levels), self.options.dt_margin, self.step_margin
+        if not levels or margin is None:
+            return
+        level = self.dt_level
+        while margin > target and level < levels:
+            level, margin = level + 1, margin / 2
+        if level == self.dt_level and level > 0 and 2 * margin <= DT_RAISE * target:
+            level -= 1
+        self.set_dt_level(level)
+
+    def dt_state(self) -> dict:
+        """What decides the next step (a checkpoint keeps it): the level, the last run's margin, the largest."""
+        return {"level": self.dt_level, "margin": self.step_margin, "margin_max": self.step_margin_max}
+
+    def restore_dt_state(self, saved: dict) -> None:
+        """Continue at a saved :meth:`dt_state`: the state saved with it already stepped at that level, so no
+        kick across a change of step follows."""
+        self.dt_level = int(saved["level"])
+        self.dt = self.dt_base / 2.0**self.dt_level
+        self.step_margin, self.step_margin_max = saved["margin"], float(saved["margin_max"])
+        self._kick_next, self._graph = None, None
+
+    def set_dt_level(self, level: int) -> None:
+        """Step at ``dt_base / 2**level`` from the next step on; that step's kick spans half of the old step and
+        half of the new one."""
+        level = int(level)
+        if level == self.dt_level:
+            return
+        dt_old, self.dt_level = self.dt, level
+        self.dt = self.dt_base / 2.0**level
+        self.step_margin = None if self.step_margin is None else self.step_margin * self.dt / dt_old
+        self._kick_next = 0.5 * (dt_old + self.dt)
+        self._graph = None
 
     def _next_release(self, state: State, f: int) -> float | None:
         """Time of factory f's next release [s], or None once it released everything."""
@@ -566,12 +646,15 @@ class Solver:
         log["retry"] = state.time + fac.interval if placed < want else -math.inf
 
     def check(self, contacts: Contacts) -> None:
-        """Raise SimulationError if a blow-up or a capacity overflow was flagged (two small host reads).
+        """Raise SimulationError if a blow-up or a capacity overflow was flagged (three small host reads, the
+        third the stiffest sphere's Omega^2 for :attr:`step_margin`).
 
         An overflow drops contacts, so spheres may pass into each other and blow up; a sphere that blew up
         may also crowd into others and overflow their lists: when both are flagged the message gives both.
         """
         blow = self._buffers.blowup.numpy()
+        self.step_margin = 0.5 * self.dt * math.sqrt(max(float(self._buffers.stiffness_max.numpy()[0]), 0.0))
+        self.step_margin_max = max(self.step_margin_max, self.step_margin)
         flags = int(contacts.overflow.numpy()[0])
         dropped = ""
         if flags:
