@@ -457,6 +457,17 @@ def test_stage_packing_settings(tmp_path):
         attr.Set(good)
 
 
+def test_stage_packing_base(tmp_path):
+    """A packing core's own base height (a funnel's gate, not the plate) is written and read back; a stage
+    without one reads None, which measures from the base height."""
+    spec = rigs.spec("lifting_cylinder", smoke=True)
+    write_stage(spec, tmp_path / "a.usda")
+    assert read_stage(str(tmp_path / "a.usda")).measure.packing_base is None
+    spec.measure.packing_base = 0.0125
+    write_stage(spec, tmp_path / "b.usda")
+    assert read_stage(str(tmp_path / "b.usda")).measure.packing_base == 0.0125
+
+
 def test_stage_press_unloading_settings(tmp_path):
     """The die press's stage carries the unloading (speed, hold) and the stroke's return as two keyframes past
     its end; a negative speed or hold names /World and the attribute."""
