@@ -258,7 +258,11 @@ class Funnel:
     Geometry from ISO 4324:1977 (outlet 75 mm above the plate) with a 60 deg laboratory funnel; the outlet
     (10 mm in ISO, for powders) is 40 mm by default for the 6.3 mm pellets of seed 000. Particles (``count``
     of them at ``rate`` per second) rain into the funnel from above and pile on the plate; the run stops when
-    the pile has settled. Materials and pairs are seed 000's calibrated values (Hertz-Mindlin with
+    the pile has settled. ``gate_time`` > 0 [s] closes the outlet with a steel plate (wall "Gate") while the
+    funnel fills and settles, and opens it at that time (after the pour, count / rate): the funnel then
+    discharges under its own head, as a hopper in Beverloo's law, and the fill's packing fraction and bulk
+    density are measured just before it opens. 0: no gate, the funnel is fed while it discharges.
+    ``output_interval`` [s]: time between outputs (the discharged-mass samples). Materials and pairs are seed 000's calibrated values (Hertz-Mindlin with
     constant-torque rolling friction); ``particle`` sphere | pellet (141-sphere clump of seed 000) |
     phosphate; ``particle_radius`` 0 keeps the clump's true size (a sphere needs one).
     """
@@ -282,7 +286,9 @@ class Funnel:
     seed: int = 1
     plate_static_friction: float = -1.0
     plate_rolling_friction: float = -1.0
-    _may_be_zero = ("particle_radius", "radius_spread", "stem_length", "seed", "surface_energy")
+    gate_time: float = 0.0
+    output_interval: float = 0.05
+    _may_be_zero = ("particle_radius", "radius_spread", "stem_length", "seed", "surface_energy", "gate_time")
     _may_be_negative = ("plate_static_friction", "plate_rolling_friction")
 
     def __post_init__(self):
@@ -292,6 +298,10 @@ class Funnel:
         _check_order(self, "outlet_diameter", "less than", "top_diameter", self.top_diameter)
         if not 0 < self.cone_angle < 180:
             raise ValueError(f"Funnel: cone_angle = {self.cone_angle} is not allowed; expected (0, 180) degrees")
+        if self.gate_time > 0:
+            # opened during the pour, the gate would only shorten the pour's fall: no hopper under its own head
+            _check_order(self, "gate_time", "more than", "the pour's end count / rate [s]", self.count / self.rate)
+            _check_order(self, "gate_time", "less than", "duration", self.duration)
 
     def spec(self) -> SceneSpec:
         shape, r_eq = _shape(self.particle, "Funnel")
@@ -344,25 +354,67 @@ class Funnel:
             seed=int(self.seed),
         )
         plate, plate_pairs = _plate_pairs(self, "grain", "steel", pw)
+        walls = [WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "plate")]
+        settle_after = self.count / self.rate
+        measure = MeasureSpec("angle_of_repose", base_height=0.0, center=(0.0, 0.0), outlet_height=self.outlet_height)
+        if self.gate_time > 0:
+            gate, opened = self._gate(radius, bound)
+            walls.append(gate)
+            # the fill rests in the funnel until the gate opens: the run must not stop as settled before
+            settle_after = opened
+            # the fill's core: one diameter from the wall where the core is narrowest, at its foot one diameter
+            # above the gate (the cone widens above it)
+            measure.packing_time = self.gate_time
+            measure.packing_margin = 1.0
+            foot = 0.25 * radius + measure.packing_margin * 2 * bound
+            measure.packing_radius = self.outlet_diameter / 2 + foot * math.tan(math.radians(self.cone_angle / 2))
+            measure.packing_base = float(gate.translations[0][2])
         return SceneSpec(
             rig="funnel",
             materials=[grain, STEEL, *plate],
             pairs=_pairs("grain", "steel", pp, pw) + plate_pairs,
             shapes=[shape],
-            walls=[WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "plate")],
+            walls=walls,
             factories=[fac],
             run=RunSpec(
                 duration=self.duration,
                 dt_fraction=self.dt_fraction,
                 settle_energy=_settle_energy(grain, radius),
-                settle_after=self.count / self.rate,
-                output_interval=0.05,
+                settle_after=settle_after,
+                output_interval=self.output_interval,
             ),
-            measure=MeasureSpec(
-                "angle_of_repose", base_height=0.0, center=(0.0, 0.0), outlet_height=self.outlet_height
-            ),
+            measure=measure,
             domain=_plate_domain(self.plate_size, self.plate_size, (0.0, 0.0, 0.0), bound, top_z + 0.5),
         )
+
+    def _gate(self, radius: float, bound: float) -> tuple[WallSpec, float]:
+        """The gate under the outlet and the time [s] it has moved clear of the domain.
+
+        A steel disc a bounding radius ``bound`` [m] wider than the outlet, a quarter particle ``radius`` [m]
+        below its rim (no particle passes the gap). At ``gate_time`` it drops by ``h`` (four bounding radii, at
+        most half its height above the plate) in a quarter of sqrt(h / g): faster than gravity, so the
+        fill comes away from it instead of riding down on it. It then slides along +x, clearing the outlet's
+        shadow within three quarters of sqrt(h / g): by then a grain released at rest has fallen h / 2, so
+        nothing touches the gate after it opens. It goes on at that speed until it is wholly outside the domain
+        (beyond the plate's edge, below the outlet's height), away from the pile the angle of repose is
+        measured on.
+        """
+        r_gate = self.outlet_diameter / 2 + bound
+        top = self.outlet_height - 0.25 * radius
+        h = min(4.0 * bound, 0.5 * top)
+        t_fall = math.sqrt(h / 9.81)
+        t_drop = 0.25 * t_fall
+        clear = r_gate + self.outlet_diameter / 2 + bound
+        speed = clear / (0.75 * t_fall)
+        # the domain ends 2 bounding radii past the plate's edge (_plate_domain)
+        away = self.plate_size / 2 + 2 * bound + r_gate + bound
+        t0, t1 = self.gate_time, self.gate_time + t_drop
+        t2 = t1 + away / speed
+        gv, gt = geo.disc(r_gate, min(self.cell, r_gate / 2), 0.0)
+        times = np.array([0.0, t0, t1, t2])
+        tr = np.array([[0.0, 0.0, top], [0.0, 0.0, top], [0.0, 0.0, top - h], [away, 0.0, top - h]])
+        rot = np.tile([0.0, 0.0, 0.0, 1.0], (len(times), 1))
+        return WallSpec("Gate", gv, gt, "steel", times, tr, rot), float(t2)
 
 
 @dataclass(frozen=True)
