@@ -2,7 +2,8 @@
 
 Each rig is a frozen dataclass of parameters (SI units; defaults are the full-size rig) whose ``spec()``
 returns a :class:`warpdem.scene.stage.SceneSpec`; :func:`new` writes it as a USD stage. ``SMOKE`` holds, per rig,
-the overrides of a CPU-sized version (a few hundred particles) used by the tests and the main job.
+the overrides of a CPU-sized version (a few hundred particles) used by the tests and the main job;
+``BEVERLOO_SMOKE`` those of a gated CPU-sized funnel whose discharge rate is checked against Beverloo's law.
 
 * funnel (seeds 000, 001): ISO 4324:1977 funnel method -- outlet 10 mm, 75 mm above the base plate; a
   standard 60 deg laboratory funnel. ISO's 10 mm outlet suits powders (seed 001); pellets of seed 000 (6.3 mm)
@@ -879,6 +880,36 @@ SMOKE = {
     },
 }
 """Overrides that make each rig a CPU smoke test with a few hundred particles."""
+
+BEVERLOO_SMOKE = {
+    # seed 000's pellet contacts on spheres: cohesionless, mu_s 0.55, constant-torque mu_r 0.05 -- free-flowing,
+    # as Beverloo's law needs (the feed's EPSD mu_r 0.21 resists rolling like angular, cohesive grains)
+    "particle": "sphere",
+    "material": "pellet",
+    "particle_radius": 0.002,
+    # 1500 spheres fill the 60 deg cone about 10 diameters (1.3 outlet diameters) deep: a head-independent rate
+    "count": 1500,
+    "rate": 5000.0,
+    "top_diameter": 0.1,
+    # 7.5 diameters, above the law's lower limit of about 6; no stem: the outlet is the cone's own edge
+    "outlet_diameter": 0.03,
+    "stem_length": 0.0,
+    # the pile (about 22 mm high) stays clear of the outlet, so nothing throttles the stream
+    "outlet_height": 0.04,
+    "plate_size": 0.2,
+    # the plate catches the stream (nothing rolls out of the domain, so the discharged mass is conserved);
+    # the flow through the outlet never touches it
+    "plate_rolling_friction": 0.3,
+    "cell": 0.01,
+    # the pour ends at 0.3 s; the fill has settled by 0.6 s
+    "gate_time": 0.6,
+    "duration": 2.0,
+    # about 30 samples in the steady part of a 0.5 s discharge
+    "output_interval": 0.01,
+}
+"""Funnel overrides (over the full-size defaults) of a CPU-sized Beverloo check, about 20 s on one core: a gated
+hopper of free-flowing spheres, filled and settled before its 7.5-diameter outlet opens (README, Discharge
+rate)."""
 
 
 def params(rig: str, values: dict | None = None):
