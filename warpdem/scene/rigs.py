@@ -883,7 +883,7 @@ SMOKE = {
 
 BEVERLOO_SMOKE = {
     # seed 000's pellet contacts on spheres: cohesionless, mu_s 0.55, constant-torque mu_r 0.05 -- free-flowing,
-    # as Beverloo's law needs (the feed's EPSD mu_r 0.21 resists rolling like angular, cohesive grains)
+    # as Beverloo's law needs (the feed's EPSD mu_r 0.21 makes spheres roll like angular grains)
     "particle": "sphere",
     "material": "pellet",
     "particle_radius": 0.002,
