@@ -14,7 +14,10 @@ from warpdem.scene.measure import (
     angle_cone,
     angle_image,
     angle_surface_fit,
+    beverloo_band,
+    beverloo_rate,
     discharge_rate,
+    hopper_angle_factor,
     impact_summary,
     packing_core,
     packing_fraction,
@@ -570,3 +573,63 @@ def test_discharge_rate_fits_the_steady_part():
         discharge_rate([0.0, 2.0, 1.0], [0.0, 1.0, 2.0])
     with pytest.raises(ValueError, match="some mass"):
         discharge_rate([0.0, 1.0, 2.0], [0.0, 0.0, 0.0])
+
+
+def test_beverloo_rate_by_hand():
+    """W = C rho_b sqrt(g) (D - k d)^(5/2): with D - k d = 0.04 m (0.04^2.5 = 3.2e-4 m^2.5), g = 4 m/s^2,
+    rho_b = 1000 kg/m^3 and C = 0.5 the rate is 0.5 * 1000 * 2 * 3.2e-4 = 0.32 kg/s; a conical hopper of
+    45 deg with phi_d = 30 deg multiplies it by (tan 45 tan 30)^-0.35 = 3^0.175."""
+    got = beverloo_rate(0.055, 0.01, 1000.0, C=0.5, k=1.5, g=4.0)
+    assert got == pytest.approx(0.32, rel=1e-12)
+    hopper = beverloo_rate(0.055, 0.01, 1000.0, C=0.5, k=1.5, g=4.0, cone_half_angle=45.0, stagnant_angle=30.0)
+    assert hopper == pytest.approx(0.32 * 3**0.175, rel=1e-12)
+
+
+def test_hopper_angle_factor_and_its_flat_bottom_limit():
+    """Rose and Tanaka: (tan theta tan phi_d)^-0.35 for theta < 90 - phi_d, symmetric in the two angles
+    (3^0.175 for 30 and 45 deg either way); 1 at theta = 90 - phi_d and for any flatter hopper."""
+    assert hopper_angle_factor(30.0, 45.0) == pytest.approx(3**0.175, rel=1e-12)
+    assert hopper_angle_factor(45.0, 30.0) == pytest.approx(3**0.175, rel=1e-12)
+    assert hopper_angle_factor(45.0, 45.0) == 1.0
+    assert hopper_angle_factor(60.0, 45.0) == 1.0
+
+
+def test_beverloo_band_by_hand():
+    """The band's ends over C 0.55-0.65 and k 1.3-2.9: with d = 0.01 m and D = 0.0326 m, D - 2.9 d = 0.06^2 and
+    D - 1.3 d = 0.14^2, so the low end is 0.55 rho_b sqrt(g) 0.06^5 and the high end 0.65 rho_b sqrt(g) 0.14^5
+    (rho_b = 1000 kg/m^3, g = 4 m/s^2: 8.5536e-4 and 0.06991712 kg/s)."""
+    band = beverloo_band(0.0326, 0.01, 1000.0, g=4.0)
+    assert band["low_kg_s"] == pytest.approx(8.5536e-4, rel=1e-9)
+    assert band["high_kg_s"] == pytest.approx(0.06991712, rel=1e-9)
+    assert band["nominal_kg_s"] == pytest.approx(0.58 * 1000.0 * 2.0 * (0.0326 - 0.015) ** 2.5, rel=1e-12)
+    assert band["hopper_factor"] == 1.0
+    cone = beverloo_band(0.0326, 0.01, 1000.0, g=4.0, cone_half_angle=30.0)
+    assert cone["low_kg_s"] == pytest.approx(8.5536e-4 * 3**0.175, rel=1e-9)
+
+
+@pytest.mark.parametrize(
+    "kw, name",
+    [
+        ({"outlet_diameter": 0.01}, "outlet_diameter"),  # D below k d: no flow
+        ({"particle_diameter": 0.0}, "particle_diameter"),
+        ({"bulk_density": -1.0}, "bulk_density"),
+        ({"C": 0.0}, "C"),
+        ({"k": -1.0}, "k"),
+        ({"g": 0.0}, "g"),
+        ({"cone_half_angle": 90.0}, "cone_half_angle"),
+        ({"cone_half_angle": 30.0, "stagnant_angle": 0.0}, "stagnant_angle"),
+    ],
+)
+def test_beverloo_rate_input_errors(kw, name):
+    """Each bad argument is refused naming it."""
+    args = {"outlet_diameter": 0.05, "particle_diameter": 0.01, "bulk_density": 1000.0, **kw}
+    with pytest.raises(ValueError, match=f"^{name} = "):
+        beverloo_rate(**args)
+
+
+def test_beverloo_band_input_errors():
+    """A band needs (low, high) pairs, and an outlet wider than the largest k times d."""
+    with pytest.raises(ValueError, match="^C = "):
+        beverloo_band(0.05, 0.01, 1000.0, C=(0.65, 0.55))
+    with pytest.raises(ValueError, match="^outlet_diameter = "):
+        beverloo_band(0.025, 0.01, 1000.0)

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
 
 from warpdem.engine import geometry
-from warpdem.scene import rigs, runner
+from warpdem.scene import measure, rigs, runner
 from warpdem.scene.stage import StageError, apply_overrides, read_stage, write_stage
 
 # usd-core may be missing: skip the module rather than fail at import
@@ -249,8 +250,8 @@ def test_funnel_discharge_is_recorded(rig_run):
     """Everything poured into the smoke funnel leaves it (mass conservation: the discharged mass is the 300
     spheres' to 2 %, the radius spread's third moment), the steady window the rate is fitted over is a span of
     the run, and the mass that rate carries through the window is positive and at most all that discharged.
-    The rate is not checked against Beverloo here: the outlet is five diameters wide, below the law's range
-    (README)."""
+    This funnel is fed while it discharges, so its rate is its feed's (test_funnel_without_gate_passes_its_feed);
+    Beverloo's law is checked on a gated one (test_beverloo)."""
     run = rig_run("funnel")
     m = run["metrics"]["metrics"][0]
     p = rigs.params("funnel", rigs.SMOKE["funnel"])
@@ -457,6 +458,17 @@ def test_stage_packing_settings(tmp_path):
         attr.Set(good)
 
 
+def test_stage_packing_base(tmp_path):
+    """A packing core's own base height (a funnel's gate, not the plate) is written and read back; a stage
+    without one reads None, which measures from the base height."""
+    spec = rigs.spec("lifting_cylinder", smoke=True)
+    write_stage(spec, tmp_path / "a.usda")
+    assert read_stage(str(tmp_path / "a.usda")).measure.packing_base is None
+    spec.measure.packing_base = 0.0125
+    write_stage(spec, tmp_path / "b.usda")
+    assert read_stage(str(tmp_path / "b.usda")).measure.packing_base == 0.0125
+
+
 def test_stage_press_unloading_settings(tmp_path):
     """The die press's stage carries the unloading (speed, hold) and the stroke's return as two keyframes past
     its end; a negative speed or hold names /World and the attribute."""
@@ -567,6 +579,78 @@ def test_params_outlet_wider_than_top():
     """An outlet wider than the funnel's top is refused as a StageError."""
     with pytest.raises(StageError, match="outlet_diameter"):
         rigs.spec("funnel", {"outlet_diameter": 0.2, "top_diameter": 0.1})
+
+
+def test_funnel_without_gate_is_the_committed_scene(tmp_path):
+    """gate_time = 0 (the default) adds no gate: the full-size stage is scenes/funnel.usda byte for byte, and
+    the smoke funnel has its two static walls, no packing measurement and outputs every 0.05 s."""
+    from pathlib import Path
+
+    path = tmp_path / "funnel.usda"
+    rigs.new("funnel", path)
+    committed = Path(__file__).resolve().parents[2] / "scenes" / "funnel.usda"
+    assert path.read_text() == committed.read_text()
+    spec = rigs.spec("funnel", {"gate_time": 0.0}, smoke=True)
+    assert [w.name for w in spec.walls] == ["Funnel", "Plate"]
+    assert all(w.times is None for w in spec.walls)
+    assert spec.measure.packing_time == 0 and spec.run.output_interval == 0.05
+
+
+@pytest.mark.parametrize(
+    "values, says",
+    [
+        (
+            {"gate_time": 0.1},
+            "gate_time = 0.1 is not allowed; expected more than the pour's end count / rate [s] = 0.2",
+        ),
+        ({"gate_time": 1.6}, "gate_time = 1.6 is not allowed; expected less than duration = 1.6"),
+        ({"gate_time": -0.5}, "gate_time = -0.5 is not allowed"),
+    ],
+)
+def test_funnel_gate_time_refused(values, says):
+    """A gate that would open during the smoke funnel's pour (300 at 1500/s: until 0.2 s), never, or at a
+    negative time is refused naming gate_time, its value and the bound."""
+    with pytest.raises(StageError, match=re.escape(says)):
+        rigs.spec("funnel", values, smoke=True)
+
+
+def test_funnel_gate_closes_the_outlet_then_leaves_the_domain(tmp_path):
+    """A smoke funnel's Gate (steel) covers the outlet, less than a particle radius below its rim, until
+    gate_time; it has moved wholly outside the domain (beyond the plate's edge, below the outlet) before the
+    run may stop as settled. The gate and the packing core's base (the gate's top) survive the stage."""
+    values = {"gate_time": 0.5}
+    p = rigs.params("funnel", {**rigs.SMOKE["funnel"], **values})
+    path = tmp_path / "funnel.usda"
+    rigs.new("funnel", path, values, smoke=True)
+    spec = read_stage(str(path))
+    gate = spec.wall("Gate")
+    assert gate.material == "steel"
+    radius = np.hypot(gate.vertices[:, 0], gate.vertices[:, 1]).max()
+    assert radius > p.outlet_diameter / 2 + p.particle_radius
+    shut = gate.times <= p.gate_time
+    assert shut.sum() >= 2 and np.allclose(gate.translations[shut], gate.translations[0])
+    z0 = gate.translations[0][2]
+    assert p.outlet_height - p.particle_radius < z0 < p.outlet_height
+    assert spec.measure.packing_base == pytest.approx(z0)
+    assert spec.measure.packing_time == pytest.approx(p.gate_time)
+    lo, hi = spec.domain
+    final = gate.vertices + gate.translations[-1]
+    assert final[:, 0].min() > hi[0] and final[:, 2].max() < p.outlet_height
+    assert gate.times[-1] <= spec.run.settle_after
+
+
+def test_funnel_without_gate_passes_its_feed(rig_run):
+    """The smoke funnel (no gate) is fed while it discharges: its rate is the pour's, 1500 spheres/s of 14.8 mg
+    (to 10 %: the steady fit spans a few outputs of a batch-wise pour), above the top of Beverloo's band for
+    its 5-diameter outlet (bulk density 0.6 of the solid's, the cone factor included). So the Beverloo test
+    (test_beverloo) would fail on it: its rate says how fast it was fed, not how fast a hopper drains."""
+    m = rig_run("funnel")["metrics"]["metrics"][0]
+    p = rigs.params("funnel", rigs.SMOKE["funnel"])
+    rho = rigs.spec("funnel", smoke=True).material("grain").density
+    feed = p.rate * rho * 4 / 3 * math.pi * p.particle_radius**3 * (1 + 3 * p.radius_spread**2)
+    assert m["discharge_rate_kg_s"] == pytest.approx(feed, rel=0.1)
+    band = measure.beverloo_band(p.outlet_diameter, 2 * p.particle_radius, 0.6 * rho, cone_half_angle=p.cone_angle / 2)
+    assert m["discharge_rate_kg_s"] > band["high_kg_s"]
 
 
 def test_params_press_law_and_plasticity():

@@ -38,7 +38,10 @@ __all__ = [
     "angle_surface_fit",
     "BoxRegion",
     "CylinderRegion",
+    "beverloo_band",
+    "beverloo_rate",
     "discharge_rate",
+    "hopper_angle_factor",
     "impact_summary",
     "packing_core",
     "packing_fraction",
@@ -896,6 +899,120 @@ def discharge_rate(time_s, mass_kg, low: float = 0.2, high: float = 0.8) -> dict
         "steady_from_s": float(t[steady][0]),
         "steady_to_s": float(t[steady][-1]),
         "samples": int(steady.sum()),
+    }
+
+
+BEVERLOO_C = (0.55, 0.65)
+"""The spread of Beverloo's discharge coefficient C [-] over free-flowing materials (Nedderman 1992, ch. 10)."""
+
+BEVERLOO_K = (1.3, 2.9)
+"""The spread of Beverloo's empty-annulus coefficient k [-] (Nedderman 1992, ch. 10): about 1.3-1.5 for
+spheres, larger for angular grains."""
+
+
+def hopper_angle_factor(cone_half_angle: float, stagnant_angle: float = 45.0) -> float:
+    """Rose and Tanaka's factor on Beverloo's rate for a conical hopper, (tan theta tan phi_d)^-0.35.
+
+    A flat-bottomed bin discharges through a converging core bounded by stagnant material at ``stagnant_angle``
+    phi_d to the horizontal; a hopper steeper than that boundary (theta < 90 deg - phi_d) guides the flow
+    and discharges faster. At theta = 90 deg - phi_d the factor is 1 and it stays 1 for flatter hoppers (the
+    flat-bottom limit). Rose and Tanaka (1956), as given by Nedderman (1992, ch. 10).
+
+    Args:
+        cone_half_angle: theta, the hopper wall's angle from the vertical [deg], in (0, 90).
+        stagnant_angle: phi_d, the stagnant-zone boundary's angle from the horizontal in a flat-bottomed bin
+            [deg], in (0, 90); 45 deg by default (free-flowing grains: about 45-60 deg).
+
+    Returns:
+        the factor [-], >= 1.
+    """
+    theta = _finite_number("cone_half_angle", cone_half_angle, "[deg]")
+    if not 0 < theta < 90:
+        _bad("cone_half_angle", cone_half_angle, "an angle from the vertical in (0, 90) deg")
+    phi = _finite_number("stagnant_angle", stagnant_angle, "[deg]")
+    if not 0 < phi < 90:
+        _bad("stagnant_angle", stagnant_angle, "an angle from the horizontal in (0, 90) deg")
+    if theta >= 90.0 - phi:
+        return 1.0
+    return (math.tan(math.radians(theta)) * math.tan(math.radians(phi))) ** -0.35
+
+
+def beverloo_rate(
+    outlet_diameter: float,
+    particle_diameter: float,
+    bulk_density: float,
+    C: float = 0.58,
+    k: float = 1.5,
+    g: float = 9.81,
+    cone_half_angle: float | None = None,
+    stagnant_angle: float = 45.0,
+) -> float:
+    """Beverloo's mass discharge rate of free-flowing, cohesionless grains through a circular outlet,
+    W = C rho_b sqrt(g) (D - k d)^(5/2) (Beverloo, Leniger and van de Velde 1961), times Rose and Tanaka's
+    :func:`hopper_angle_factor` for a conical hopper.
+
+    The rate does not depend on the head above the outlet once the bed is deeper than about the outlet's
+    diameter, and the law holds for D above about 6 d (narrower outlets arch and jam).
+
+    Args:
+        outlet_diameter: D [m], > k d.
+        particle_diameter: d [m], > 0 (the mean of a narrow size spread).
+        bulk_density: rho_b of the bed in the hopper [kg/m^3], > 0.
+        C: the discharge coefficient [-], > 0 (0.58: Beverloo's; spread :data:`BEVERLOO_C`).
+        k: the empty-annulus coefficient [-], >= 0 (1.5: spheres; spread :data:`BEVERLOO_K`).
+        g: gravity [m/s^2], > 0.
+        cone_half_angle: the hopper wall's angle from the vertical [deg], in (0, 90); None: a flat-bottomed bin.
+        stagnant_angle: phi_d for the hopper factor [deg] (see :func:`hopper_angle_factor`).
+
+    Returns:
+        the mass flow rate [kg/s].
+    """
+    D = _positive("outlet_diameter", outlet_diameter, "m")
+    d = _positive("particle_diameter", particle_diameter, "m")
+    rho = _positive("bulk_density", bulk_density, "kg/m^3")
+    C = _positive("C", C, "")
+    k = _finite_number("k", k, "")
+    if k < 0:
+        _bad("k", k, "a number >= 0")
+    g = _positive("g", g, "m/s^2")
+    if not D > k * d:
+        _bad("outlet_diameter", outlet_diameter, f"more than k d = {k * d:.6g} m (k = {k}, d = {d} m)")
+    factor = 1.0 if cone_half_angle is None else hopper_angle_factor(cone_half_angle, stagnant_angle)
+    return C * rho * math.sqrt(g) * (D - k * d) ** 2.5 * factor
+
+
+def beverloo_band(
+    outlet_diameter: float,
+    particle_diameter: float,
+    bulk_density: float,
+    g: float = 9.81,
+    cone_half_angle: float | None = None,
+    stagnant_angle: float = 45.0,
+    C: tuple = BEVERLOO_C,
+    k: tuple = BEVERLOO_K,
+) -> dict:
+    """The range of Beverloo's rate over the literature's spread of C and k (:func:`beverloo_rate`).
+
+    Args:
+        outlet_diameter, particle_diameter, bulk_density, g, cone_half_angle, stagnant_angle: as in
+            :func:`beverloo_rate` (units m, m, kg/m^3, m/s^2, deg, deg).
+        C: (low, high) discharge coefficients [-], 0 < low <= high.
+        k: (low, high) empty-annulus coefficients [-], 0 <= low <= high; D must exceed high k d.
+
+    Returns:
+        dict with ``low_kg_s`` (C low, k high), ``high_kg_s`` (C high, k low), ``nominal_kg_s`` (C = 0.58,
+        k = 1.5) and ``hopper_factor`` [-] (1 without ``cone_half_angle``).
+    """
+    for name, pair in (("C", C), ("k", k)):
+        if not (isinstance(pair, (tuple, list)) and len(pair) == 2 and pair[0] <= pair[1]):
+            _bad(name, pair, "a pair (low, high) with low <= high")
+    kw = dict(g=g, cone_half_angle=cone_half_angle, stagnant_angle=stagnant_angle)
+    args = (outlet_diameter, particle_diameter, bulk_density)
+    return {
+        "low_kg_s": beverloo_rate(*args, C=C[0], k=k[1], **kw),
+        "high_kg_s": beverloo_rate(*args, C=C[1], k=k[0], **kw),
+        "nominal_kg_s": beverloo_rate(*args, **kw),
+        "hopper_factor": 1.0 if cone_half_angle is None else hopper_angle_factor(cone_half_angle, stagnant_angle),
     }
 
 

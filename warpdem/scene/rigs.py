@@ -2,7 +2,8 @@
 
 Each rig is a frozen dataclass of parameters (SI units; defaults are the full-size rig) whose ``spec()``
 returns a :class:`warpdem.scene.stage.SceneSpec`; :func:`new` writes it as a USD stage. ``SMOKE`` holds, per rig,
-the overrides of a CPU-sized version (a few hundred particles) used by the tests and the main job.
+the overrides of a CPU-sized version (a few hundred particles) used by the tests and the main job;
+``BEVERLOO_SMOKE`` those of a gated CPU-sized funnel whose discharge rate is checked against Beverloo's law.
 
 * funnel (seeds 000, 001): ISO 4324:1977 funnel method -- outlet 10 mm, 75 mm above the base plate; a
   standard 60 deg laboratory funnel. ISO's 10 mm outlet suits powders (seed 001); pellets of seed 000 (6.3 mm)
@@ -258,7 +259,11 @@ class Funnel:
     Geometry from ISO 4324:1977 (outlet 75 mm above the plate) with a 60 deg laboratory funnel; the outlet
     (10 mm in ISO, for powders) is 40 mm by default for the 6.3 mm pellets of seed 000. Particles (``count``
     of them at ``rate`` per second) rain into the funnel from above and pile on the plate; the run stops when
-    the pile has settled. Materials and pairs are seed 000's calibrated values (Hertz-Mindlin with
+    the pile has settled. ``gate_time`` > 0 [s] closes the outlet with a steel plate (wall "Gate") while the
+    funnel fills and settles, and opens it at that time (after the pour, count / rate): the funnel then
+    discharges under its own head, as a hopper in Beverloo's law, and the fill's packing fraction and bulk
+    density are measured just before it opens. 0: no gate, the funnel is fed while it discharges.
+    ``output_interval`` [s]: time between outputs (the discharged-mass samples). Materials and pairs are seed 000's calibrated values (Hertz-Mindlin with
     constant-torque rolling friction); ``particle`` sphere | pellet (141-sphere clump of seed 000) |
     phosphate; ``particle_radius`` 0 keeps the clump's true size (a sphere needs one).
     """
@@ -282,7 +287,9 @@ class Funnel:
     seed: int = 1
     plate_static_friction: float = -1.0
     plate_rolling_friction: float = -1.0
-    _may_be_zero = ("particle_radius", "radius_spread", "stem_length", "seed", "surface_energy")
+    gate_time: float = 0.0
+    output_interval: float = 0.05
+    _may_be_zero = ("particle_radius", "radius_spread", "stem_length", "seed", "surface_energy", "gate_time")
     _may_be_negative = ("plate_static_friction", "plate_rolling_friction")
 
     def __post_init__(self):
@@ -292,6 +299,10 @@ class Funnel:
         _check_order(self, "outlet_diameter", "less than", "top_diameter", self.top_diameter)
         if not 0 < self.cone_angle < 180:
             raise ValueError(f"Funnel: cone_angle = {self.cone_angle} is not allowed; expected (0, 180) degrees")
+        if self.gate_time > 0:
+            # opened during the pour, the gate would only shorten the pour's fall: no hopper under its own head
+            _check_order(self, "gate_time", "more than", "the pour's end count / rate [s]", self.count / self.rate)
+            _check_order(self, "gate_time", "less than", "duration", self.duration)
 
     def spec(self) -> SceneSpec:
         shape, r_eq = _shape(self.particle, "Funnel")
@@ -344,25 +355,67 @@ class Funnel:
             seed=int(self.seed),
         )
         plate, plate_pairs = _plate_pairs(self, "grain", "steel", pw)
+        walls = [WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "plate")]
+        settle_after = self.count / self.rate
+        measure = MeasureSpec("angle_of_repose", base_height=0.0, center=(0.0, 0.0), outlet_height=self.outlet_height)
+        if self.gate_time > 0:
+            gate, opened = self._gate(radius, bound)
+            walls.append(gate)
+            # the fill rests in the funnel until the gate opens: the run must not stop as settled before
+            settle_after = opened
+            # the fill's core: one diameter from the wall where the core is narrowest, at its foot one diameter
+            # above the gate (the cone widens above it)
+            measure.packing_time = self.gate_time
+            measure.packing_margin = 1.0
+            foot = 0.25 * radius + measure.packing_margin * 2 * bound
+            measure.packing_radius = self.outlet_diameter / 2 + foot * math.tan(math.radians(self.cone_angle / 2))
+            measure.packing_base = float(gate.translations[0][2])
         return SceneSpec(
             rig="funnel",
             materials=[grain, STEEL, *plate],
             pairs=_pairs("grain", "steel", pp, pw) + plate_pairs,
             shapes=[shape],
-            walls=[WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "plate")],
+            walls=walls,
             factories=[fac],
             run=RunSpec(
                 duration=self.duration,
                 dt_fraction=self.dt_fraction,
                 settle_energy=_settle_energy(grain, radius),
-                settle_after=self.count / self.rate,
-                output_interval=0.05,
+                settle_after=settle_after,
+                output_interval=self.output_interval,
             ),
-            measure=MeasureSpec(
-                "angle_of_repose", base_height=0.0, center=(0.0, 0.0), outlet_height=self.outlet_height
-            ),
+            measure=measure,
             domain=_plate_domain(self.plate_size, self.plate_size, (0.0, 0.0, 0.0), bound, top_z + 0.5),
         )
+
+    def _gate(self, radius: float, bound: float) -> tuple[WallSpec, float]:
+        """The gate under the outlet and the time [s] it has moved clear of the domain.
+
+        A steel disc a bounding radius ``bound`` [m] wider than the outlet, a quarter particle ``radius`` [m]
+        below its rim (no particle passes the gap). At ``gate_time`` it drops by ``h`` (four bounding radii, at
+        most half its height above the plate) in a quarter of sqrt(h / g): faster than gravity, so the
+        fill comes away from it instead of riding down on it. It then slides along +x, clearing the outlet's
+        shadow within three quarters of sqrt(h / g): by then a grain released at rest has fallen h / 2, so
+        nothing touches the gate after it opens. It goes on at that speed until it is wholly outside the domain
+        (beyond the plate's edge, below the outlet's height), away from the pile the angle of repose is
+        measured on.
+        """
+        r_gate = self.outlet_diameter / 2 + bound
+        top = self.outlet_height - 0.25 * radius
+        h = min(4.0 * bound, 0.5 * top)
+        t_fall = math.sqrt(h / 9.81)
+        t_drop = 0.25 * t_fall
+        clear = r_gate + self.outlet_diameter / 2 + bound
+        speed = clear / (0.75 * t_fall)
+        # the domain ends 2 bounding radii past the plate's edge (_plate_domain)
+        away = self.plate_size / 2 + 2 * bound + r_gate + bound
+        t0, t1 = self.gate_time, self.gate_time + t_drop
+        t2 = t1 + away / speed
+        gv, gt = geo.disc(r_gate, min(self.cell, r_gate / 2), 0.0)
+        times = np.array([0.0, t0, t1, t2])
+        tr = np.array([[0.0, 0.0, top], [0.0, 0.0, top], [0.0, 0.0, top - h], [away, 0.0, top - h]])
+        rot = np.tile([0.0, 0.0, 0.0, 1.0], (len(times), 1))
+        return WallSpec("Gate", gv, gt, "steel", times, tr, rot), float(t2)
 
 
 @dataclass(frozen=True)
@@ -827,6 +880,36 @@ SMOKE = {
     },
 }
 """Overrides that make each rig a CPU smoke test with a few hundred particles."""
+
+BEVERLOO_SMOKE = {
+    # seed 000's pellet contacts on spheres: cohesionless, mu_s 0.55, constant-torque mu_r 0.05 -- free-flowing,
+    # as Beverloo's law needs (the feed's EPSD mu_r 0.21 makes spheres roll like angular grains)
+    "particle": "sphere",
+    "material": "pellet",
+    "particle_radius": 0.002,
+    # 1500 spheres fill the 60 deg cone about 10 diameters (1.3 outlet diameters) deep: a head-independent rate
+    "count": 1500,
+    "rate": 5000.0,
+    "top_diameter": 0.1,
+    # 7.5 diameters, above the law's lower limit of about 6; no stem: the outlet is the cone's own edge
+    "outlet_diameter": 0.03,
+    "stem_length": 0.0,
+    # the pile (about 22 mm high) stays clear of the outlet, so nothing throttles the stream
+    "outlet_height": 0.04,
+    "plate_size": 0.2,
+    # the plate catches the stream (nothing rolls out of the domain, so the discharged mass is conserved);
+    # the flow through the outlet never touches it
+    "plate_rolling_friction": 0.3,
+    "cell": 0.01,
+    # the pour ends at 0.3 s; the fill has settled by 0.6 s
+    "gate_time": 0.6,
+    "duration": 2.0,
+    # about 30 samples in the steady part of a 0.5 s discharge
+    "output_interval": 0.01,
+}
+"""Funnel overrides (over the full-size defaults) of a CPU-sized Beverloo check, about 20 s on one core: a gated
+hopper of free-flowing spheres, filled and settled before its 7.5-diameter outlet opens (README, Discharge
+rate)."""
 
 
 def params(rig: str, values: dict | None = None):

@@ -574,7 +574,8 @@ def _packing_metrics(model, state, h, w: int, m) -> dict:
         return {"packing_error": "no particles in the container"}
     x, r, rho = state.sphere_x.numpy()[sel].astype(np.float64), h["radius"][sel], h["density"][sel]
     try:
-        core = ms.packing_core(x, r, m.center, m.packing_radius, m.base_height, m.packing_margin)
+        base = m.base_height if m.packing_base is None else m.packing_base
+        core = ms.packing_core(x, r, m.center, m.packing_radius, base, m.packing_margin)
     except ValueError as e:
         return {"packing_error": str(e)}
     got = ms.packing_fraction(x, r, core, density=rho)

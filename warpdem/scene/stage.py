@@ -152,6 +152,9 @@ class MeasureSpec:
     packing_margin: float = 2.0
     """How far the measured core stays from the container's wall, its base and the free surface [particle
     diameters]."""
+    packing_base: float | None = None
+    """The height [m] of the container's base for the packing core; None: ``base_height`` (a container standing
+    on the base plate, as the lifting cylinder; a funnel's fill rests on its closed gate instead)."""
     unload_speed: float = 0.0
     """Press: the speed [m/s] at which the piston retracts once the force reaches ``force_limit``, back to
     where its stroke began, recording the unloading branch; 0: the run stops at the force limit."""
@@ -340,6 +343,8 @@ def write_stage(spec: SceneSpec, path=None):
             ("packingMargin", m.packing_margin),
         ):
             wp_.CreateAttribute(NS + "measure:" + name, Sdf.ValueTypeNames.Double).Set(float(value))
+        if m.packing_base is not None:
+            wp_.CreateAttribute(NS + "measure:packingBase", Sdf.ValueTypeNames.Double).Set(float(m.packing_base))
     if m.piston:
         wp_.CreateRelationship(NS + "measure:piston").SetTargets([Sdf.Path(f"/World/Walls/{_ident(m.piston)}")])
     if m.walls:
@@ -658,6 +663,7 @@ def read_stage(path_or_stage) -> SceneSpec:
         packing_time=r.get(world, NS + "measure:packingTime", required=False, default=0.0),
         packing_radius=r.get(world, NS + "measure:packingRadius", required=False, default=0.0),
         packing_margin=r.get(world, NS + "measure:packingMargin", required=False, default=2.0),
+        packing_base=r.get(world, NS + "measure:packingBase", required=False, default=None),
         unload_speed=r.get(world, NS + "measure:unloadSpeed", required=False, default=0.0),
         hold_time=r.get(world, NS + "measure:holdTime", required=False, default=0.0),
         outlet_height=r.get(world, NS + "measure:outletHeight", required=False, default=None),
