@@ -375,7 +375,8 @@ def test_rotating_drum_rolls(rig_run):
     even narrow-drum wall friction included). Every output from the averaging time on is a frame (0.25
     revolution at 30 rpm, 0.05 s apart: 10 intervals, 11 frames), each read; the frames' angles scatter by
     less than 10 deg; a rolling cohesionless surface moves by grain-scale roughness from frame to frame, less
-    than two diameters (and more than nothing). The drum is closed: no particle is lost. drum.png is drawn."""
+    than two diameters (and more than nothing). The drum is closed: no particle is lost. drum.png is drawn, and
+    the dynamic angle and fluctuation index are study measures."""
     run = rig_run("rotating_drum")
     m = run["metrics"]["metrics"][0]
     p = rigs.params("rotating_drum", rigs.SMOKE["rotating_drum"])
@@ -390,6 +391,10 @@ def test_rotating_drum_rolls(rig_run):
     assert m["removed"] == 0
     assert run["metrics"]["info"]["spheres"] == run["spec"].factories[0].count
     assert (run["out"] / "drum.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # a study can take both as responses
+    from warpdem.study.spec import MEASURES
+
+    assert {"dynamic_angle_deg", "fluctuation_index"} <= set(MEASURES) & set(m)
     # every frame of the series was taken at or after the averaging time
     times = [tick[0]["time"] for tick in run["result"].series["drum"]]
     assert min(times) >= run["spec"].measure.average_from - 1e-9 and len(times) == want
