@@ -1,5 +1,5 @@
 """Post-processing measures (warpdem.scene.measure): angle of repose on synthetic cones of known slope,
-die-press curves, wall impact summaries, the settling monitor, the plots and the input checks."""
+the rotating drum's surface on synthetic beds of known slope, die-press curves, wall impact summaries, the settling monitor, the plots and the input checks."""
 
 import math
 
@@ -17,11 +17,14 @@ from warpdem.scene.measure import (
     beverloo_band,
     beverloo_rate,
     discharge_rate,
+    drum_metrics,
+    drum_surface,
     hopper_angle_factor,
     impact_summary,
     packing_core,
     packing_fraction,
     plot_angles,
+    plot_drum,
     plot_press,
     press_curve,
     press_summary,
@@ -633,3 +636,158 @@ def test_beverloo_band_input_errors():
         beverloo_band(0.05, 0.01, 1000.0, C=(0.65, 0.55))
     with pytest.raises(ValueError, match="^outlet_diameter = "):
         beverloo_band(0.025, 0.01, 1000.0)
+
+
+# --------------------------------------------------------------------------------------------------
+# rotating drum
+# --------------------------------------------------------------------------------------------------
+DRUM_R = 0.042  # GranuDrum's inner radius [m]
+
+
+def _drum_bed(angle_deg, r=0.0005, width=0.01, level=-0.005, seed=0, turn=0.0):
+    """Spheres of radius ``r`` [m] on a jittered cubic lattice (spacing 1.9 r, so neighbours touch; +-0.1 r of
+    jitter; turned by ``turn`` [rad] in the cross-section) filling a drum of radius DRUM_R about the y axis,
+    ``width`` [m] deep, below the plane h = level - tan(angle) s: its top rises toward -x by ``angle_deg``."""
+    rng = np.random.default_rng(seed)
+    step = 1.9 * r
+    g = np.arange(-1.5 * DRUM_R, 1.5 * DRUM_R, step)
+    ys = np.arange(-width / 2 + r, width / 2 - r + 1e-12, step)
+    S, Y, H = np.meshgrid(g, ys, g, indexing="ij")
+    c, sn = math.cos(turn), math.sin(turn)
+    s, h = c * S.ravel() - sn * H.ravel(), sn * S.ravel() + c * H.ravel()
+    x = np.column_stack([s, Y.ravel(), h]) + rng.uniform(-0.1 * r, 0.1 * r, (s.size, 3))
+    slope = -math.tan(math.radians(angle_deg))
+    keep = (np.hypot(x[:, 0], x[:, 2]) <= DRUM_R - r) & (x[:, 2] + r <= level + slope * x[:, 0])
+    return x[keep], np.full(int(keep.sum()), r)
+
+
+@pytest.mark.parametrize("angle", [25.0, -25.0, 40.0])
+@pytest.mark.parametrize("turn", [0.0, 0.3])
+def test_drum_surface_recovers_the_slope(angle, turn):
+    """A bed whose sphere tops lie under a plane of known slope, inside GranuDrum's 84 mm circle, reads its slope
+    within 0.5 deg, sign included (rising toward -x, the side a drum turning about +y lifts, is positive). The
+    tops scatter over one lattice step below the plane (SD ~0.55 r); over ~23 points across 60 % of the chord
+    that moves the slope by ~0.2 deg (1 SD), so 0.5 deg is 2.5 SD. The chord is where that plane meets the
+    drum."""
+    x, r = _drum_bed(angle, turn=turn)
+    got = drum_surface(x, r, (0.0, 0.0, 0.0), DRUM_R)
+    assert got["angle_deg"] == pytest.approx(angle, abs=0.5)
+    # a lattice corner cut by the drum's circle may leave a sphere or two touching none
+    assert got["detached"] <= 2 and got["bed_spheres"] == len(r) - got["detached"]
+    assert len(got["surface_s"]) >= 10
+    # the sphere tops are at most one step (1.9 r, plus jitter) under the plane; the chord is that plane's
+    slope = -math.tan(math.radians(angle))
+    below = -0.005 + slope * got["surface_s"] - got["surface_h"]
+    assert np.all((below >= 0) & (below <= 2.2 * r[0] * (1 + abs(slope))))
+    s0, s1 = got["chord_m"]
+    for s in (s0, s1):
+        assert math.hypot(s, got["intercept_m"] + got["slope"] * s) == pytest.approx(DRUM_R, rel=1e-9)
+
+
+def test_drum_surface_ignores_flying_spheres_and_follows_the_axis():
+    """Spheres flying over the bed (isolated, 3 diameters apart, up to the drum's top) are not part of the bed:
+    the surface is read exactly as without them and they are counted as detached. The same bed seen with the
+    axis reversed (a drum turning the other way) reads the opposite angle, and moved with its drum it reads the
+    same angle."""
+    x, r = _drum_bed(25.0)
+    ref = drum_surface(x, r, (0.0, 0.0, 0.0), DRUM_R)
+    rng = np.random.default_rng(1)
+    fly = np.column_stack(
+        [np.arange(-0.02, 0.02, 6 * r[0]), rng.uniform(-0.004, 0.004, 14), rng.uniform(0.02, 0.035, 14)]
+    )
+    got = drum_surface(np.vstack([x, fly]), np.r_[r, np.full(len(fly), r[0])], (0.0, 0.0, 0.0), DRUM_R)
+    assert got["detached"] == len(fly)
+    assert got["angle_deg"] == ref["angle_deg"]
+    assert np.array_equal(got["surface_h"], ref["surface_h"])
+    back = drum_surface(x, r, (0.0, 0.0, 0.0), DRUM_R, axis=(0.0, -1.0, 0.0))
+    assert back["angle_deg"] == pytest.approx(-ref["angle_deg"], abs=1e-9)
+    moved = drum_surface(x + (0.3, -0.1, 0.5), r, (0.3, -0.1, 0.5), DRUM_R)
+    assert moved["angle_deg"] == pytest.approx(ref["angle_deg"], abs=1e-9)
+
+
+def _frames(heights, angles=None, n=30, span=0.03, seed=0):
+    """drum_surface-like frames: surface points at jittered positions over [-span, span] [m] (each frame its
+    own), heights ``heights[k](s)`` [m]."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k, fn in enumerate(heights):
+        s = np.sort(rng.uniform(-span, span, n))
+        s[0], s[-1] = -span, span
+        out.append({"angle_deg": 30.0 if angles is None else angles[k], "surface_s": s, "surface_h": fn(s)})
+    return out
+
+
+def test_drum_metrics_of_known_fluctuations():
+    """Frames of a straight surface (the profile is linear between points, so it is read exactly anywhere):
+    shifted up and down by +-delta in turn, the height's sample SD over K frames is delta sqrt(K / (K - 1))
+    everywhere, and so is the index (in diameters); tilted by +-eps about s = 0, the SD at s is
+    |s| eps sqrt(K / (K - 1)) and its rms over P equally spaced positions on [-L, L] is
+    eps sqrt(K / (K - 1)) L sqrt((P + 1) / (3 (P - 1))). The angles' mean and SD are the frames'."""
+    K, d, delta = 6, 0.001, 0.0004
+    shifted = [(lambda s, k=k: 0.01 - 0.5 * s + (delta if k % 2 else -delta)) for k in range(K)]
+    angles = [29.0, 31.0] * (K // 2)
+    got = drum_metrics(_frames(shifted, angles), d)
+    assert got["fluctuation_index"] == pytest.approx(delta * math.sqrt(K / (K - 1)) / d, rel=1e-9)
+    assert got["dynamic_angle_deg"] == pytest.approx(30.0, abs=1e-12)
+    assert got["dynamic_angle_sd_deg"] == pytest.approx(math.sqrt(K / (K - 1)), rel=1e-12)
+    assert got["frames"] == K
+    eps, P, L = 0.05, 16, 0.03
+    tilted = [(lambda s, k=k: -0.5 * s + (eps if k % 2 else -eps) * s) for k in range(K)]
+    got = drum_metrics(_frames(tilted), d, positions=P)
+    assert got["positions_m"][0] == pytest.approx(-L) and got["positions_m"][-1] == pytest.approx(L)
+    want = eps * math.sqrt(K / (K - 1)) * L * math.sqrt((P + 1) / (3 * (P - 1))) / d
+    assert got["fluctuation_index"] == pytest.approx(want, rel=1e-9)
+    # a steady surface does not fluctuate
+    still = drum_metrics(_frames([(lambda s: 0.01 - 0.5 * s)] * K), d)
+    assert still["fluctuation_index"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_drum_metrics_reads_the_common_span():
+    """Frames that cover different parts of the chord are compared only where all of them have surface points."""
+    frames = _frames([lambda s: 0 * s] * 3)
+    frames[1] = {**frames[1], "surface_s": frames[1]["surface_s"] * 0.5 + 0.01}
+    got = drum_metrics(frames, 0.001, positions=5)
+    assert got["positions_m"][0] == pytest.approx(-0.005) and got["positions_m"][-1] == pytest.approx(0.025)
+
+
+def test_plot_drum_writes_png(tmp_path):
+    """plot_drum writes the cross-section with the fitted surface as a PNG."""
+    x, r = _drum_bed(25.0, r=0.001)
+    got = drum_surface(x, r, (0.0, 0.0, 0.0), DRUM_R)
+    path = plot_drum(x[:, 0], x[:, 2], r, got, tmp_path / "drum.png", DRUM_R, title="drum")
+    assert (tmp_path / "drum.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.endswith("drum.png")
+
+
+_DX, _DR = _drum_bed(25.0, r=0.001)
+_DF = _frames([lambda s: 0 * s] * 2)
+
+
+@pytest.mark.parametrize(
+    "call,names",
+    [
+        (lambda: drum_surface(_DX, _DR, (0.0, 0.0, 0.0), 0.0), "drum_radius = 0.0"),
+        (lambda: drum_surface(_DX, _DR, (0.0, 0.0, 0.0), 0.005), "drum_radius = 0.005"),
+        (lambda: drum_surface(_DX, _DR, (0.0, 0.0), DRUM_R), "center = "),
+        (lambda: drum_surface(_DX, _DR, (0.0, 0.0, 0.0), DRUM_R, axis=(0.0, 0.0, 1.0)), "axis = .*horizontal"),
+        (lambda: drum_surface(_DX, _DR, (0.0, 0.0, 0.0), DRUM_R, axis=(0.0, 0.0, 0.0)), "axis = "),
+        (lambda: drum_surface(_DX, _DR, (0.0, 0.0, 0.0), DRUM_R, bins=2), "bins = 2"),
+        (lambda: drum_surface(_DX, _DR, (0.0, 0.0, 0.0), DRUM_R, inner=0.5, outer=0.5), "outer = 0.5"),
+        (lambda: drum_surface(_DX, _DR, (0.0, 0.0, 0.0), DRUM_R, gap=-0.1), "gap = -0.1"),
+        (lambda: drum_surface(_DX[:2], _DR[:2], (0.0, 0.0, 0.0), DRUM_R), "x = "),
+        (lambda: drum_surface(_DX[:40], _DR[:40], (0.0, 0.0, 0.0), DRUM_R), "x = .*surface points"),
+        (lambda: drum_metrics(_DF[:1], 0.001), "frames = "),
+        (lambda: drum_metrics(_DF, 0.0), "diameter = 0.0"),
+        (lambda: drum_metrics(_DF, 0.001, positions=1), "positions = 1"),
+        (lambda: drum_metrics([_DF[0], {"angle_deg": 1.0}], 0.001), r"frames\[1\] = "),
+        (
+            lambda: drum_metrics([_DF[0], {**_DF[1], "surface_s": _DF[1]["surface_s"] + 1.0}], 0.001),
+            "frames = .*overlap",
+        ),
+        (lambda: plot_drum(_DX[:, 0], _DX[:, 2], _DR, {}, "x.png", DRUM_R), "surface = "),
+    ],
+)
+def test_drum_bad_input_names_argument(call, names):
+    """Bad drum input raises ValueError naming the argument and its value, and saying what is allowed."""
+    with pytest.raises(ValueError, match=names) as err:
+        call()
+    assert "expected" in str(err.value)

@@ -1,4 +1,4 @@
-"""The four test rigs as USD stages: stage round trip, stage validation, rig parameters, the wall meshes, and
+"""The test rigs as USD stages: stage round trip, stage validation, rig parameters, the wall meshes, and
 one smoke-size CPU run of each rig (its output files and the physics they hold)."""
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ Sdf = pytest.importorskip("pxr.Sdf")
 Usd = pytest.importorskip("pxr.Usd")
 UsdGeom = pytest.importorskip("pxr.UsdGeom")
 
-RIG_NAMES = ["funnel", "lifting_cylinder", "die_press", "truck_tipper"]
-MOVING_WALLS = {"Piston", "Cylinder", "Body", "Tailgate", "Bucket"}
+RIG_NAMES = ["funnel", "lifting_cylinder", "die_press", "truck_tipper", "rotating_drum"]
+MOVING_WALLS = {"Piston", "Cylinder", "Body", "Tailgate", "Bucket", "Drum", "FrontWall", "BackWall"}
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -163,6 +163,8 @@ def test_stage_round_trip(rig):
     assert list(gm.walls) == list(wm.walls)
     assert list(gm.phase_names) == list(wm.phase_names)
     assert _close(gm.phase_ends, wm.phase_ends)
+    for f in ("drum_center", "drum_axis", "drum_radius", "average_from"):
+        assert _close(getattr(gm, f), getattr(wm, f), rtol=1e-12, atol=0), f
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -367,6 +369,98 @@ def test_truck_tipper_impacts(rig_run):
     assert body["total_count"] > 0
 
 
+def test_rotating_drum_rolls(rig_run):
+    """Rotating drum: the bed poured level (a centred pour: angle ~0) turns with the drum and rolls, its surface
+    rising on the side the wall lifts (-x for a drum turning about +y): a dynamic angle well above the level
+    bed (> 10 deg) and below 50 deg (over which no cohesionless bed of mu_s 0.4 and mu_r 0.02 spheres stands,
+    even narrow-drum wall friction included). Every output from the averaging time on is a frame (0.25
+    revolution at 30 rpm, 0.05 s apart: 10 intervals, 11 frames), each read; the frames' angles scatter by
+    less than 10 deg; a rolling cohesionless surface moves by grain-scale roughness from frame to frame, less
+    than two diameters (and more than nothing). The drum is closed: no particle is lost. drum.png is drawn, and
+    the dynamic angle and fluctuation index are study measures."""
+    run = rig_run("rotating_drum")
+    m = run["metrics"]["metrics"][0]
+    p = rigs.params("rotating_drum", rigs.SMOKE["rotating_drum"])
+    assert "drum_error" not in m, m.get("drum_error")
+    assert m["frame_errors"] == 0
+    want = round(p.measure_revolutions * 60.0 / p.rpm / p.frame_interval) + 1
+    assert m["frames"] == want
+    assert 10.0 < m["dynamic_angle_deg"] < 50.0
+    assert 0.0 < m["dynamic_angle_sd_deg"] < 10.0
+    assert 0.0 < m["fluctuation_index"] < 2.0
+    assert m["mean_diameter_m"] == pytest.approx(2 * p.particle_radius, rel=0.02)
+    assert m["removed"] == 0
+    assert run["metrics"]["info"]["spheres"] == run["spec"].factories[0].count
+    assert (run["out"] / "drum.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # a study can take both as responses
+    from warpdem.study.spec import MEASURES
+
+    assert {"dynamic_angle_deg", "fluctuation_index"} <= set(MEASURES) & set(m)
+    # every frame of the series was taken at or after the averaging time
+    times = [tick[0]["time"] for tick in run["result"].series["drum"]]
+    assert min(times) >= run["spec"].measure.average_from - 1e-9 and len(times) == want
+
+
+def test_rotating_drum_turns_at_constant_speed():
+    """The drum's keyframes turn it about +y at exactly rpm: each keyframe's rotation is the angle
+    omega (t - t_start) about (0, 1, 0), the translation stays 0 (the axis through the origin), and no
+    keyframe step reaches 180 deg (slerp takes the short way, so a longer step would turn backwards); the end
+    walls carry the same keyframes."""
+    from scipy.spatial.transform import Rotation
+
+    spec = rigs.spec("rotating_drum", smoke=True)
+    p = rigs.params("rotating_drum", rigs.SMOKE["rotating_drum"])
+    drum = spec.wall("Drum")
+    omega = 2 * math.pi * p.rpm / 60.0
+    t_start = spec.measure.average_from - p.steady_after * 2 * math.pi / omega
+    rotvec = Rotation.from_quat(drum.rotations).as_rotvec()
+    angle = np.unwrap(np.sign(rotvec[:, 1]) * np.linalg.norm(rotvec, axis=1))
+    want = omega * np.maximum(drum.times - t_start, 0.0)
+    assert np.allclose(angle, want, atol=1e-9)
+    assert np.allclose(rotvec[:, [0, 2]], 0.0, atol=1e-12) and np.all(drum.translations == 0)
+    assert np.all(np.diff(angle) < math.pi)
+    assert drum.times[-1] == pytest.approx(spec.run.duration)
+    for name in ("FrontWall", "BackWall"):
+        assert np.array_equal(spec.wall(name).rotations, drum.rotations)
+
+
+def test_rotating_drum_facets_are_no_lifters():
+    """The drum's polygon deviates from its circle by at most 5 % of a particle radius (its sagitta), at full
+    size and smoke size; every vertex lies on the circle of the inner radius, and its normals point inward."""
+    for values in ({}, rigs.SMOKE["rotating_drum"]):
+        p = rigs.params("rotating_drum", values)
+        v = rigs.spec("rotating_drum", values).wall("Drum").vertices
+        R = p.inner_diameter / 2
+        assert np.allclose(np.hypot(v[:, 0], v[:, 2]), R, rtol=1e-12)
+        angles = np.unique(np.round(np.arctan2(v[:, 2], v[:, 0]), 9))
+        n = len(angles)
+        assert R * (1 - math.cos(math.pi / n)) <= 0.05 * p.particle_radius
+
+
+def test_rotating_drum_resumes_with_its_frames(tmp_path):
+    """A short drum run killed after its frames began resumes from its checkpoint with the frames it had
+    recorded (they are in the checkpoint's series) and ends with the same metrics as the run never killed."""
+    values = {"settle_time": 0.05, "steady_after": 0.1, "measure_revolutions": 0.1, "frame_interval": 0.02}
+    spec = rigs.spec("rotating_drum", values, smoke=True)
+    a = runner.run_scene(spec, out_dir=tmp_path / "a", frames=False, checkpoint_every=1e-9)
+
+    class Crash(Exception):
+        pass
+
+    def kill(frac, msg):
+        if frac * spec.run.duration > spec.measure.average_from + 0.05:
+            raise Crash
+
+    with pytest.raises(Crash):
+        runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9, progress=kill)
+    b = runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9)
+    assert b.info["resumed_from_s"] > spec.measure.average_from
+    ma, mb = a.metrics[0], b.metrics[0]
+    assert mb["frames"] == ma["frames"] >= 2
+    for key in ("dynamic_angle_deg", "dynamic_angle_sd_deg", "fluctuation_index"):
+        assert mb[key] == ma[key], key
+
+
 # ----------------------------------------------------------------------------------------------------
 # 4. stage validation
 # ----------------------------------------------------------------------------------------------------
@@ -563,9 +657,46 @@ def test_stage_factory_without_count_or_mass(funnel_stage):
     assert "/World/Factories/pour" in msg and "count" in msg
 
 
+def test_stage_drum_settings(tmp_path):
+    """The drum's stage carries its measurement (centre, axis, radius, averaging time), read back as written; a
+    vertical axis, a radius of 0 or a negative time names /World and the attribute."""
+    path = tmp_path / "drum.usda"
+    rigs.new("rotating_drum", path, smoke=True)
+    m = read_stage(str(path)).measure
+    p = rigs.params("rotating_drum", rigs.SMOKE["rotating_drum"])
+    assert m.kind == "drum" and m.drum_axis == (0.0, 1.0, 0.0) and m.drum_center == (0.0, 0.0, 0.0)
+    assert m.drum_radius == pytest.approx(p.inner_diameter / 2, rel=1e-12) and m.average_from > 0
+    for name, value, says in (
+        ("drumAxis", (0.0, 0.0, 1.0), "horizontal"),
+        ("drumRadius", 0.0, "radius > 0"),
+        ("averageFrom", -1.0, ">= 0 s"),
+    ):
+        stage = Usd.Stage.Open(str(path))
+        attr = stage.GetPrimAtPath("/World").GetAttribute("warpdem:measure:" + name)
+        keep = attr.Get()
+        attr.Set(value)
+        msg = _read_error(path, stage)
+        assert "/World" in msg and f"warpdem:measure:{name}" in msg and says in msg, msg
+        attr.Set(keep)
+        stage.GetRootLayer().Save()
+
+
 # ----------------------------------------------------------------------------------------------------
 # 5. rig parameters
 # ----------------------------------------------------------------------------------------------------
+def test_params_drum():
+    """The drum refuses a fill above 0.6 (the pour needs the upper part), a speed outside (0, 120] rpm and
+    particles too large for its width, each as a StageError naming the parameter, its value and the range."""
+    with pytest.raises(StageError, match=r"fill_fraction = 0.7 is not allowed; expected .*\(0, 0.6\]"):
+        rigs.spec("rotating_drum", {"fill_fraction": 0.7})
+    with pytest.raises(StageError, match=r"rpm = 0 is not allowed; expected a value > 0"):
+        rigs.spec("rotating_drum", {"rpm": 0})
+    with pytest.raises(StageError, match=r"rpm = 200 is not allowed; expected \(0, 120\]"):
+        rigs.spec("rotating_drum", {"rpm": 200})
+    with pytest.raises(StageError, match=r"particle_radius = 0.006 is not allowed; expected less than width / 4"):
+        rigs.spec("rotating_drum", {"particle_radius": 0.006})
+
+
 def test_params_unknown_name():
     """An unknown rig parameter is a StageError that lists the rig's parameters."""
     with pytest.raises(StageError) as exc:

@@ -17,6 +17,9 @@ Angle-of-repose methods (after the seed papers):
 * :func:`angle_image`: the photographic method (silhouette -> binary image -> top boundary -> line
   fit per flank) done with orthographic projections instead of photos.
 
+Rotating drum (:func:`drum_surface` per frame, :func:`drum_metrics` over frames): the free surface of the bed
+in the drum's cross-section, its dynamic angle of repose and the surface-fluctuation index.
+
 :func:`synthetic_cone` builds piles of known slope to check them.
 """
 
@@ -42,10 +45,14 @@ __all__ = [
     "beverloo_rate",
     "discharge_rate",
     "hopper_angle_factor",
+    "drum_metrics",
+    "drum_section",
+    "drum_surface",
     "impact_summary",
     "packing_core",
     "packing_fraction",
     "plot_angles",
+    "plot_drum",
     "plot_press",
     "press_curve",
     "press_summary",
@@ -170,12 +177,20 @@ def pile_spheres(x, r, base_z: float = 0.0, gap: float = 0.1) -> np.ndarray:
     Returns:
         bool mask, shape (n,).
     """
+    x, r = _spheres(x, r)
+    gap = _finite_number("gap", gap, "[-]")
+    label = _touching_groups(x, r, gap)
+    grounded = x[:, 2] - r <= base_z + gap * r
+    return np.isin(label, np.unique(label[grounded]))
+
+
+def _touching_groups(x: np.ndarray, r: np.ndarray, gap: float) -> np.ndarray:
+    """Label (n,) of each sphere's group of spheres connected by contacts: two spheres touch when their
+    centres are closer than (1 + ``gap``) (r_i + r_j)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
-    x, r = _spheres(x, r)
-    gap = _finite_number("gap", gap, "[-]")
     n = len(r)
     pairs = cKDTree(x).query_pairs(2.0 * (1.0 + gap) * float(r.max()), output_type="ndarray")
     if len(pairs):
@@ -185,9 +200,7 @@ def pile_spheres(x, r, base_z: float = 0.0, gap: float = 0.1) -> np.ndarray:
     else:
         i = j = np.zeros(0, dtype=np.int64)
     graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
-    grounded = x[:, 2] - r <= base_z + gap * r
-    return np.isin(label, np.unique(label[grounded]))
+    return connected_components(graph, directed=False)[1]
 
 
 def angle_surface_fit(
@@ -1264,6 +1277,274 @@ def impact_summary(face_count, face_energy, face_max_speed, face_area=None, hot:
 
 
 # --------------------------------------------------------------------------------------------------
+# rotating drum
+# --------------------------------------------------------------------------------------------------
+
+DRUM_FIT_ROUNDS = 10
+"""Most rounds of :func:`drum_surface`'s fit (points -> line -> chord -> points); it stops as soon as a round
+picks the same points as the one before, which takes two or three rounds."""
+
+
+def _drum_frame(center, axis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The drum's centre (3,) [m], unit axis (3,) and the section's horizontal direction u = axis x z (3,)."""
+    c = np.asarray(center, dtype=float)
+    if c.shape != (3,) or not np.all(np.isfinite(c)):
+        _bad("center", center, "a point on the drum's axis (x, y, z) in m, three finite numbers")
+    a = np.asarray(axis, dtype=float)
+    norm = float(np.linalg.norm(a)) if a.shape == (3,) and np.all(np.isfinite(a)) else 0.0
+    if norm == 0.0:
+        _bad("axis", axis, "the direction of the drum's angular velocity, three finite numbers, not all 0")
+    a = a / norm
+    if abs(a[2]) > 1e-9:
+        _bad("axis", axis, "a horizontal direction (z component 0): the drum turns about a horizontal axis")
+    u = np.cross(a, (0.0, 0.0, 1.0))
+    return c, a, u / np.linalg.norm(u)
+
+
+def drum_section(x, center=(0.0, 0.0, 0.0), axis=(0.0, 1.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """Cross-section coordinates of points in a drum that turns about the horizontal ``axis`` through ``center``.
+
+    ``axis`` is the direction of the drum's angular velocity (right-hand rule). The section's horizontal
+    coordinate s runs along u = axis x z (for axis +y, u = +x): the wall at the drum's bottom moves toward -u,
+    so it carries the bed up on the -s side.
+
+    Args:
+        x: points [m], shape (n, 3).
+        center: a point on the drum's axis [m], (3,).
+        axis: the angular velocity's direction, (3,), horizontal, any length > 0.
+
+    Returns:
+        (s, h): the position across the drum along u [m] and the height above the axis [m], each shape (n,).
+    """
+    x = np.asarray(x, dtype=float)
+    if x.ndim != 2 or x.shape[1] != 3:
+        _bad("x", x, "points [m] of shape (n, 3)")
+    c, _, u = _drum_frame(center, axis)
+    d = x - c
+    return d @ u, d[:, 2]
+
+
+def _drum_points(s, top, window, bins: int, diameter: float) -> tuple[np.ndarray, float]:
+    """Indices of the highest top in each of at most ``bins`` equal bins over ``window`` = (s0, s1) [m], at
+    least MIN_BIN_DIAMETERS ``diameter`` wide, and in a second grid shifted by half a bin (each sphere once);
+    and the bin width [m]."""
+    s0, s1 = window
+    n = min(bins, int((s1 - s0) // (MIN_BIN_DIAMETERS * diameter)))
+    if n < 2:
+        return np.zeros(0, dtype=np.int64), s1 - s0
+    width = (s1 - s0) / n
+    picks = []
+    for shift in (0.0, 0.5):
+        k = np.floor((s - s0) / width - shift).astype(np.int64)
+        idx = np.flatnonzero((k >= 0) & (k < n - (1 if shift else 0)))
+        order = np.lexsort((top[idx], k[idx]))
+        kk = k[idx][order]
+        picks.append(idx[order[np.flatnonzero(np.r_[kk[1:] != kk[:-1], True])]])
+    return np.unique(np.concatenate(picks)), width
+
+
+def _chord(slope: float, intercept: float, radius: float) -> tuple[float, float]:
+    """Where the line h = intercept + slope s meets the circle s^2 + h^2 = radius^2: (s_low, s_high) [m]."""
+    q = 1.0 + slope * slope
+    disc = radius * radius * q - intercept * intercept
+    if disc <= 0:
+        _bad(
+            "drum_radius",
+            radius,
+            f"a drum that the bed's surface line (height {intercept:.4g} m above the axis, slope {slope:.4g}) crosses",
+        )
+    root = math.sqrt(disc)
+    return (-intercept * slope - root) / q, (-intercept * slope + root) / q
+
+
+def drum_surface(
+    x,
+    r,
+    center,
+    drum_radius: float,
+    axis=(0.0, 1.0, 0.0),
+    bins: int = 12,
+    inner: float = 0.15,
+    outer: float = 0.85,
+    gap: float = 0.1,
+) -> dict:
+    """The free surface of the bed in a rotating drum, and its angle, from one frame.
+
+    The spheres are projected onto the drum's cross-section (:func:`drum_section`: s across, h up). Only the
+    bed counts: the largest group of spheres connected through contacts (centres closer than (1 + ``gap``)
+    (r_i + r_j)), so grains flying over the cascade, or carried alone by the wall, are left out. The chord
+    where the surface meets the wall is cut into equal bins along s; the highest sphere top (h + r) of each
+    bin is a surface point, taken at that sphere's own s (the highest top of a bin lies toward its up-slope
+    edge: the bin centre would bias the slope), and a second grid shifted by half a bin adds points (each
+    sphere once). Bins cover ``inner`` to ``outer`` of the chord: near the wall the bed is lifted and piles
+    against it. A straight line h(s) is fitted by least squares.
+
+    Why this is unbiased: every bin spans the drum's whole width along its axis, so all bins have the same
+    area and the same number of candidate tops (the highest of more rough tops sits higher); bins are at
+    least 2.5 mean diameters wide so that each holds a surface sphere. The chord comes from the surface
+    itself: a first line through the bins of the middle half of the bed's width gives the chord (the line
+    meets the circle of ``drum_radius``), its bins give the next line, and so on until the points repeat
+    (at most DRUM_FIT_ROUNDS rounds).
+
+    Sign: ``angle_deg`` = atan(-dh/ds) is positive when the surface rises toward -s, the side where the wall
+    carries the bed up, i.e. in a drum turning the way ``axis`` says (right-hand rule). A bed tilted the other
+    way reads negative.
+
+    Args:
+        x: sphere centres [m], shape (n, 3); r: radii [m], shape (n,).
+        center: a point on the drum's axis [m], (3,).
+        drum_radius: the drum's inner radius [m], > 0.
+        axis: the direction of the drum's angular velocity, (3,), horizontal.
+        bins: most bins over the part of the chord used, >= 3 (fewer when they would be narrower than 2.5
+            mean diameters; at least 2 are needed).
+        inner, outer: the part of the chord used, as fractions of it from its -s end, 0 <= inner < outer <= 1.
+        gap: contact tolerance of the bed test, as a fraction of the radii sum [-].
+
+    Returns:
+        dict with ``angle_deg``; ``slope`` dh/ds [-] and ``intercept_m`` (the line's height above the axis at
+        s = 0); ``surface_s``, ``surface_h`` [m], shape (k,): the surface points (sphere tops) in section
+        coordinates, sorted by s; ``chord_m`` (s_low, s_high) where the line meets the drum; ``window_m`` (the
+        part used); ``bin_width_m``; ``bed`` (bool mask, shape (n,)); ``bed_spheres``; ``detached`` (spheres
+        not in the bed); ``mean_diameter_m`` of the bed; ``rounds`` of the fit.
+
+    Raises:
+        ValueError: bad arguments; a bed of fewer than 3 spheres, or one with sphere centres outside
+        ``drum_radius``; fewer than 3 surface points (a bed too small for bins of 2.5 diameters); a surface
+        line that misses the drum.
+    """
+    x, r = _spheres(x, r)
+    radius = _positive("drum_radius", drum_radius, "m")
+    bins = _int_at_least("bins", bins, 3)
+    inner, outer = _zones(inner, outer)
+    gap = _finite_number("gap", gap, "[-]")
+    if gap < 0:
+        _bad("gap", gap, "a contact tolerance >= 0 (a fraction of the radii sum)")
+    s_all, h_all = drum_section(x, center, axis)
+    label = _touching_groups(x, r, gap)
+    bed = label == np.bincount(label).argmax()
+    if bed.sum() < 3:
+        _bad("x", f"a largest group of {int(bed.sum())} touching spheres", "a bed of at least 3 touching spheres")
+    out = int(np.count_nonzero(np.hypot(s_all[bed], h_all[bed]) > radius))
+    if out:
+        _bad("drum_radius", radius, f"the drum's inner radius [m] (the centres of {out} bed spheres are outside it)")
+    s, top, rb = s_all[bed], h_all[bed] + r[bed], r[bed]
+    diameter = 2.0 * float(rb.mean())
+
+    def fit(window):
+        pick, width = _drum_points(s, top, window, bins, diameter)
+        if len(pick) < 3:
+            _bad(
+                "x",
+                f"{len(pick)} surface points over {window[1] - window[0]:.4g} m of the chord",
+                f"at least 3 (bins >= {MIN_BIN_DIAMETERS} diameters = {MIN_BIN_DIAMETERS * diameter:.4g} m wide): "
+                "a larger bed, smaller spheres or wider inner..outer",
+            )
+        slope, intercept = np.polyfit(s[pick], top[pick], 1)
+        return pick, width, float(slope), float(intercept)
+
+    lo, hi = float((s - rb).min()), float((s + rb).max())
+    window = (lo + 0.25 * (hi - lo), lo + 0.75 * (hi - lo))
+    pick, width, slope, intercept = fit(window)
+    rounds = 1
+    while rounds <= DRUM_FIT_ROUNDS:
+        rounds += 1
+        c0, c1 = _chord(slope, intercept, radius)
+        window = (c0 + inner * (c1 - c0), c0 + outer * (c1 - c0))
+        new, width, slope, intercept = fit(window)
+        if np.array_equal(new, pick):
+            break
+        pick = new
+    order = np.argsort(s[pick])
+    return {
+        "angle_deg": math.degrees(math.atan(-slope)),
+        "slope": slope,
+        "intercept_m": intercept,
+        "surface_s": s[pick][order],
+        "surface_h": top[pick][order],
+        "chord_m": _chord(slope, intercept, radius),
+        "window_m": window,
+        "bin_width_m": width,
+        "bed": bed,
+        "bed_spheres": int(bed.sum()),
+        "detached": int(len(r) - bed.sum()),
+        "mean_diameter_m": diameter,
+        "rounds": rounds,
+    }
+
+
+def drum_metrics(frames, diameter: float, positions: int = 16) -> dict:
+    """Dynamic angle of repose and surface-fluctuation index of a rotating drum over its steady frames.
+
+    ``dynamic_angle_deg`` is the mean of the frames' :func:`drum_surface` angles, ``dynamic_angle_sd_deg``
+    their sample SD (ddof=1). ``fluctuation_index`` measures how much the interface moves from frame to frame:
+    each frame's surface profile (its surface points, linear between them) is read at ``positions`` equally
+    spaced positions across the part of the chord that every frame covers; at each position the sample SD
+    (ddof=1) of the height over the frames is taken, and the index is the root mean square of these SDs over
+    the positions, in mean particle diameters:
+
+        fluctuation_index = sqrt(mean_i SD_k(h_ik)^2) / diameter.
+
+    A free-flowing bed rolls with a steady surface (its index is the grain-scale roughness, a fraction of a
+    diameter); a cohesive one avalanches and its surface swings (larger index). GranuDrum's cohesive index is
+    the same idea, the interface's frame-to-frame fluctuation averaged across the drum, but normalised
+    differently; a measured data set must be compared through this definition (recomputed from the measured
+    interface profiles), not through the instrument's number.
+
+    Args:
+        frames: the steady frames, a sequence of :func:`drum_surface` dicts (``angle_deg``, ``surface_s`` and
+            ``surface_h`` [m] are used), at least 2.
+        diameter: the mean particle diameter [m], > 0.
+        positions: positions across the chord, >= 2.
+
+    Returns:
+        dict with ``dynamic_angle_deg``, ``dynamic_angle_sd_deg``, ``fluctuation_index`` [diameters],
+        ``frames`` (count), ``positions_m`` (shape (positions,), s [m]) and ``height_sd_m`` (the SD at each).
+    """
+    if isinstance(frames, Mapping) or not hasattr(frames, "__len__"):
+        _bad("frames", type(frames).__name__, "a sequence of drum_surface results (dicts)")
+    if len(frames) < 2:
+        _bad("frames", f"{len(frames)} frames", "at least 2 frames of drum_surface")
+    diameter = _positive("diameter", diameter, "m")
+    positions = _int_at_least("positions", positions, 2)
+    angles, profiles = [], []
+    for k, f in enumerate(frames):
+        if not isinstance(f, Mapping) or not {"angle_deg", "surface_s", "surface_h"} <= set(f):
+            _bad(f"frames[{k}]", type(f).__name__, "a drum_surface dict with angle_deg, surface_s and surface_h")
+        s, h = _paired(
+            f"frames[{k}]['surface_s']",
+            f["surface_s"],
+            "surface positions [m]",
+            "surface_h",
+            f["surface_h"],
+            "surface heights [m]",
+            2,
+        )
+        angles.append(_finite_number(f"frames[{k}]['angle_deg']", f["angle_deg"], "deg"))
+        order = np.argsort(s)
+        profiles.append((s[order], h[order]))
+    lo = max(float(s[0]) for s, _ in profiles)
+    hi = min(float(s[-1]) for s, _ in profiles)
+    if not hi > lo:
+        _bad(
+            "frames",
+            f"surfaces whose common span is [{lo:.4g}, {hi:.4g}] m",
+            "frames whose surfaces overlap across the drum",
+        )
+    grid = np.linspace(lo, hi, positions)
+    heights = np.array([np.interp(grid, s, h) for s, h in profiles])
+    sd = heights.std(axis=0, ddof=1)
+    a = np.array(angles)
+    return {
+        "dynamic_angle_deg": float(a.mean()),
+        "dynamic_angle_sd_deg": float(a.std(ddof=1)),
+        "fluctuation_index": float(np.sqrt(np.mean(sd**2)) / diameter),
+        "frames": len(frames),
+        "positions_m": grid,
+        "height_sd_m": sd,
+    }
+
+
+# --------------------------------------------------------------------------------------------------
 # settling
 # --------------------------------------------------------------------------------------------------
 
@@ -1378,6 +1659,64 @@ def plot_angles(result: dict, path) -> str:
     ax.set_xlabel("sector" if key == "per_slice_deg" else "flank (left, right per view)")
     ax.set_ylabel("angle of repose [deg]")
     ax.legend(loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return str(path)
+
+
+def plot_drum(s, h, r, surface: dict, path, drum_radius: float, title: str | None = None) -> str:
+    """Write the drum's cross-section as a PNG to ``path``: the spheres as discs of their radius at their
+    section coordinates (``s``, ``h`` [m] of :func:`drum_section`, shape (n,); ``r`` [m], shape (n,)), the drum
+    wall (``drum_radius`` [m]), one frame's surface points and fitted line (a :func:`drum_surface` dict) over
+    the chord, in mm."""
+    from matplotlib.collections import EllipseCollection
+
+    s, h = _paired("s", s, "section positions [m]", "h", h, "section heights [m]", 0)
+    r = np.asarray(r, dtype=float)
+    if r.shape != s.shape:
+        _bad("r", r, f"radii [m] of shape {s.shape}, one per sphere")
+    if not isinstance(surface, Mapping) or not {"slope", "intercept_m", "chord_m"} <= set(surface):
+        _bad("surface", type(surface).__name__, "the dict of drum_surface")
+    radius = _positive("drum_radius", drum_radius, "m")
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5, 5), dpi=120)
+    mm = 1e3
+    ax.add_collection(
+        EllipseCollection(
+            2 * mm * r,
+            2 * mm * r,
+            0.0,
+            units="xy",
+            offsets=np.column_stack([mm * s, mm * h]),
+            offset_transform=ax.transData,
+            facecolors="tan",
+            edgecolors="0.4",
+            linewidths=0.3,
+        )
+    )
+    phi = np.linspace(0, 2 * math.pi, 361)
+    ax.plot(mm * radius * np.cos(phi), mm * radius * np.sin(phi), color="0.3", lw=1.2)
+    c0, c1 = surface["chord_m"]
+    line = np.array([c0, c1])
+    ax.plot(mm * line, mm * (surface["intercept_m"] + surface["slope"] * line), color="tab:red", lw=1.5)
+    if "surface_s" in surface:
+        ax.plot(
+            mm * np.asarray(surface["surface_s"]),
+            mm * np.asarray(surface["surface_h"]),
+            "o",
+            ms=3,
+            color="tab:blue",
+            label="surface points",
+        )
+        ax.legend(loc="lower right", frameon=False, fontsize=8)
+    ax.set_xlim(-1.05 * mm * radius, 1.05 * mm * radius)
+    ax.set_ylim(-1.05 * mm * radius, 1.05 * mm * radius)
+    ax.set_aspect("equal")
+    ax.set_xlabel("across the drum, s [mm]")
+    ax.set_ylabel("height above the axis [mm]")
+    if title:
+        ax.set_title(title, fontsize=9)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

@@ -1,4 +1,4 @@
-"""The four test rigs of the seed papers, generated as scenes from a few parameters.
+"""The test rigs (the four of the seed papers and a rotating drum), generated as scenes from a few parameters.
 
 Each rig is a frozen dataclass of parameters (SI units; defaults are the full-size rig) whose ``spec()``
 returns a :class:`warpdem.scene.stage.SceneSpec`; :func:`new` writes it as a USD stage. ``SMOKE`` holds, per rig,
@@ -12,6 +12,8 @@ the overrides of a CPU-sized version (a few hundred particles) used by the tests
   glued particles on the cylinder and the base (seed 002 glues ore grains on both).
 * die_press (seed 001): single pellet press -- die hole, feeding inlet, pressure bar (piston), backstop.
 * truck_tipper (seed 002): dump body loaded by a bucket, then tilted about its rear hinge to discharge.
+* rotating_drum (GranuDrum-like): horizontal cylinder 84 mm x 20 mm, partly filled, turning at constant rpm;
+  dynamic angle of repose and surface fluctuation of the rolling bed.
 """
 
 from __future__ import annotations
@@ -813,7 +815,188 @@ class TruckTipper:
         )
 
 
-RIGS = {"funnel": Funnel, "lifting_cylinder": LiftingCylinder, "die_press": DiePress, "truck_tipper": TruckTipper}
+GLASS = Material("glass", density=2500.0, poisson_ratio=0.25, shear_modulus=1.0e7)
+"""Glass beads: soda-lime glass's density (2500 kg/m^3) and Poisson ratio, with a shear modulus of 10 MPa
+instead of glass's 26 GPa (the funnel's feed has the same): the rotating bed's contact forces are set by gravity,
+overlaps stay below 0.5 % of a radius at the drum's depth, and the time step is 50 times longer."""
+
+DRUM = Material("drum", density=2700.0, poisson_ratio=0.33, shear_modulus=2.6e10)
+"""Aluminium (2700 kg/m^3, G = 26 GPa, nu = 0.33): the drum and, as the material ``window`` with its own pair,
+its end walls."""
+
+
+def _segment_level(fill: float) -> float:
+    """Height [drum radii] above the axis of the level surface of a bed filling ``fill`` of a circle's area: the
+    circular segment's area (theta - sin theta) / 2 at central angle theta equals fill pi."""
+    from scipy.optimize import brentq
+
+    theta = brentq(lambda t: t - math.sin(t) - 2 * math.pi * fill, 0.0, 2 * math.pi)
+    return -math.cos(theta / 2)
+
+
+def _drum_y(vertices: np.ndarray) -> np.ndarray:
+    """Vertices of a mesh built about the z axis turned about x by -90 deg to lie along y: (x, y, z) -> (x, z, -y),
+    a proper rotation, so the winding (the particle side) is kept."""
+    return np.column_stack([vertices[:, 0], vertices[:, 2], -vertices[:, 1]])
+
+
+@dataclass(frozen=True)
+class RotatingDrum:
+    """Rotating drum (GranuDrum-like): a horizontal cylinder, axis along y through the origin, with two square end
+    walls,
+    ``fill_fraction`` full and turning at ``rpm`` about +y (right-hand rule: the wall at the bottom moves toward
+    -x and lifts the bed on the -x side). Full size is GranuDrum's cell: 84 mm inner diameter, 20 mm wide
+    (GranuDrum turns at 2 to 60 rpm; 10 rpm by default).
+
+    Particles: glass-bead-like spheres (:data:`GLASS`) of ``particle_radius`` (1 mm, coarse next to the
+    instrument's powders: a free-flowing reference bed), ``radius_spread``, with a moderately damped
+    (restitution 0.6), frictional (mu_s 0.4) contact and a little rolling resistance (EPSD, mu_r 0.02, as for
+    the funnel's spheres, which need it to rest); cohesionless by default (``surface_energy`` 0; > 0: JKR).
+    The drum is aluminium (:data:`DRUM`) with mu_s 0.6 against the beads: a smooth drum lets the bed slide
+    instead of turning with it. The end walls are a material of their own, ``window``, whose contact with the
+    beads is the drum's unless ``window_static_friction`` (negative: the drum's) sets it: their friction raises
+    the dynamic angle of a narrow drum.
+
+    Fill: ``fill_fraction`` of the drum's volume as a bed packed at 0.6, i.e. count = fill_fraction x drum
+    volume x 0.6 / mean particle volume, poured from a box above the bed's level (particles leave it at
+    ``pour_speed`` downward) and left to settle for ``settle_time``. Then the drum, its end walls with it,
+    turns at a constant angular velocity (keyframes every 45 deg, each segment an exact constant rotation about
+    the axis); after ``steady_after`` revolutions every output, ``frame_interval`` apart, is a frame of the
+    ``drum`` measurement for ``measure_revolutions`` more revolutions, and the run ends.
+
+    Facets: the drum is a polygon of n sides with n large enough that its sagitta R (1 - cos(pi / n)) is at
+    most 5 % of a particle radius, so a facet corner rises less than that above the circle: the wall reads as a
+    circle to the particles (its normal turns by at most 180 / n deg from radial), and facets do not act as
+    lifters. ``cell`` [m] caps the facets' size along the drum and around it.
+    """
+
+    particle_radius: float = 0.001
+    radius_spread: float = 0.05
+    inner_diameter: float = 0.084
+    width: float = 0.02
+    fill_fraction: float = 0.4
+    rpm: float = 10.0
+    surface_energy: float = 0.0
+    window_static_friction: float = -1.0
+    pour_speed: float = 0.5
+    settle_time: float = 0.5
+    steady_after: float = 1.0
+    measure_revolutions: float = 2.0
+    frame_interval: float = 0.2
+    cell: float = 0.004
+    dt_fraction: float = 0.2
+    seed: int = 1
+    _may_be_zero = ("radius_spread", "seed", "surface_energy", "pour_speed", "steady_after")
+    _may_be_negative = ("window_static_friction",)
+
+    def __post_init__(self):
+        _check_params(self)
+        if not self.fill_fraction <= 0.6:
+            raise ValueError(
+                f"RotatingDrum: fill_fraction = {self.fill_fraction} is not allowed; expected a fraction of the "
+                "drum's volume in (0, 0.6] (the pour needs the drum's upper part)"
+            )
+        _check_order(self, "particle_radius", "less than", "width / 4", self.width / 4)
+        _check_order(self, "particle_radius", "less than", "inner_diameter / 20", self.inner_diameter / 20)
+        if not 0 < self.rpm <= 120:
+            raise ValueError(f"RotatingDrum: rpm = {self.rpm} is not allowed; expected (0, 120] revolutions/min")
+        if not self.radius_spread < 0.25:
+            raise ValueError(
+                f"RotatingDrum: radius_spread = {self.radius_spread} is not allowed; expected a relative SD in [0, 0.25)"
+            )
+
+    def spec(self) -> SceneSpec:
+        r, R, W = self.particle_radius, self.inner_diameter / 2, self.width
+        ct = RollingModel.EPSD
+        law = ContactLaw.JKR if self.surface_energy > 0 else ContactLaw.HERTZ_MINDLIN
+        pp = Interaction(
+            restitution=0.6,
+            static_friction=0.4,
+            rolling_friction=0.02,
+            rolling_model=ct,
+            law=law,
+            surface_energy=self.surface_energy,
+        )
+        pw = Interaction(restitution=0.6, static_friction=0.6, rolling_friction=0.02, rolling_model=ct)
+        pwin = (
+            pw
+            if self.window_static_friction < 0
+            else dataclasses.replace(pw, static_friction=self.window_static_friction)
+        )
+        walls_ia = Interaction(restitution=0.5, static_friction=0.3)
+        window = dataclasses.replace(DRUM, name="window")
+        pairs = _pairs("glass", "drum", pp, pw) + [
+            ("glass", "window", pwin),
+            ("drum", "window", walls_ia),
+            ("window", "window", walls_ia),
+        ]
+        # facets: sagitta R (1 - cos(pi / n)) <= 0.05 r
+        n = math.ceil(math.pi / math.acos(1.0 - 0.05 * r / R))
+        cell = min(self.cell, 2 * math.pi * R / n)
+        cv, ct_ = geo.frustum(R, R, -W / 2, W / 2, cell)
+        # square end walls, a cell wider than the drum: a disc's central fan would put every one of its n
+        # triangles under a particle at the centre
+        side = 2 * R + 2 * cell
+        front_v, front_t = geo.grid_plate(side, side, cell, z=-W / 2, up=True)
+        back_v, back_t = geo.grid_plate(side, side, cell, z=W / 2, up=False)
+        v_mean = 4.0 / 3.0 * math.pi * r**3 * (1 + 3 * self.radius_spread**2)
+        count = int(self.fill_fraction * math.pi * R**2 * W * 0.6 / v_mean)
+        # pour region: a box between the bed's level (plus a diameter) and 0.8 R, inside the circle and clear of
+        # the end walls by a largest particle
+        margin = 1.45 * r * (1 + 2 * self.radius_spread)
+        z_lo, z_hi = _segment_level(self.fill_fraction) * R + 2 * r, 0.8 * R
+        half = math.sqrt(R**2 - z_hi**2) - margin
+        region = ("box", (-half, -W / 2 + margin, z_lo), (half, W / 2 - margin, z_hi))
+        rate = _pour_rate(2 * half * (W - 2 * margin) * (z_hi - z_lo), v_mean, 1.0, z_hi - z_lo, self.pour_speed)
+        fac = _pour(
+            "pour",
+            region,
+            "glass",
+            "sphere",
+            r,
+            self.radius_spread,
+            count=count,
+            rate=rate,
+            seed=self.seed,
+            initial_velocity=(0.0, 0.0, -self.pour_speed),
+        )
+        omega = 2 * math.pi * self.rpm / 60.0
+        t_turn = count / rate + self.settle_time
+        t_avg = t_turn + self.steady_after * 2 * math.pi / omega
+        end = t_avg + self.measure_revolutions * 2 * math.pi / omega
+        # slerped keyframes: 45 deg apart, each segment turns at exactly omega about the axis (the pose's pivot)
+        step = math.radians(45.0) / omega
+        times = np.unique(np.r_[0.0, np.arange(t_turn, end, step), end])
+        times, tr, rot = _pose_samples(times, lambda t: (_rot_y(omega * max(t - t_turn, 0.0)), np.zeros(3)))
+        walls = [
+            WallSpec("Drum", _drum_y(cv), ct_, "drum", times, tr, rot),
+            WallSpec("FrontWall", _drum_y(front_v), front_t, "window", times, tr, rot),
+            WallSpec("BackWall", _drum_y(back_v), back_t, "window", times, tr, rot),
+        ]
+        box = R + 4 * margin
+        return SceneSpec(
+            rig="rotating_drum",
+            materials=[GLASS, DRUM, window],
+            pairs=pairs,
+            shapes=[ShapeSpec("sphere", "sphere")],
+            walls=walls,
+            factories=[fac],
+            run=RunSpec(duration=float(end), dt_fraction=self.dt_fraction, output_interval=self.frame_interval),
+            measure=MeasureSpec(
+                "drum", drum_center=(0.0, 0.0, 0.0), drum_axis=(0.0, 1.0, 0.0), drum_radius=R, average_from=t_avg
+            ),
+            # what leaks past the end walls' seams is removed, not left falling
+            domain=((-box, -W / 2 - 4 * margin, -box), (box, W / 2 + 4 * margin, box)),
+        )
+
+
+RIGS = {
+    "funnel": Funnel,
+    "lifting_cylinder": LiftingCylinder,
+    "die_press": DiePress,
+    "truck_tipper": TruckTipper,
+    "rotating_drum": RotatingDrum,
+}
 
 SMOKE = {
     "funnel": {
@@ -877,6 +1060,18 @@ SMOKE = {
         "after_tilt": 0.5,
         "chassis_height": 0.2,
         "cell": 0.05,
+    },
+    "rotating_drum": {
+        "particle_radius": 0.0015,
+        "inner_diameter": 0.06,
+        "width": 0.009,
+        "rpm": 30.0,
+        "pour_speed": 1.0,
+        "settle_time": 0.2,
+        "steady_after": 0.25,
+        "measure_revolutions": 0.25,
+        "frame_interval": 0.05,
+        "cell": 0.01,
     },
 }
 """Overrides that make each rig a CPU smoke test with a few hundred particles."""

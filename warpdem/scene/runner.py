@@ -301,6 +301,8 @@ def run_scene(
                     }
                 )
                 state.reset_impacts()
+        if m.kind == "drum" and t >= m.average_from - eps:
+            series.setdefault("drum", []).append([_drum_frame(model, state, h, w, m, t) for w in range(W)])
         if packing_time is not None and abs(t - packing_time) <= eps and "packing" not in series:
             series["packing"] = [_packing_metrics(model, state, h, w, m) for w in range(W)]
         if writer is not None:
@@ -391,6 +393,8 @@ def run_scene(
             mw.update(_press_metrics(spec, model, state, h, w, z, f, series))
         elif m.kind == "impacts":
             mw["phases"] = _impact_metrics(model, names, m, phase_snap, w)
+        elif m.kind == "drum":
+            mw.update(_drum_metrics(series, h, w))
         metrics.append(mw)
     info = {
         "rig": spec.rig,
@@ -586,6 +590,47 @@ def _packing_metrics(model, state, h, w: int, m) -> dict:
     }
 
 
+def _drum_frame(model, state, h, w: int, m, t: float) -> dict:
+    """World ``w``'s bed surface at time ``t`` [s] (``measure.drum_surface``), as JSON-able numbers for the
+    series (and so for a checkpoint): time, angle, the surface points and the line; or the error."""
+    x, r = _particles(model, state, h, w)
+    try:
+        got = ms.drum_surface(x, r, m.drum_center, m.drum_radius, axis=m.drum_axis)
+    except ValueError as e:
+        return {"time": t, "error": str(e)}
+    return {
+        "time": t,
+        "angle_deg": got["angle_deg"],
+        "slope": got["slope"],
+        "intercept_m": got["intercept_m"],
+        "chord_m": list(got["chord_m"]),
+        "surface_s": got["surface_s"].tolist(),
+        "surface_h": got["surface_h"].tolist(),
+        "detached": got["detached"],
+    }
+
+
+def _drum_metrics(series, h, w: int) -> dict:
+    """Dynamic angle and fluctuation index of world ``w`` over its measured frames (``measure.drum_metrics``)."""
+    frames = [tick[w] for tick in series.get("drum", [])]
+    good = [f for f in frames if "angle_deg" in f]
+    out = {"frames": len(good), "frame_errors": len(frames) - len(good)}
+    d = 2.0 * float(np.mean(h["radius"][(h["world"] == w) & h["free"]]))
+    try:
+        got = ms.drum_metrics(good, d)
+    except ValueError as e:
+        out["drum_error"] = str(e)
+        return out
+    out.update(
+        dynamic_angle_deg=got["dynamic_angle_deg"],
+        dynamic_angle_sd_deg=got["dynamic_angle_sd_deg"],
+        fluctuation_index=got["fluctuation_index"],
+        mean_diameter_m=d,
+        detached_mean=float(np.mean([f["detached"] for f in good])),
+    )
+    return out
+
+
 def _start_unloading(spec, model, solver, piston: int, t_stop: float) -> float:
     """Move the piston's last keyframes so that its stroke ends at ``t_stop`` [s] where it is then, holds for
     ``measure.hold_time`` and returns at ``measure.unload_speed`` (``stage.unload_keyframes``), in the solver's
@@ -702,7 +747,7 @@ def _final_npz(out: Path, model, state, h) -> dict:
 
 
 def _pictures(out: Path, spec, model, state, h, result) -> dict:
-    """pile.png (side view of world 0 at the end, like the seeds' photos) and rig plots."""
+    """pile.png (side view of world 0 at the end, like the seeds' photos) and rig plots (press.png, drum.png)."""
     from .export import side_view_png
 
     files = {}
@@ -721,6 +766,16 @@ def _pictures(out: Path, spec, model, state, h, result) -> dict:
     if "angle_fit_deg" in m0:
         title += f": angle of repose {m0['angle_fit_deg']:.1f} deg (fit), {m0['angle_image_deg']:.1f} deg (image)"
     files["pile_png"] = side_view_png(str(out / "pile.png"), xs, rs, walls_world=walls, axis="y", title=title)
+    frames = [tick[0] for tick in result.series.get("drum", []) if "angle_deg" in tick[0]]
+    if spec.measure.kind == "drum" and frames:
+        m = spec.measure
+        s, z = ms.drum_section(x, m.drum_center, m.drum_axis)
+        last = frames[-1]
+        title = f"rotating drum: last frame {last['angle_deg']:.1f} deg at t = {last['time']:.2f} s"
+        if "dynamic_angle_deg" in m0:
+            title += f"\ndynamic angle {m0['dynamic_angle_deg']:.1f} +- {m0['dynamic_angle_sd_deg']:.1f} deg"
+            title += f" over {m0['frames']} frames"
+        files["drum_png"] = ms.plot_drum(s, z, r, last, str(out / "drum.png"), m.drum_radius, title=title)
     if spec.measure.kind == "press" and "force_n" in m0:
         unload = None
         if "unload_force_n" in m0:

@@ -130,10 +130,11 @@ class RunSpec:
 
 @dataclass
 class MeasureSpec:
-    """What the run measures: ``kind`` angle_of_repose | press | impacts. Angle of repose: the base height
+    """What the run measures: ``kind`` angle_of_repose | press | impacts | drum. Angle of repose: the base height
     ``base_height`` [m] and pile axis ``center`` (x, y) [m]. Press: the ``piston`` wall, ``force_limit`` [N]
     (the run stops there) and ``backstop_height`` [m]. Impacts: the ``walls`` whose faces are counted and the
-    phases (``phase_names``, ``phase_ends`` [s])."""
+    phases (``phase_names``, ``phase_ends`` [s]). Drum: ``drum_center``, ``drum_axis``, ``drum_radius`` and
+    ``average_from``."""
 
     kind: str = "angle_of_repose"
     base_height: float = 0.0
@@ -164,6 +165,16 @@ class MeasureSpec:
     """Angle of repose from a funnel: the height [m] of its outlet's lower edge; a body whose centre is below it
     has discharged, and the run reports the steady discharge rate (``measure.discharge_rate``). None: not
     measured."""
+    drum_center: tuple = (0.0, 0.0, 0.0)
+    """Drum: a point on the rotating drum's axis (its centre) [m]."""
+    drum_axis: tuple = (0.0, 1.0, 0.0)
+    """Drum: the direction of its angular velocity (right-hand rule), horizontal; the surface angle is positive
+    when the bed rises on the side the wall carries up (``measure.drum_surface``)."""
+    drum_radius: float = 0.0
+    """Drum: its inner radius [m]."""
+    average_from: float = 0.0
+    """Drum: the time [s] from which every output frame's surface is measured and averaged (the rotation is
+    steady by then)."""
 
 
 def unload_keyframes(times, translations, t_stop: float, stop, hold: float, speed: float):
@@ -345,6 +356,11 @@ def write_stage(spec: SceneSpec, path=None):
             wp_.CreateAttribute(NS + "measure:" + name, Sdf.ValueTypeNames.Double).Set(float(value))
         if m.packing_base is not None:
             wp_.CreateAttribute(NS + "measure:packingBase", Sdf.ValueTypeNames.Double).Set(float(m.packing_base))
+    if m.kind == "drum":
+        for name, value in (("drumCenter", m.drum_center), ("drumAxis", m.drum_axis)):
+            wp_.CreateAttribute(NS + "measure:" + name, Sdf.ValueTypeNames.Double3).Set(Gf.Vec3d(*map(float, value)))
+        for name, value in (("drumRadius", m.drum_radius), ("averageFrom", m.average_from)):
+            wp_.CreateAttribute(NS + "measure:" + name, Sdf.ValueTypeNames.Double).Set(float(value))
     if m.piston:
         wp_.CreateRelationship(NS + "measure:piston").SetTargets([Sdf.Path(f"/World/Walls/{_ident(m.piston)}")])
     if m.walls:
@@ -668,6 +684,22 @@ def read_stage(path_or_stage) -> SceneSpec:
         hold_time=r.get(world, NS + "measure:holdTime", required=False, default=0.0),
         outlet_height=r.get(world, NS + "measure:outletHeight", required=False, default=None),
     )
+    if kind == "drum":
+        measure.drum_center = r.get(world, NS + "measure:drumCenter", "vec3")
+        measure.drum_axis = r.get(world, NS + "measure:drumAxis", "vec3")
+        measure.drum_radius = r.get(world, NS + "measure:drumRadius")
+        measure.average_from = r.get(world, NS + "measure:averageFrom")
+        a = measure.drum_axis
+        if not (math.hypot(a[0], a[1]) > 0 and a[2] == 0):
+            r.fail(
+                world,
+                NS + "measure:drumAxis",
+                f"= {a} is not allowed; expected a horizontal direction (x, y, 0), not (0, 0, 0)",
+            )
+        if measure.drum_radius <= 0:
+            r.fail(world, NS + "measure:drumRadius", f"= {measure.drum_radius} is not allowed; expected a radius > 0 m")
+        if measure.average_from < 0:
+            r.fail(world, NS + "measure:averageFrom", f"= {measure.average_from} is not allowed; expected >= 0 s")
     for name, value, unit in (("unloadSpeed", measure.unload_speed, "m/s"), ("holdTime", measure.hold_time, "s")):
         if value < 0:
             r.fail(world, NS + "measure:" + name, f"= {value} is not allowed; expected >= 0 {unit}")
@@ -683,8 +715,8 @@ def read_stage(path_or_stage) -> SceneSpec:
         r.fail(
             world, NS + "measure:packingMargin", f"= {measure.packing_margin} is not allowed; expected >= 0 diameters"
         )
-    if kind not in ("angle_of_repose", "press", "impacts", "none"):
-        r.fail(world, NS + "measure:kind", f"= {kind!r} is not allowed; expected angle_of_repose, press, impacts")
+    if kind not in ("angle_of_repose", "press", "impacts", "drum", "none"):
+        r.fail(world, NS + "measure:kind", f"= {kind!r} is not allowed; expected angle_of_repose, press, impacts, drum")
     if kind == "press":
         measure.piston = _prim_name(r.target(world, NS + "measure:piston"))
     if kind == "impacts":

@@ -173,6 +173,8 @@ MEASURES = (
     "packing_fraction",
     "bulk_density_kg_m3",
     "discharge_rate_kg_s",
+    "dynamic_angle_deg",
+    "fluctuation_index",
     "residual_set_ratio",
     "loading_exponent",
     "unloading_stiffness_n_m",
