@@ -71,5 +71,6 @@ def test_gate_holds_the_fill_then_stays_clear(gated):
     at_gate = int(np.argmin(np.abs(t - p.gate_time)))  # the runner ends a tick there (the packing time)
     assert t[at_gate] == pytest.approx(p.gate_time, abs=1e-4)
     assert 0 < -force[at_gate] < weight
-    assert np.all(force[t > p.gate_time + p.output_interval + 1e-9] == 0)
+    # from the second output after the opening on (the first still holds the instant the fill lets go)
+    assert np.all(force[t > p.gate_time + 1.5 * p.output_interval] == 0)
     assert np.asarray(series["kinetic_energy"])[at_gate, 0] < spec.run.settle_energy
