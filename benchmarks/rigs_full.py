@@ -2,16 +2,21 @@
 run's metrics.json and final.npz under OUT/<rig>/ (no USD/VTK frames: the GPU machine has no usd-core).
 
     python benchmarks/rigs_full.py --device cuda --out OUT [--rig funnel --rig die_press ...] [--set rig.k=v]
+        [--smoke] [--stop-after SECONDS]
+
+``--smoke`` runs the CPU smoke size instead; ``--stop-after`` saves a checkpoint and exits 3 before a run would
+pass that many wall seconds (the same command resumes it), so a long run fits a device's time limit.
 """
 
 import argparse
 import json
+import sys
 import time
 
 import warp as wp
 
 from warpdem.scene import rigs
-from warpdem.scene.runner import run_scene
+from warpdem.scene.runner import RunStopped, run_scene
 
 wp.config.quiet = True
 
@@ -20,6 +25,8 @@ p.add_argument("--device", default="cuda")
 p.add_argument("--out", default="runs/full")
 p.add_argument("--rig", action="append")
 p.add_argument("--set", action="append", default=[], help="RIG.param=value")
+p.add_argument("--smoke", action="store_true", help="the CPU smoke size")
+p.add_argument("--stop-after", type=float, default=0.0, help="wall seconds; 0: no limit")
 a = p.parse_args()
 wp.init()
 for rig in a.rig or list(rigs.RIGS):
@@ -29,7 +36,7 @@ for rig in a.rig or list(rigs.RIGS):
         r, name = k.split(".", 1)
         if r == rig:
             values[name] = v
-    spec = rigs.spec(rig, values)
+    spec = rigs.spec(rig, values, smoke=a.smoke)
     t0 = time.perf_counter()
     last = [0.0]
 
@@ -39,7 +46,21 @@ for rig in a.rig or list(rigs.RIGS):
             last[0] = frac
             print(f"  {rig}: {100 * frac:.0f} % {msg} after {time.perf_counter() - t0:.0f} s", flush=True)
 
-    res = run_scene(spec, device=a.device, out_dir=f"{a.out}/{rig}", frames=False, progress=progress)
+    try:
+        res = run_scene(
+            spec,
+            device=a.device,
+            out_dir=f"{a.out}/{rig}",
+            frames=False,
+            progress=progress,
+            checkpoint_every=60.0 if a.stop_after else 0.0,
+            stop_after=a.stop_after,
+        )
+    except RunStopped as e:
+        print(
+            f"  {rig}: stopped at {e.simulated_s:.4f} s simulated after {e.wall_s:.0f} s; rerun to resume", flush=True
+        )
+        sys.exit(3)
     i = res.info
     m = {k: v for k, v in res.metrics[0].items() if not isinstance(v, (list, dict))}
     print(
@@ -52,6 +73,8 @@ for rig in a.rig or list(rigs.RIGS):
                 "clumps": i["clumps"],
                 "glued": i["glued_spheres"],
                 "dt_s": i["dt_s"],
+                "dt_range_s": i["dt_range_s"],
+                "step_margin_max": round(i["step_margin_max"], 3),
                 "steps": i["steps"],
                 "simulated_s": round(i["simulated_s"], 3),
                 "stop": i["stop"],
