@@ -315,26 +315,58 @@ def test_die_press_compaction(rig_run):
 
 def test_die_press_tells_plastic_from_elastic_contacts():
     """The same smoke press with elastic Hertz-Mindlin contacts and with EEPA at plasticity ratio 0.5 (no
-    adhesion). EEPA's unloading keeps a plastic overlap of lambda_p times the largest one at every contact, so
-    the bed keeps a set of at least about half its compaction under load (0.4 of it allows for the output
-    interval); the elastic bed keeps only what its grains rearranged, less than one particle radius."""
+    adhesion). Both beds keep what their grains rearranged (a loose bed does that whatever its contacts;
+    tests/verification/test_column_press.py shows an elastic column returning to zero). What unloading gives back
+    is the contacts' spring: all of it for Hertz; for EEPA only (1 - lambda_p^(1/n)) = 0.37 of a contact's
+    overlap, so the plastic bed springs back less than two thirds of the elastic bed's, and keeps a set of more
+    than 0.4 of its travel."""
     got = {}
     for law in ("hertz_mindlin", "eepa"):
         spec = rigs.spec("die_press", {"law": law, "surface_energy": 0.0}, smoke=True)
         got[law] = runner.run_scene(spec, frames=False).metrics[0]
         assert got[law]["stop"] == "unloaded", got[law].get("press_error")
-    p = rigs.params("die_press", rigs.SMOKE["die_press"])
-    assert got["hertz_mindlin"]["residual_set_m"] < p.particle_radius
-    assert got["eepa"]["residual_set_m"] > 0.4 * got["eepa"]["max_displacement_m"]
-    assert got["eepa"]["residual_set_m"] > 4 * got["hertz_mindlin"]["residual_set_m"]
+    hm, ep = got["hertz_mindlin"], got["eepa"]
+    spring = {law: m["max_displacement_m"] - m["residual_set_m"] for law, m in got.items()}
+    assert spring["eepa"] < 2.0 / 3.0 * spring["hertz_mindlin"]
+    assert ep["residual_set_m"] > 0.4 * ep["max_displacement_m"]
+    assert ep["residual_set_m"] > hm["residual_set_m"]
+
+
+def _press_to_limit(job):
+    """(loose fill [m], bed height at the force limit [m]) of the smoke press with fill ``seed``, rig ``values``
+    and stage ``overrides``, pressed to 10 N (no unloading); run in a worker process."""
+    seed, values, overrides = job
+    spec = rigs.spec("die_press", {"seed": seed, "unload": False, **values}, smoke=True)
+    m = runner.run_scene(apply_overrides(spec, overrides), frames=False).metrics[0]
+    assert m["stop"] == "force_limit", m.get("press_error")
+    return m["fill_height_m"], m["final_height_m"]
+
+
+def test_die_press_converges_in_the_step():
+    """The smoke press at the default step (20 % of the Rayleigh time, halved by the solver while the stiffest
+    contact needs it: SolverOptions.dt_margin) gives the loose fill and the bed height at 10 N of a fixed step of
+    2.5 % of the Rayleigh time (whose margin stays below 0.3), within the seed-to-seed scatter: over three fill
+    seeds the means differ by less than two pooled standard deviations of one run. A fixed 20 % step fails this
+    by far (its fill is shaken down by an unstable step: 7.6 against 10.0 mm), so the test can fail. (A fixed 5 %
+    step, which reaches 0.57 of the stable step under compression, gives a bed 0.1 mm lower at 10 N.)"""
+    import multiprocessing
+
+    default = [(seed, {}, {}) for seed in (1, 2, 3)]
+    fine = [(seed, {"dt_fraction": 0.025}, {"run.dt_levels": "0"}) for seed in (1, 2, 3)]
+    # two worker processes (CI's two cores); spawned, as Warp's runtime does not survive a fork
+    with multiprocessing.get_context("spawn").Pool(2) as pool:
+        got = pool.map(_press_to_limit, default + fine, chunksize=1)
+    a, b = np.array(got[:3]), np.array(got[3:])
+    pooled = np.sqrt((a.var(axis=0, ddof=1) + b.var(axis=0, ddof=1)) / 2)
+    assert np.all(np.abs(a.mean(axis=0) - b.mean(axis=0)) <= 2 * pooled), (a, b)
 
 
 def test_die_press_unloading_branch(rig_run):
     """Die press, unloading: the bar returns at the pressing speed from where the force limit stopped it (the
     unloading branch starts at the loading branch's last sample) to where the stroke began, so the force falls
-    from the limit to nothing. The set left is at most the compaction under load and, as the soft wet-feed
-    spheres (G = 10 MPa) deform elastically, far below it; one output interval of travel (gap / 8) bounds how
-    well either is read. The unloading stiffness exceeds the loading secant F_max / d_max (an unloading line
+    from the limit to nothing. The set left is at most the compaction under load (the loose cohesive fill packs
+    at 0.42 and compacts mostly by rearranging, which unloading does not undo); one output interval of travel
+    (gap / 8) bounds how well either is read. The unloading stiffness exceeds the loading secant F_max / d_max (an unloading line
     steeper than the loading curve, as for any bed that does not fully spring back along its loading path).
     press.png is written."""
     run = rig_run("die_press")
@@ -345,7 +377,6 @@ def test_die_press_unloading_branch(rig_run):
     assert m["unload_force_n"][0] == pytest.approx(m["force_n"][-1], abs=1e-12)
     assert m["unload_force_n"][0] >= p.force_limit and m["unload_force_n"][-1] <= 0.01 * p.force_limit
     assert -step <= m["residual_set_m"] <= m["max_displacement_m"] + step
-    assert m["residual_set_m"] < 0.5 * m["max_displacement_m"]
     assert m["residual_set_ratio"] == pytest.approx(m["residual_set_m"] / m["fill_height_m"])
     assert m["unloading_stiffness_n_m"] > m["max_force_n"] / m["max_displacement_m"]
     assert m["loading_exponent"] > 1.0
@@ -1065,7 +1096,14 @@ def test_checkpoint_of_another_format_is_not_resumed(tmp_path):
     solver = wd.Solver(model)
     state, contacts = model.state(), solver.contacts()
     state = solver.run(state, contacts, 50)
-    book = {"impulse_prev": np.zeros(3), "phase_snap": [], "series": {}, "t_prev": 0.0, "settled_since": 0}
+    book = {
+        "impulse_prev": np.zeros(3),
+        "phase_snap": [],
+        "series": {},
+        "t_prev": 0.0,
+        "settled_since": 0,
+        "dt_state": solver.dt_state(),
+    }
     path = tmp_path / "checkpoint.npz"
     runner._save_checkpoint(path, "run", state, contacts, book)
 
@@ -1075,6 +1113,7 @@ def test_checkpoint_of_another_format_is_not_resumed(tmp_path):
 
     got, fresh, _ = load()
     assert got is not None and np.array_equal(fresh.sphere_x.numpy(), state.sphere_x.numpy())
+    assert got["dt_state"] == solver.dt_state()
 
     with np.load(path) as z:
         arrays = {k: z[k] for k in z.files}

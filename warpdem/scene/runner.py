@@ -11,6 +11,7 @@ import dataclasses
 import json
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -161,6 +162,8 @@ def scene_solver(model, run, skin: float | None = None):
             clump_contact_mass=run.clump_contact_mass,
             skin_fraction=run.skin_fraction,
             skin=skin,
+            dt_margin=run.dt_margin,
+            dt_levels=int(run.dt_levels),
         ),
     )
     # a compacted bed (die press) or glued layers hold more partners per sphere than a loose packing
@@ -233,7 +236,16 @@ def run_scene(
     packing_time = m.packing_time if m.kind == "angle_of_repose" and m.packing_time > 0 else None
     phase_snap = []
     # tick_wall_s and rebuilds say where the wall time of a long run went (a dense pile, a flowing stream)
-    series = {"time": [], "kinetic_energy": [], "wall_force": [], "tick_wall_s": [], "rebuilds": []}
+    # dt_s and step_margin: the step each tick ran at and the fraction of the stable step it used (SolverOptions)
+    series = {
+        "time": [],
+        "kinetic_energy": [],
+        "wall_force": [],
+        "tick_wall_s": [],
+        "rebuilds": [],
+        "dt_s": [],
+        "step_margin": [],
+    }
     if piston is not None:
         series.update(piston_z=[], piston_force=[], bed_top=[])
     impulse_prev = state.wall_impulse.numpy().copy()
@@ -254,6 +266,7 @@ def run_scene(
         if book is not None:
             series, impulse_prev, t_prev = book["series"], book["impulse_prev"], book["t_prev"]
             phase_snap = book["phase_snap"]
+            solver.restore_dt_state(book["dt_state"])
             if settle is not None:
                 settle.streak = book["settled_since"]
             resumed_from = state.time
@@ -277,6 +290,8 @@ def run_scene(
         rebuilds, rebuilds_total = solver.rebuild_count - rebuilds_total, solver.rebuild_count
         series["tick_wall_s"].append(time.perf_counter() - t_tick)
         series["rebuilds"].append(rebuilds)
+        series["dt_s"].append(solver.dt)
+        series["step_margin"].append(solver.step_margin)
         imp = state.wall_impulse.numpy()
         force = (imp - impulse_prev) / max(t - t_prev, 1e-300)
         impulse_prev, t_prev = imp.copy(), t
@@ -347,6 +362,7 @@ def run_scene(
                     "t_prev": t_prev,
                     "phase_snap": phase_snap,
                     "settled_since": settle.streak if settle is not None else 0,
+                    "dt_state": solver.dt_state(),
                 },
             )
             t_ckpt = time.perf_counter()
@@ -403,7 +419,9 @@ def run_scene(
         "spheres": model.sphere_count,
         "clumps": model.clump_count,
         "glued_spheres": model.attached_count,
-        "dt_s": solver.dt,
+        "dt_s": solver.dt_base,
+        "dt_range_s": [min(series["dt_s"], default=solver.dt), max(series["dt_s"], default=solver.dt)],
+        "step_margin_max": solver.step_margin_max,
         "steps": state.step,
         "simulated_s": state.time,
         "wall_s": wall_s,
@@ -414,6 +432,14 @@ def run_scene(
         "tick_wall_s": list(series.get("tick_wall_s", [])),
         "tick_rebuilds": list(series.get("rebuilds", [])),
     }
+    if solver.step_margin_max > 1.0:
+        # leapfrog was unstable in some tick: say so where the figures are read, not only on stderr
+        info["step_warning"] = (
+            f"the step reached {solver.step_margin_max:.2f} of the stable step of the stiffest contact (stable "
+            f"below 1; dt {min(series['dt_s']):.3g} to {max(series['dt_s']):.3g} s, dt_levels "
+            f"{solver.options.dt_levels}): figures from those ticks are not to be trusted; lower run.dt_fraction"
+        )
+        warnings.warn(info["step_warning"], stacklevel=2)
     result = RunResult(metrics, info, series)
     if out is not None:
         files = {}
@@ -451,9 +477,9 @@ def _fingerprint(spec, device, world_count, variations, world_seeds) -> str:
     return hashlib.sha1(text.encode()).hexdigest()
 
 
-CHECKPOINT_FORMAT = 4
+CHECKPOINT_FORMAT = 5
 """Version of the arrays a checkpoint holds (4: contact history in the slot type of ``StepFeatures.history_type``;
-live masks of the neighbour and plane slots).
+live masks of the neighbour and plane slots; 5: the solver's step level, ``Solver.dt_state``).
 A checkpoint of another version, or one whose history slot has another layout, belongs to other code: the run
 starts afresh instead of resuming from it."""
 
@@ -498,6 +524,7 @@ def _save_checkpoint(path: Path, fingerprint: str, state, contacts, book: dict) 
         "series": book["series"],
         "t_prev": book["t_prev"],
         "settled_since": book["settled_since"],
+        "dt_state": book["dt_state"],
         "snaps": len(book["phase_snap"]),
     }
     arrays["meta"] = np.frombuffer(json.dumps(meta, default=_json_default).encode(), dtype=np.uint8)
@@ -535,7 +562,9 @@ def _load_checkpoint(path: Path, fingerprint: str, state, contacts) -> dict | No
         }
     state.time, state.step, state.half_step = meta["time"], meta["step"], meta["half_step"]
     state.released = {int(f): v for f, v in meta["released"].items()}
-    book.update(series=meta["series"], t_prev=meta["t_prev"], settled_since=meta["settled_since"])
+    book.update(
+        series=meta["series"], t_prev=meta["t_prev"], settled_since=meta["settled_since"], dt_state=meta["dt_state"]
+    )
     return book
 
 

@@ -39,7 +39,7 @@ import numpy as np
 from warpdem.engine.checks import check, did_you_mean, enum_value, number_fields
 from warpdem.engine.keys import KeyGrammar
 from warpdem.engine.materials import INTERACTION_ENUMS, INTERACTION_FIELDS, MATERIAL_SCALARS, Interaction, Material
-from warpdem.engine.solver import CLUMP_CONTACT_MASSES
+from warpdem.engine.solver import CLUMP_CONTACT_MASSES, SolverOptions
 
 TIME_CODES_PER_SECOND = 100.0
 NS = "warpdem:"
@@ -115,8 +115,10 @@ class RunSpec:
     """Run settings: ``duration`` [s]; ``dt_fraction`` of the Rayleigh time; a run stops early once the mean
     kinetic energy per particle stays below ``settle_energy`` [J] (0: never) for three outputs after
     ``settle_after`` [s] with every factory done; ``output_interval`` [s] between frames;
-    ``impact_speed_min`` [m/s], ``clump_contact_mass`` ("shared" or "body", a token in USD) and
-    ``skin_fraction`` (the Verlet skin over the smallest radius) as in SolverOptions."""
+    ``impact_speed_min`` [m/s], ``clump_contact_mass`` ("shared" or "body", a token in USD),
+    ``skin_fraction`` (the Verlet skin over the smallest radius), ``dt_margin`` (the fraction of the stiffest
+    contact's stable step a step may use) and ``dt_levels`` (how often the step may halve to keep it) as in
+    SolverOptions."""
 
     duration: float = 1.0
     dt_fraction: float = 0.2
@@ -126,6 +128,8 @@ class RunSpec:
     impact_speed_min: float = 0.05
     clump_contact_mass: str = "shared"
     skin_fraction: float = 0.4
+    dt_margin: float = 0.5
+    dt_levels: int = 6
 
 
 @dataclass
@@ -651,6 +655,12 @@ def read_stage(path_or_stage) -> SceneSpec:
             NS + "run:skinFraction",
             f"= {run.skin_fraction} is not allowed; expected a fraction of the smallest radius > 0",
         )
+
+    for f in ("dt_margin", "dt_levels"):
+        try:
+            SolverOptions(**{f: getattr(run, f)})
+        except ValueError as e:
+            r.fail(world, NS + "run:" + _camel(f), f"= {getattr(run, f)} is not allowed; {str(e).split('; ', 1)[1]}")
 
     lo = r.get(world, NS + "domainMin", "vec3", required=False)
     hi = r.get(world, NS + "domainMax", "vec3", required=False)
