@@ -291,11 +291,15 @@ def step_max_registers(features: StepFeatures) -> int | None:
     """Register cap of the step kernel on CUDA (``__maxnreg__``; None: the compiler's choice) for ``features``.
 
     A cap trades spills for occupancy, and the kernel issues instructions more than it waits on memory since
-    fast math. Measured on an H100 (sphere-steps/s, blocks of 128): plain spheres 3.05e9 uncapped against
-    2.90e9 at 72 and 2.78e9 at 64; the 8-sphere clump bed, whose mass tables and clump branches need more
-    registers, 2.12e9 at 72 against 2.07e9 at 64, 2.09e9 at 80 and 1.47e9 uncapped (two blocks per SM).
+    fast math. Measured on an H100 (sphere-steps/s, blocks of 128, the 1 M bench beds), with the stable-step
+    tracking (SolverOptions.dt_margin): plain Hertz-Mindlin spheres 3.03e9 at 80 against 2.86e9 uncapped, 2.81e9
+    at 96 and 2.51e9 at 128; the cohesive laws' kernel, whose law dispatch needs more registers, JKR 3.20e9 at 96
+    against 3.11e9 at 80 and 2.73e9 uncapped, EEPA 2.98e9 at 96 against 2.66e9 uncapped; the 8-sphere clump bed
+    (before the tracking) 2.12e9 at 72 against 2.07e9 at 64, 2.09e9 at 80 and 1.47e9 uncapped.
     """
-    return 72 if features.clumps else None
+    if features.clumps:
+        return 72
+    return 96 if features.cohesive_laws else 80
 
 
 @functools.cache
