@@ -1152,7 +1152,11 @@ def press_unload(
     where the loading force first rises through ``contact_fraction`` of its maximum and where the unloading
     force falls through it again (linear between samples; the same rule on both branches, so that the
     particles the bar meets first do not count), also as a ratio of ``fill_height``: the permanent compaction.
-    An elastic bed returns to (nearly) zero set; a plastic one does not.
+    An elastic bed returns to (nearly) zero set; a plastic one does not. The reading is the set at the threshold
+    force, not at zero: a plastic bed's loading branch crosses it at ``contact_fraction``^(1/n) of its stroke while
+    the unloading branch crosses much nearer its zero-force end, so the reading is below the zero-force set (a
+    column of EEPA contacts, lambda_p 0.5, n 1.5: 18 % below at 0.05, 7 % at 0.01;
+    tests/verification/test_column_press.py predicts both exactly).
 
     Args:
         load_z, load_force: piston height [m] and force [N] of the loading branch, shape (k,), z non-increasing.
