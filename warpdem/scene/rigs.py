@@ -227,6 +227,19 @@ def _plate_pairs(p, particle: str, wall: str, particle_wall: Interaction) -> tup
     ]
 
 
+def _sphere_pair(restitution: float, static_friction: float, rolling_friction: float, surface_energy: float = 0.0):
+    """A contact of spheres with EPSD rolling resistance (spheres need it to rest in a pile): Hertz-Mindlin, or JKR
+    when ``surface_energy`` [J/m^2] > 0 (a rig's cohesion switch)."""
+    return Interaction(
+        restitution=restitution,
+        static_friction=static_friction,
+        rolling_friction=rolling_friction,
+        rolling_model=RollingModel.EPSD,
+        law=ContactLaw.JKR if surface_energy > 0 else ContactLaw.HERTZ_MINDLIN,
+        surface_energy=surface_energy,
+    )
+
+
 def _pour(name: str, region: tuple, material: str, shape: str, radius: float, spread: float, **kw) -> FactorySpec:
     """A dynamic factory releasing particles of ``radius`` [m] (relative SD ``spread``) into ``region`` in
     batches every POUR_INTERVAL; ``kw``: count or mass, rate, seed, initial_velocity as in FactorySpec."""
@@ -321,17 +334,8 @@ class Funnel:
             # seed 001: wet-sticky feed as spheres, calibrated optimum; JKR when surface_energy > 0
             grain = Material("grain", density=440.0, poisson_ratio=0.25, shear_modulus=10.0e6)
             # spheres need the elastic-plastic spring-dashpot rolling model to rest in a pile
-            law = ContactLaw.JKR if self.surface_energy > 0 else ContactLaw.HERTZ_MINDLIN
-            epsd = RollingModel.EPSD
-            pp = Interaction(
-                restitution=0.15,
-                static_friction=0.51,
-                rolling_friction=0.21,
-                rolling_model=epsd,
-                law=law,
-                surface_energy=self.surface_energy,
-            )
-            pw = Interaction(restitution=0.1, static_friction=0.45, rolling_friction=0.2, rolling_model=epsd)
+            pp = _sphere_pair(0.15, 0.51, 0.21, self.surface_energy)
+            pw = _sphere_pair(0.1, 0.45, 0.2)
         cone_h = geo.funnel_height(self.top_diameter, self.outlet_diameter, self.cone_angle)
         top_z = self.outlet_height + self.stem_length + cone_h
         fv, ft = geo.funnel(
@@ -909,17 +913,8 @@ class RotatingDrum:
 
     def spec(self) -> SceneSpec:
         r, R, W = self.particle_radius, self.inner_diameter / 2, self.width
-        ct = RollingModel.EPSD
-        law = ContactLaw.JKR if self.surface_energy > 0 else ContactLaw.HERTZ_MINDLIN
-        pp = Interaction(
-            restitution=0.6,
-            static_friction=0.4,
-            rolling_friction=0.02,
-            rolling_model=ct,
-            law=law,
-            surface_energy=self.surface_energy,
-        )
-        pw = Interaction(restitution=0.6, static_friction=0.6, rolling_friction=0.02, rolling_model=ct)
+        pp = _sphere_pair(0.6, 0.4, 0.02, self.surface_energy)
+        pw = _sphere_pair(0.6, 0.6, 0.02)
         pwin = (
             pw
             if self.window_static_friction < 0
