@@ -551,6 +551,31 @@ def test_press_unload_reads_back_a_synthetic_cycle(adhesive):
     assert got["max_displacement_m"] == pytest.approx(d_max)
 
 
+def test_press_unload_pairs_interval_means_with_their_middles():
+    """An elastic bed, F = k d^1.5 on the way down and back along the same curve (no set), sampled as a scene run
+    samples it: each force the mean over an output interval (exact: k (b^2.5 - a^2.5) / (2.5 (b - a)) over the
+    interval's travel a..b), at the interval's end height. Paired with the middles (``interval_means``) the set
+    reads zero to second order in the interval (the mean of a convex curve sits above its middle value; below
+    5 % of the interval's travel h here, h = d_max / 40); paired with the ends it reads one interval low."""
+    zc, fill, k, d_max = 0.01, 0.01, 2.0e5, 2.0e-3
+    edges = np.linspace(0.0, d_max, 41)
+    h = edges[1] - edges[0]
+
+    def means(a, b):
+        return k * (b**2.5 - a**2.5) / (2.5 * (b - a))
+
+    f_load = means(edges[:-1], edges[1:])
+    back = edges[::-1]
+    f_back = means(back[1:], back[:-1])
+    load_z = zc - edges[1:]
+    unload_z = np.concatenate([[load_z[-1]], zc - back[1:]])
+    unload_f = np.concatenate([[f_load[-1]], f_back])
+    mid = press_unload(load_z, f_load, unload_z, unload_f, contact_z=zc, fill_height=fill, interval_means=True)
+    end = press_unload(load_z, f_load, unload_z, unload_f, contact_z=zc, fill_height=fill)
+    assert abs(mid["residual_set_m"]) < 0.05 * h
+    assert end["residual_set_m"] == pytest.approx(-h, rel=0.05)
+
+
 def test_press_unload_refuses_a_retraction_that_moves_down():
     z = np.array([0.01, 0.009, 0.008])
     f = np.array([0.0, 1.0, 2.0])

@@ -1141,7 +1141,14 @@ def press_summary(
 
 
 def press_unload(
-    load_z, load_force, unload_z, unload_force, contact_z: float, fill_height: float, contact_fraction: float = 0.05
+    load_z,
+    load_force,
+    unload_z,
+    unload_force,
+    contact_z: float,
+    fill_height: float,
+    contact_fraction: float = 0.05,
+    interval_means: bool = False,
 ) -> dict:
     """The unloading branch of a press cycle against its loading branch.
 
@@ -1156,7 +1163,12 @@ def press_unload(
     force, not at zero: a plastic bed's loading branch crosses it at ``contact_fraction``^(1/n) of its stroke while
     the unloading branch crosses much nearer its zero-force end, so the reading is below the zero-force set (a
     column of EEPA contacts, lambda_p 0.5, n 1.5: 18 % below at 0.05, 7 % at 0.01;
-    tests/verification/test_column_press.py predicts both exactly).
+    tests/verification/test_column_press.py predicts both exactly). With ``interval_means`` each force is the mean
+    over the interval that ends at its height (a scene run's outputs): for the set it is paired with the middle of
+    that interval, its height and the one before (the first sample of a branch keeps its own); paired with the end
+    instead, each branch reads half an interval of travel late, in opposite directions, and the set one interval
+    of travel low. The loading exponent uses the middles too; the unloading stiffness the ends (a line's slope
+    does not move with a shift, and the middles would put the turning point's two samples at one height).
 
     Args:
         load_z, load_force: piston height [m] and force [N] of the loading branch, shape (k,), z non-increasing.
@@ -1165,6 +1177,7 @@ def press_unload(
         contact_z: the piston height at first contact [m], the origin of the displacements; fill_height: the
             loose fill's height [m], > 0.
         contact_fraction: the force that counts as contact, as a fraction of the largest loading force, in (0, 1).
+        interval_means: the forces are means over the intervals ending at their heights (see above).
 
     Returns:
         dict with ``loading_exponent``, ``unloading_stiffness_n_m`` [N/m], ``residual_set_m`` [m] and
@@ -1183,8 +1196,13 @@ def press_unload(
     if not 0 < contact_fraction < 1:
         _bad("contact_fraction", contact_fraction, "a fraction of the largest force in (0, 1)")
     ld, ud = zc - lz, zc - uz
-    upper = (lf >= 0.2 * lf.max()) & (ld > 0)
-    exponent = float(np.polyfit(np.log(ld[upper]), np.log(lf[upper]), 1)[0]) if upper.sum() >= 2 else None
+    # interval means pair with their intervals' middles: for the set and the log-log exponent (a shift moves
+    # neither the unloading line's slope nor, at constant speed, anything else the fits use)
+    ls, us = ld, ud
+    if interval_means:
+        ls, us = (np.r_[d[:1], 0.5 * (d[1:] + d[:-1])] for d in (ld, ud))
+    upper = (lf >= 0.2 * lf.max()) & (ls > 0)
+    exponent = float(np.polyfit(np.log(ls[upper]), np.log(lf[upper]), 1)[0]) if upper.sum() >= 2 else None
     # the retraction starts at the last sample at the stop's height (after any hold)
     moving = np.flatnonzero(uz > uz[0] + tol)
     start = int(moving[0]) - 1 if moving.size else len(uz) - 1
@@ -1200,8 +1218,8 @@ def press_unload(
     fall = np.flatnonzero(uf[start:] <= threshold)
     if rise.size and rise[0] > 0 and fall.size and f0 > threshold:
         i, j = int(rise[0]), start + int(fall[0])
-        d_on = ld[i - 1] + (ld[i] - ld[i - 1]) * (threshold - lf[i - 1]) / (lf[i] - lf[i - 1])
-        d_off = ud[j - 1] + (ud[j] - ud[j - 1]) * (uf[j - 1] - threshold) / (uf[j - 1] - uf[j])
+        d_on = ls[i - 1] + (ls[i] - ls[i - 1]) * (threshold - lf[i - 1]) / (lf[i] - lf[i - 1])
+        d_off = us[j - 1] + (us[j] - us[j - 1]) * (uf[j - 1] - threshold) / (uf[j - 1] - uf[j])
         residual = float(d_off - d_on)
     return {
         "loading_exponent": exponent,

@@ -717,7 +717,13 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
     )
     if stop is not None:
         cycle = ms.press_unload(
-            z - m.backstop_height, f, z_all[stop:] - m.backstop_height, f_all[stop:], contact_z=fill, fill_height=fill
+            z - m.backstop_height,
+            f,
+            z_all[stop:] - m.backstop_height,
+            f_all[stop:],
+            contact_z=fill,
+            fill_height=fill,
+            interval_means=True,
         )
         out.update(
             {k: v for k, v in cycle.items() if not k.startswith("unload_") and k != "max_displacement_m"},
