@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from warpdem.kernels.law_hertz_mindlin import stable_factors
+from warpdem.kernels.law_hertz_mindlin import SQRT_5_6, stable_factors
 from warpdem.kernels.params import PairParams
 
 from .checks import check, check_number, enum_value, number_fields
@@ -196,9 +196,9 @@ class Interaction:
     @property
     def dashpot_factor(self) -> float:
         """damp [-] of the pair's dashpots c = damp sqrt(S m*): -2 sqrt(5/6) beta (Tsuji, as Hertz-Mindlin, JKR
-        and non-linear EEPA apply it), -2 beta for linear EEPA (n = 1)."""
+        and non-linear EEPA apply it), -2 beta for linear EEPA (n = 1; law_eepa.eepa_damping_coefficient)."""
         linear = self.law == ContactLaw.EEPA and self.slope_exponent == 1.0
-        return -2.0 * self.beta * (1.0 if linear else math.sqrt(5.0 / 6.0))
+        return -2.0 * self.beta * (1.0 if linear else float(SQRT_5_6))
 
     @property
     def beta(self) -> float:

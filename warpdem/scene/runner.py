@@ -75,6 +75,11 @@ def _particle_mask(state, h, world: int) -> np.ndarray:
     return state.sphere_active.numpy().astype(bool) & (h["glued"] < 0) & (h["world"] == world)
 
 
+def _mean_diameter(h, world: int) -> float:
+    """Mean diameter [m] of ``world``'s free particle spheres."""
+    return 2.0 * float(np.mean(h["radius"][(h["world"] == world) & h["free"]]))
+
+
 def _particles(model, state, h, world: int):
     """Centres (n, 3) and radii (n,) of the active particle spheres (glued ones excluded) of ``world``."""
     sel = _particle_mask(state, h, world)
@@ -412,6 +417,7 @@ def run_scene(
         elif m.kind == "drum":
             mw.update(_drum_metrics(series, h, w))
         metrics.append(mw)
+    dt_range = [min(series["dt_s"], default=solver.dt), max(series["dt_s"], default=solver.dt)]
     info = {
         "rig": spec.rig,
         "device": str(device),
@@ -420,7 +426,7 @@ def run_scene(
         "clumps": model.clump_count,
         "glued_spheres": model.attached_count,
         "dt_s": solver.dt_base,
-        "dt_range_s": [min(series["dt_s"], default=solver.dt), max(series["dt_s"], default=solver.dt)],
+        "dt_range_s": dt_range,
         "step_margin_max": solver.step_margin_max,
         "steps": state.step,
         "simulated_s": state.time,
@@ -436,7 +442,7 @@ def run_scene(
         # leapfrog was unstable in some tick: say so where the figures are read, not only on stderr
         info["step_warning"] = (
             f"the step reached {solver.step_margin_max:.2f} of the stable step of the stiffest contact (stable "
-            f"below 1; dt {min(series['dt_s']):.3g} to {max(series['dt_s']):.3g} s, dt_levels "
+            f"below 1; dt {dt_range[0]:.3g} to {dt_range[1]:.3g} s, dt_levels "
             f"{solver.options.dt_levels}): figures from those ticks are not to be trusted; lower run.dt_fraction"
         )
         warnings.warn(info["step_warning"], stacklevel=2)
@@ -644,7 +650,7 @@ def _drum_metrics(series, h, w: int) -> dict:
     frames = [tick[w] for tick in series.get("drum", [])]
     good = [f for f in frames if "angle_deg" in f]
     out = {"frames": len(good), "frame_errors": len(frames) - len(good)}
-    d = 2.0 * float(np.mean(h["radius"][(h["world"] == w) & h["free"]]))
+    d = _mean_diameter(h, w)
     try:
         got = ms.drum_metrics(good, d)
     except ValueError as e:
@@ -700,7 +706,7 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
     # the curve starts where the summary's displacement does: the piston at the loose bed's top
     curve = ms.press_curve(z - m.backstop_height, f, contact_z=fill)
     mat = model.materials[int(h["material"][h["world"] == w][0])]
-    d = 2.0 * float(np.mean(h["radius"][(h["world"] == w) & h["free"]]))
+    d = _mean_diameter(h, w)
     area = math.pi * _piston_radius(model, m.piston) ** 2
     t = np.asarray(series["time"])[: len(z)]
     speed = np.abs(np.gradient(z, t)) if len(z) > 2 else np.zeros_like(z)
