@@ -278,3 +278,20 @@ def test_two_processes_stop_and_resume(finished, tmp_path):
         rec = json.loads((out2 / "runs" / f"{pid}.json").read_text())
         assert 0 < rec["info"]["resumed_from_s"] < 0.3
     assert list(execute.load_results(out1, study)["height"]) == list(execute.load_results(out2, study)["height"])
+
+
+def test_press_runs_one_world_per_launch(tmp_path):
+    """The press's bar is one wall for all batched worlds (its force sums theirs, its force limit turns all their
+    strokes at once): a press study splits into single-world launches, and run_scene refuses to batch one."""
+    from warpdem.scene import rigs
+    from warpdem.scene.runner import run_scene
+
+    text = STUDY.format(batch=0, target=0.0, verify=0).replace('rig = "funnel"', 'rig = "die_press"')
+    text = text.replace("count = 40\nduration = 0.3\n", "").replace("pile_height_m", "residual_set_ratio")
+    path = tmp_path / "press.toml"
+    path.write_text(text)
+    study = load_study(path, check_scene=False)
+    rows = [{"overrides": execute.sp.run_overrides(study, r)} for _, r in execute.sp.design_table(study).iterrows()]
+    assert [len(b) for b in execute._batches(study, rows)] == [1] * len(rows)
+    with pytest.raises(ValueError, match="world_count = 2 is not allowed for a 'press' measurement"):
+        run_scene(rigs.spec("die_press", smoke=True), world_count=2, frames=False)

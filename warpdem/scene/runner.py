@@ -176,6 +176,18 @@ def scene_solver(model, run, skin: float | None = None):
     return solver
 
 
+SHARED_WALL_MEASURES = ("press",)
+"""Measure kinds read from a wall's force and motion, which the batched worlds share: the bar's force is the
+sum over the worlds, and its force limit turns the stroke of all of them at once. Such a scene runs one world
+per launch."""
+
+
+def independent_worlds(spec: SceneSpec) -> bool:
+    """True when the batched worlds of ``spec`` measure independently (its measure kind is not in
+    :data:`SHARED_WALL_MEASURES`)."""
+    return spec.measure.kind not in SHARED_WALL_MEASURES
+
+
 def run_scene(
     spec: SceneSpec,
     device: str = "cpu",
@@ -211,6 +223,11 @@ def run_scene(
         RunResult with one metrics dict per world.
     """
     check_stop_after(stop_after, out_dir, frames)
+    if world_count > 1 and not independent_worlds(spec):
+        raise ValueError(
+            f"run_scene: world_count = {world_count} is not allowed for a {spec.measure.kind!r} measurement; "
+            "expected 1 (its worlds would share the wall it is read from)"
+        )
     t_wall0 = time.perf_counter()
     builder = build(spec, world_count, variations, world_seeds)
     model = builder.finalize(device)

@@ -102,14 +102,20 @@ def parse_devices(device: str) -> list[str]:
 
 
 def _batches(study: sp.StudySpec, rows: list[dict], parts: int = 1) -> list[list[dict]]:
-    """Runs grouped by what they must share (scene, rig parameters), each group cut to ``study.batch``;
+    """Runs grouped by what they must share (scene, rig parameters), each group cut to ``study.batch``
+    (to single runs where the worlds would share the wall they are measured by, ``runner.independent_worlds``);
     with ``parts`` > 1 (devices) each group is also cut into at least ``parts`` launches (as many as it has
     runs at most), their sizes differing by one at most."""
+    from warpdem.scene.runner import independent_worlds
+
     groups: dict[tuple, list[dict]] = {}
     for row in rows:
         groups.setdefault(sp.batch_key(study, row["overrides"]), []).append(row)
     out = []
     for g in groups.values():
+        if not independent_worlds(_scene(study, g[0]["overrides"])):
+            out += [[r] for r in g]
+            continue
         if parts <= 1:
             size = study.batch or len(g)
             out += [g[i : i + size] for i in range(0, len(g), size)]
