@@ -301,10 +301,12 @@ def _run_parallel(
     checkpoint_every: float,
     stop_after: float,
     log,
+    on_done=None,
 ) -> str | None:
     """Run ``batches`` over ``devices`` at once, one spawned process per device that has work; every finished
     launch is saved by its process as it ends. A failing device does not stop the others: its error is
-    raised once they are done. Returns the stop message(s), or None."""
+    raised once they are done. ``on_done(study, out)`` runs once every device has stopped (default: rewrite
+    results.csv). Returns the stop message(s), or None."""
     import multiprocessing as mp
     import queue as queue_mod
     from concurrent.futures import ProcessPoolExecutor
@@ -352,7 +354,7 @@ def _run_parallel(
                 results[i] = f.result()
             except Exception as e:  # kept, raised after every device has finished
                 errors.append((plan[i][0], e))
-    _results_csv(study, out)
+    (on_done or _results_csv)(study, out)
     for (d, bs), r in zip(plan, results):
         if r is not None and r["walls"]:
             log(f"{study.name}: {d}: " + ", ".join(f"{len(b)} worlds in {w:.1f} s" for b, w in zip(bs, r["walls"])))

@@ -141,6 +141,7 @@ __all__ = [
     "check_scene_overrides",
     "design_table",
     "load_study",
+    "point_key",
     "run_overrides",
     "varies_per_world",
 ]
@@ -1029,9 +1030,15 @@ def _canon(v):
 
 
 def _point_id(spec: StudySpec, row) -> str:
+    return point_key(spec, run_overrides(spec, row), int(row["world_seed"]))
+
+
+def point_key(spec: StudySpec, overrides: Mapping, world_seed: int) -> str:
+    """The identity of one simulated world: a short sha1 of the scene (rig and smoke, or the stage path as
+    written), its ``overrides`` (numbers to 12 significant digits) and its ``world_seed``."""
     scene = {"rig": spec.rig, "smoke": spec.smoke} if spec.rig is not None else {"scene": spec.scene}
-    ov = {k: _canon(v) for k, v in run_overrides(spec, row).items()}
-    text = json.dumps({"scene": scene, "overrides": ov, "world_seed": int(row["world_seed"])}, sort_keys=True)
+    ov = {k: _canon(v) for k, v in overrides.items()}
+    text = json.dumps({"scene": scene, "overrides": ov, "world_seed": int(world_seed)}, sort_keys=True)
     return hashlib.sha1(text.encode()).hexdigest()[:12]
 
 
