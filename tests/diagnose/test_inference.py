@@ -1,0 +1,126 @@
+"""Statistics of warpdem.diagnose.inference against answers known in closed form or from the libraries."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from warpdem.diagnose import inference as inf
+
+# --------------------------------------------------------------------------------------------
+# space_filling
+# --------------------------------------------------------------------------------------------
+
+
+def test_space_filling_is_a_seeded_latin_hypercube():
+    """Shape (n, d), inside the unit cube, exactly one point in each of the n strata of every dimension
+    (the Latin-hypercube property, which the random-cd optimisation must keep), and the same seed gives the
+    same points while another seed does not."""
+    n, d = 23, 4
+    X = inf.space_filling(n, d, seed=3)
+    assert X.shape == (n, d)
+    assert np.all((X >= 0) & (X < 1))
+    for j in range(d):
+        assert np.array_equal(np.sort(np.floor(n * X[:, j]).astype(int)), np.arange(n))
+    assert np.array_equal(X, inf.space_filling(n, d, seed=3))
+    assert not np.allclose(X, inf.space_filling(n, d, seed=4))
+
+
+# --------------------------------------------------------------------------------------------
+# Surrogate
+# --------------------------------------------------------------------------------------------
+
+NOISE = 0.05
+
+
+def _smooth(X: np.ndarray) -> np.ndarray:
+    return np.sin(3.0 * X[:, 0]) + 2.0 * (X[:, 1] - 0.5) ** 2
+
+
+@pytest.fixture(scope="module")
+def noisy_fit():
+    X = inf.space_filling(60, 2, seed=0)
+    y = _smooth(X) + NOISE * np.random.default_rng(1).standard_normal(60)
+    return X, y, inf.Surrogate(seed=0).fit(X, y)
+
+
+def test_surrogate_predicts_a_smooth_function_within_its_sd(noisy_fit):
+    """sin + quadratic in 2-D with noise of SD 0.05 on a 60-point design: at 200 held-out points the
+    latent mean is closer to the truth than one noise SD (RMS), the truth lies within 3 predictive SD at
+    >= 90 % of them, and the SD excludes the white noise (it is well below the noise SD in the interior)."""
+    _, _, s = noisy_fit
+    Xt = inf.space_filling(200, 2, seed=99)
+    mean, sd = s.predict(Xt)
+    err = mean - _smooth(Xt)
+    assert mean.shape == sd.shape == (200,)
+    assert math.sqrt(np.mean(err**2)) < NOISE
+    assert np.mean(np.abs(err) < 3 * sd) >= 0.9
+    assert np.median(sd) < 0.7 * NOISE
+
+
+def test_surrogate_noise_and_cross_validation(noisy_fit):
+    """The fitted white-noise SD is within a factor 1.5 of the true 0.05; K-fold cross-validated RMSE of a
+    noisy observation is about the noise SD (the surrogate error adds a little); Q^2 near 1 for a function
+    whose range (~1.3) dwarfs the noise."""
+    _, y, s = noisy_fit
+    assert NOISE / 1.5 < s.noise_sd < 1.5 * NOISE
+    cv = s.cv()
+    assert cv["folds"] == inf.KFOLD
+    assert NOISE / 1.5 < cv["rmse"] < 1.5 * NOISE
+    assert cv["q2"] > 0.95
+    assert cv["rmse_range"] == pytest.approx(cv["rmse"] / np.ptp(y))
+
+
+def test_surrogate_leave_one_out_matches_closed_form():
+    """With the hyperparameters fixed, leave-one-out residuals of a GP are [K^-1 z]_i / [K^-1]_ii
+    (Rasmussen & Williams 2006, eq. 5.12), with K the fitted kernel (white noise included) on the
+    standardised y: the refitting cross-validation on 25 points must reproduce that RMSE and Q^2."""
+    X = inf.space_filling(25, 3, seed=7)
+    y = 4.0 + X[:, 0] - np.cos(2 * X[:, 1]) + 0.1 * np.random.default_rng(2).standard_normal(25)
+    s = inf.Surrogate(seed=1).fit(X, y)
+    cv = s.cv()
+    assert cv["folds"] == 25
+    Kinv = np.linalg.inv(s.kernel(X))
+    z = (y - y.mean()) / y.std()
+    e = y.std() * (Kinv @ z) / np.diag(Kinv)
+    assert cv["rmse"] == pytest.approx(math.sqrt(np.mean(e**2)), rel=1e-6)
+    assert cv["q2"] == pytest.approx(1 - np.sum(e**2) / np.sum((y - y.mean()) ** 2), rel=1e-6)
+
+
+def test_surrogate_takes_replicates_and_drops_failed_runs():
+    """World-seed replicates (each of 20 design points run 3 times, noise SD 0.05) pin the noise: its
+    estimate is within 25 %; cross-validation leaves out whole design points (20 folds). Non-finite y
+    (failed simulations) are dropped with their X: the fit equals the fit without those rows."""
+    X = np.repeat(inf.space_filling(20, 2, seed=5), 3, axis=0)
+    y = _smooth(X) + NOISE * np.random.default_rng(3).standard_normal(60)
+    s = inf.Surrogate(seed=0).fit(X, y)
+    assert NOISE / 1.25 < s.noise_sd < 1.25 * NOISE
+    assert s.cv()["folds"] == 20
+
+    y_failed = y.copy()
+    y_failed[[4, 17, 30]] = [np.nan, np.inf, np.nan]
+    keep = np.isfinite(y_failed)
+    a = inf.Surrogate(seed=0).fit(X, y_failed)
+    b = inf.Surrogate(seed=0).fit(X[keep], y[keep])
+    Xt = inf.space_filling(10, 2, seed=6)
+    assert a.X.shape == (57, 2)
+    np.testing.assert_allclose(a.predict(Xt), b.predict(Xt))
+
+
+def test_surrogate_of_a_constant_response():
+    """A response that does not vary (e.g. a clamped output) is predicted as that constant with zero SD
+    and zero noise; cross-validation is exact."""
+    X = inf.space_filling(12, 3, seed=0)
+    s = inf.Surrogate().fit(X, np.full(12, 2.5))
+    mean, sd = s.predict(inf.space_filling(5, 3, seed=1))
+    assert np.array_equal(mean, np.full(5, 2.5)) and np.array_equal(sd, np.zeros(5))
+    assert s.noise_sd == 0.0
+    assert s.cv() == {"rmse": 0.0, "q2": 1.0, "rmse_range": 0.0, "folds": 0}
+
+
+def test_surrogate_rejects_points_outside_the_unit_cube():
+    """The surrogate lives on the unit cube; physical parameter values are a caller's mistake."""
+    with pytest.raises(ValueError, match="unit cube"):
+        inf.Surrogate().fit(np.array([[0.1, 0.2], [1.5, 0.3], [0.4, 0.9]]), np.array([1.0, 2.0, 3.0]))
