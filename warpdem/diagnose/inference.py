@@ -9,6 +9,7 @@ units) and on plain arrays; nothing here runs a simulation.
 ``space_filling``  a seeded, optimised Latin hypercube: where to simulate.
 ``Surrogate``      one Gaussian process per (condition, response) over the unit cube, with its noise
                    (world-seed scatter) and a cross-validated accuracy.
+``calibrate``      MAP (multi-start L-BFGS-B) and posterior samples (emcee) of theta given measured means.
 
 Every random choice takes a seed, so a diagnosis repeats exactly.
 """
@@ -17,11 +18,13 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Callable
 
 import numpy as np
 
 __all__ = [
     "Surrogate",
+    "calibrate",
     "space_filling",
 ]
 
@@ -31,6 +34,9 @@ LOO_MAX = 30
 KFOLD = 10
 """Folds of the surrogate cross-validation above ``LOO_MAX`` design points."""
 
+EDGE = 1e-6
+"""A MAP coordinate this close to 0 or 1 lies on the cube's boundary (L-BFGS-B stops exactly on a bound)."""
+
 
 def _vector(name: str, a, n: int | None = None) -> np.ndarray:
     a = np.asarray(a, dtype=float)
@@ -39,6 +45,13 @@ def _vector(name: str, a, n: int | None = None) -> np.ndarray:
     if n is not None and a.shape[0] != n:
         raise ValueError(f"{name} has {a.shape[0]} values, expected {n}")
     return a
+
+
+def _variance(name: str, v, n: int) -> np.ndarray:
+    v = _vector(name, v, n)
+    if not np.all(np.isfinite(v) & (v > 0)):
+        raise ValueError(f"{name} must be finite and positive")
+    return v
 
 
 # --------------------------------------------------------------------------------------------
@@ -175,3 +188,103 @@ class Surrogate:
             "rmse_range": rmse / float(np.ptp(self.y)),
             "folds": folds,
         }
+
+
+# --------------------------------------------------------------------------------------------
+# Calibration
+# --------------------------------------------------------------------------------------------
+
+
+def calibrate(
+    predict: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    measured,
+    variance,
+    d: int,
+    seed: int = 0,
+    steps: int = 2000,
+    walkers: int | None = None,
+    x0=None,
+    n_starts: int = 10,
+) -> dict:
+    """Posterior of the unit-cube parameters u (d,) given n measured values.
+
+    ``predict(U)`` takes U (m, d) and returns the predicted mean (m, n) of every measured value and its
+    surrogate variance (m, n). The likelihood is Gaussian and independent with total variance ``variance``
+    (n,) (the noise budget of the measured means) + the surrogate variance; the prior is flat on [0, 1]^d.
+
+    The MAP is the best of L-BFGS-B runs from ``n_starts`` seeded space-filling points and ``x0`` (d,) if
+    given (e.g. the best design point). Posterior samples: emcee's stretch move with ``walkers`` (default
+    max(4d, 16)) started in a small ball round the MAP, ``steps`` steps, the first half discarded as burn-in,
+    thinned by half the largest autocorrelation time.
+
+    Returns ``map`` (d,), ``loglik`` at the MAP, ``samples`` (k, d), ``interval`` (d, 2), ``at_bound`` (d,)
+    -1/0/+1, ``acceptance`` (mean acceptance fraction), ``tau`` (d,) autocorrelation times, ``thin``.
+    The interval is the 2.5-97.5 percentile range, except where the MAP lies on a face of the cube (a
+    candidate at its off value): there the equal-tailed interval would exclude the most probable value, so
+    it is one-sided, from the face to the 95th (or from the 5th) percentile.
+    """
+    import emcee
+    from scipy.optimize import minimize
+
+    y = _vector("measured", measured)
+    v = _variance("variance", variance, y.size)
+
+    def loglik(U: np.ndarray) -> np.ndarray:
+        mean, var = predict(U)
+        mean = np.asarray(mean, dtype=float).reshape(U.shape[0], y.size)
+        total = v + np.asarray(var, dtype=float).reshape(U.shape[0], y.size)
+        ll = -0.5 * np.sum(np.log(2 * np.pi * total) + (y - mean) ** 2 / total, axis=1)
+        return np.where(np.isfinite(ll), ll, -np.inf)
+
+    def logpost(U: np.ndarray) -> np.ndarray:
+        U = np.atleast_2d(U)
+        inside = np.all((U >= 0) & (U <= 1), axis=1)
+        out = np.full(U.shape[0], -np.inf)
+        if inside.any():
+            out[inside] = loglik(U[inside])
+        return out
+
+    starts = space_filling(n_starts, d, seed)
+    if x0 is not None:
+        starts = np.vstack([starts, np.clip(_vector("x0", x0, d), 0, 1)])
+    best = None
+    for u in starts:
+        res = minimize(lambda u: -loglik(u[None])[0], u, method="L-BFGS-B", bounds=[(0.0, 1.0)] * d)
+        if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
+            best = res
+    if best is None:
+        raise ValueError("the log-likelihood is not finite at any start")
+    u_map = np.clip(best.x, 0.0, 1.0)
+
+    nwalkers = walkers or max(4 * d, 16)
+    nwalkers += nwalkers % 2  # the stretch move updates two equal halves of the ensemble
+    if nwalkers < 2 * d:
+        raise ValueError(f"emcee needs at least 2d = {2 * d} walkers, got {nwalkers}")
+    rng = np.random.default_rng(seed)
+    # reflected into the cube: a MAP on a face must not pin every walker to it (the ensemble would never leave)
+    p0 = np.abs(u_map + 1e-3 * rng.standard_normal((nwalkers, d)))
+    p0 = 1.0 - np.abs(1.0 - p0)
+    state = emcee.State(p0, random_state=np.random.RandomState(int(rng.integers(2**32))).get_state())
+    sampler = emcee.EnsembleSampler(nwalkers, d, logpost, vectorize=True)
+    sampler.run_mcmc(state, steps, progress=False)
+    burn = steps // 2
+    tau = sampler.get_autocorr_time(discard=burn, tol=0, quiet=True)
+    thin = max(1, int(np.nanmax(tau) / 2)) if np.any(np.isfinite(tau)) else 1
+    samples = sampler.get_chain(discard=burn, thin=thin, flat=True)
+
+    at_bound = np.where(u_map <= EDGE, -1, np.where(u_map >= 1 - EDGE, 1, 0))
+    interval = np.percentile(samples, [2.5, 97.5], axis=0).T
+    for j in np.flatnonzero(at_bound):
+        interval[j] = (
+            (0.0, np.percentile(samples[:, j], 95)) if at_bound[j] < 0 else (np.percentile(samples[:, j], 5), 1.0)
+        )
+    return {
+        "map": u_map,
+        "loglik": float(-best.fun),
+        "samples": samples,
+        "interval": interval,
+        "at_bound": at_bound,
+        "acceptance": float(np.mean(sampler.acceptance_fraction)),
+        "tau": tau,
+        "thin": thin,
+    }
