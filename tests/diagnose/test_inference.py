@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import gc
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
+import statsmodels.api as sm
 from scipy import stats
+from statsmodels.stats.multitest import multipletests
 
 from warpdem.diagnose import inference as inf
 
@@ -201,3 +205,115 @@ def test_calibrate_repeats_with_its_seed():
     a = inf.calibrate(predict, measured, variance, d=2, seed=4, steps=200, x0=[0.5, 0.5])
     c = inf.calibrate(predict, measured, variance, d=2, seed=4, steps=200, x0=[0.5, 0.5])
     assert np.array_equal(a["map"], c["map"]) and np.array_equal(a["samples"], c["samples"])
+
+
+# --------------------------------------------------------------------------------------------
+# holm
+# --------------------------------------------------------------------------------------------
+
+
+def test_holm_by_hand_and_against_statsmodels():
+    """p = (0.01, 0.04, 0.03, 0.005): sorted 0.005 x 4 = 0.02, 0.01 x 3 = 0.03, 0.03 x 2 = 0.06,
+    0.04 x 1 -> 0.06 (monotone); NaN is left out of the family (two tests: 0.01 x 2, 0.04 x 1); a longer
+    vector equals statsmodels' multipletests."""
+    np.testing.assert_allclose(inf.holm([0.01, 0.04, 0.03, 0.005]), [0.03, 0.06, 0.06, 0.02])
+    np.testing.assert_allclose(inf.holm([0.01, np.nan, 0.04]), [0.02, np.nan, 0.04])
+    p = np.random.default_rng(0).uniform(0, 0.2, 15)
+    np.testing.assert_allclose(inf.holm(p), multipletests(p, method="holm")[1])
+    assert np.all(np.isnan(inf.holm([np.nan, np.nan])))
+
+
+# --------------------------------------------------------------------------------------------
+# adequacy
+# --------------------------------------------------------------------------------------------
+
+SIZES = np.array([1e-3, 2e-3, 3e-3, 4e-3])  # particle diameter, m
+FILLS = np.array([0.3, 0.5, 0.7])
+
+
+def _experiments() -> tuple[pd.DataFrame, np.ndarray, np.ndarray]:
+    """12 experiments (4 sizes x 3 fill fractions), 2 responses each: conditions (24 rows, indexed by
+    experiment), response labels and noise variances."""
+    size, fill = (g.ravel() for g in np.meshgrid(SIZES, FILLS, indexing="ij"))
+    names = [f"e{i:02d}" for i in range(size.size)]
+    one = pd.DataFrame({"size": size, "fill": fill, "material": "glass"}, index=names)
+    conditions = pd.concat([one, one])
+    responses = np.repeat(["angle", "flow"], size.size)
+    variance = np.r_[np.full(size.size, 0.5**2), np.full(size.size, 0.02**2)] * np.tile(np.linspace(0.5, 2, 12), 2)
+    return conditions, responses, variance
+
+
+def test_adequacy_false_positive_rate_of_an_exact_model(monkeypatch):
+    """Measured = a model linear in 2 parameters + noise of the stated variance, the parameters fitted by
+    WLS, residuals tested: over 200 seeded repetitions the fraction declared inadequate at alpha = 0.05 is
+    at most alpha + 3 standard errors (Holm over chi-square, point and trend tests controls the family-wise
+    error)."""
+    # statsmodels' Holm runs gc.collect() on every call (~0.1 s in a test process full of modules)
+    monkeypatch.setattr(gc, "collect", lambda *args: 0)
+    conditions, responses, variance = _experiments()
+    G = np.random.default_rng(10).normal(size=(24, 2))
+    rng = np.random.default_rng(11)
+    rejected = 0
+    for _ in range(200):
+        measured = G @ [1.0, -0.5] + np.sqrt(variance) * rng.standard_normal(24)
+        theta = sm.WLS(measured, G, weights=1 / variance).fit().params
+        out = inf.adequacy(measured - G @ theta, variance, 2, conditions, responses, alpha=0.05)
+        rejected += not out["adequate"]
+    assert rejected / 200 <= 0.05 + 3 * math.sqrt(0.05 * 0.95 / 200)
+
+
+def test_adequacy_finds_a_trend_in_one_condition():
+    """A residual that grows by 3 sigma per size step in the angle response: not adequate, the angle-size
+    trend is significant with a 95 % CI covering the true slope, while the trend in fill fraction (no
+    trend there) and the flow response's trends are not. The text column (material) is not regressed on."""
+    conditions, responses, variance = _experiments()
+    sd = np.sqrt(variance)
+    step = np.searchsorted(SIZES, conditions["size"].to_numpy())
+    residual = sd * np.random.default_rng(4).standard_normal(24)
+    angle = responses == "angle"
+    residual[angle] += 3 * 0.5 * (step[angle] - 1.5)  # 3 x the mean angle SD (0.5) per step
+    out = inf.adequacy(residual, variance, 2, conditions, responses)
+    tests = out["tests"]
+    assert not out["adequate"]
+    trend = tests[tests["kind"] == "trend"].set_index(["response", "condition"])
+    assert set(trend.index) == {("angle", "size"), ("angle", "fill"), ("flow", "size"), ("flow", "fill")}
+    assert trend.loc[("angle", "size"), "significant"]
+    true_slope = 1.5 / 1e-3
+    assert trend.loc[("angle", "size"), "ci_low"] < true_slope < trend.loc[("angle", "size"), "ci_high"]
+    assert not trend.loc[("angle", "fill"), "significant"]
+    assert not trend.loc[("flow", "size"), "significant"] and not trend.loc[("flow", "fill"), "significant"]
+
+
+def test_adequacy_tables_against_scipy_and_statsmodels():
+    """Every number in the table, recomputed independently: z = r / sd; chi-square per response on
+    df = 12 - 2 x 12 / 24 = 11; two-sided normal p per point; the WLS slope, CI and p equal statsmodels'
+    formula API on the same rows; p_holm is Holm over the whole family."""
+    conditions, responses, variance = _experiments()
+    residual = np.sqrt(variance) * np.random.default_rng(8).standard_normal(24) * 1.3
+    out = inf.adequacy(residual, variance, 2, conditions, responses, alpha=0.05)
+    z = residual / np.sqrt(variance)
+    np.testing.assert_allclose(out["z"]["z"], z)
+    assert list(out["z"]["experiment"]) == list(conditions.index)
+    tests = out["tests"]
+
+    chi = tests[tests["kind"] == "chi2"].set_index("response")
+    angle = responses == "angle"
+    assert chi.loc["angle", "df"] == 11
+    assert chi.loc["angle", "p"] == pytest.approx(stats.chi2.sf(np.sum(z[angle] ** 2), 11))
+
+    point = tests[tests["kind"] == "point"]
+    np.testing.assert_allclose(point["p"], 2 * stats.norm.sf(np.abs(z)))
+    assert list(point["experiment"]) == list(conditions.index)
+
+    import statsmodels.formula.api as smf
+
+    data = conditions[~angle].assign(r=residual[~angle], w=1 / variance[~angle])
+    ref = smf.wls("r ~ size", data=data, weights=data["w"]).fit()
+    row = tests[(tests["kind"] == "trend") & (tests["response"] == "flow") & (tests["condition"] == "size")].iloc[0]
+    assert row["slope"] == pytest.approx(ref.params["size"])
+    assert (row["ci_low"], row["ci_high"]) == pytest.approx(tuple(ref.conf_int(0.05).loc["size"]))
+    assert row["p"] == pytest.approx(ref.pvalues["size"])
+    assert row["df"] == 10
+
+    np.testing.assert_allclose(tests["p_holm"], multipletests(tests["p"], method="holm")[1])
+    assert out["adequate"] == (not np.any(tests["p_holm"] < 0.05))

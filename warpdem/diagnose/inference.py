@@ -10,6 +10,7 @@ units) and on plain arrays; nothing here runs a simulation.
 ``Surrogate``      one Gaussian process per (condition, response) over the unit cube, with its noise
                    (world-seed scatter) and a cross-validated accuracy.
 ``calibrate``      MAP (multi-start L-BFGS-B) and posterior samples (emcee) of theta given measured means.
+``adequacy``       chi-square, per-point and trend tests of the standardised residuals, Holm-adjusted together.
 
 Every random choice takes a seed, so a diagnosis repeats exactly.
 """
@@ -18,13 +19,19 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    import pandas as pd
+
 __all__ = [
     "Surrogate",
+    "adequacy",
     "calibrate",
+    "holm",
     "space_filling",
 ]
 
@@ -288,3 +295,127 @@ def calibrate(
         "tau": tau,
         "thin": thin,
     }
+
+
+# --------------------------------------------------------------------------------------------
+# Adequacy
+# --------------------------------------------------------------------------------------------
+
+
+def holm(pvalues) -> np.ndarray:
+    """Holm-adjusted p-values (statsmodels ``multipletests``) of a 1-D family; NaN entries stay NaN and are
+    not counted in the family."""
+    from statsmodels.stats.multitest import multipletests
+
+    p = _vector("pvalues", pvalues)
+    out = np.full(p.shape, np.nan)
+    ok = np.isfinite(p)
+    if ok.any():
+        out[ok] = multipletests(p[ok], method="holm")[1]
+    return out
+
+
+def adequacy(
+    residual,
+    variance,
+    n_params: int,
+    conditions: pd.DataFrame,
+    responses: Sequence,
+    alpha: float = 0.05,
+) -> dict:
+    """Is the calibrated model adequate? Tests of the standardised residuals z = residual / sqrt(variance).
+
+    Each of the n rows is one (experiment, response): ``residual`` (n,) measured mean - simulated mean,
+    ``variance`` (n,) its noise-budget variance, ``conditions`` (n rows) the experiment's conditions, its
+    index naming the experiment, ``responses`` (n,) the response labels. ``n_params`` parameters were
+    calibrated on these rows.
+
+    Tests (one family, Holm-adjusted together; ``adequate`` when no adjusted p is below ``alpha``):
+
+    * ``chi2``: per response, sum z^2 against chi-square with df = max(n_r - n_params n_r / n, 1) (the
+      parameters are shared by all responses, so each response is charged its share);
+    * ``point``: per row, two-sided normal test of z;
+    * ``trend``: per response and numeric condition column with >= 3 distinct values among its rows, the
+      slope of the weighted least-squares line residual ~ 1 + condition (statsmodels WLS, weights
+      1 / variance) and its t-test, with the scale estimated from the scatter about the line so that a
+      misstated noise budget (the chi-square's business) does not masquerade as a trend.
+
+    Returns ``z`` (DataFrame: experiment, response, the conditions, residual, variance, z), ``tests``
+    (DataFrame: kind, response, experiment, condition, statistic (chi-square, z or t), df, p, p_holm,
+    significant, slope, ci_low, ci_high (95 %)) and ``adequate``.
+    """
+    import pandas as pd
+    import statsmodels.api as sm
+    from scipy import stats
+
+    r = _vector("residual", residual)
+    n = r.size
+    v = _variance("variance", variance, n)
+    if not np.all(np.isfinite(r)):
+        raise ValueError("residual must be finite")
+    conditions = pd.DataFrame(conditions)
+    if len(conditions) != n:
+        raise ValueError(f"conditions has {len(conditions)} rows, expected {n}")
+    responses = np.asarray(responses, dtype=object)
+    if responses.shape != (n,):
+        raise ValueError(f"responses must have {n} labels")
+    z = r / np.sqrt(v)
+    experiments = list(conditions.index)
+
+    table = conditions.reset_index(drop=True)
+    table.insert(0, "response", responses)
+    table.insert(0, "experiment", experiments)
+    table = table.assign(residual=r, variance=v, z=z)
+
+    rows = []
+    blank = {"experiment": None, "condition": None, "slope": np.nan, "ci_low": np.nan, "ci_high": np.nan}
+    for resp in pd.unique(responses):
+        m = responses == resp
+        df = max(m.sum() - n_params * m.sum() / n, 1.0)
+        stat = float(np.sum(z[m] ** 2))
+        rows.append(
+            {**blank, "kind": "chi2", "response": resp, "statistic": stat, "df": df, "p": stats.chi2.sf(stat, df)}
+        )
+    numeric = [c for c in conditions.columns if pd.api.types.is_numeric_dtype(conditions[c])]
+    for resp in pd.unique(responses):
+        m = responses == resp
+        for col in numeric:
+            x = conditions[col].to_numpy(dtype=float)[m]
+            if np.unique(x).size < 3:
+                continue
+            fit = sm.WLS(r[m], np.column_stack([np.ones(x.size), x]), weights=1.0 / v[m]).fit()
+            lo, hi = fit.conf_int(0.05)[1]
+            rows.append(
+                {
+                    **blank,
+                    "kind": "trend",
+                    "response": resp,
+                    "condition": col,
+                    "statistic": float(fit.tvalues[1]),
+                    "df": float(fit.df_resid),
+                    "p": float(fit.pvalues[1]),
+                    "slope": float(fit.params[1]),
+                    "ci_low": float(lo),
+                    "ci_high": float(hi),
+                }
+            )
+    for i in range(n):
+        p = 2.0 * stats.norm.sf(abs(z[i]))
+        rows.append(
+            {
+                **blank,
+                "kind": "point",
+                "response": responses[i],
+                "experiment": experiments[i],
+                "statistic": z[i],
+                "df": np.nan,
+                "p": p,
+            }
+        )
+
+    columns = ["kind", "response", "experiment", "condition", "statistic", "df", "p", "p_holm", "significant"]
+    tests = pd.DataFrame(rows)
+    tests["p_holm"] = holm(tests["p"].to_numpy(dtype=float))
+    tests["significant"] = tests["p_holm"] < alpha
+    tests = tests[columns + ["slope", "ci_low", "ci_high"]]
+    return {"z": table, "tests": tests, "adequate": not bool(tests["significant"].any())}
