@@ -317,3 +317,148 @@ def test_adequacy_tables_against_scipy_and_statsmodels():
 
     np.testing.assert_allclose(tests["p_holm"], multipletests(tests["p"], method="holm")[1])
     assert out["adequate"] == (not np.any(tests["p_holm"] < 0.05))
+
+
+# --------------------------------------------------------------------------------------------
+# lrt_boundary, aic, bic
+# --------------------------------------------------------------------------------------------
+
+
+def test_lrt_boundary_mixture():
+    """Self & Liang's 50:50 mixture of chi2_0 and chi2_1: p = P(chi2_1 > LR) / 2, so LR = 2.71 (the
+    chi2_1 90 % point) gives p = 0.05; no gain gives p = 1; with one more interior parameter the mixture
+    is of chi2_1 and chi2_2."""
+    lr, p = inf.lrt_boundary(-10.0, -8.0)
+    assert lr == 4.0 and p == pytest.approx(0.5 * stats.chi2.sf(4.0, 1))
+    assert inf.lrt_boundary(0.0, 2.71 / 2)[1] == pytest.approx(0.05, abs=5e-4)
+    assert inf.lrt_boundary(-3.0, -3.0) == (0.0, 1.0)
+    assert inf.lrt_boundary(-3.0, -3.5)[1] == 1.0
+    assert inf.lrt_boundary(0.0, 2.0, df=2)[1] == pytest.approx(
+        0.5 * stats.chi2.sf(4.0, 2) + 0.5 * stats.chi2.sf(4.0, 1)
+    )
+
+
+def test_lrt_boundary_is_the_one_sided_z_test_of_a_mean():
+    """For n draws from N(mu, sigma^2), mu >= 0 with null mu = 0, LR = n max(xbar, 0)^2 / sigma^2, and the
+    exact one-sided test of the mean has p = P(Z > sqrt(n) xbar / sigma): the boundary mixture must give
+    that p for every xbar > 0."""
+    n, sigma = 9, 2.0
+    for xbar in (0.1, 0.8, 1.5, 3.0):
+        ll_base = -0.5 * n * xbar**2 / sigma**2  # the Gaussian log-likelihood up to a shared constant
+        _, p = inf.lrt_boundary(ll_base, 0.0)
+        assert p == pytest.approx(stats.norm.sf(math.sqrt(n) * xbar / sigma))
+
+
+def test_information_criteria():
+    """AIC = 2k - 2 loglik, BIC = k ln n - 2 loglik (Akaike 1974, Schwarz 1978)."""
+    assert inf.aic(-10.0, 3) == 26.0
+    assert inf.bic(-10.0, 3, 100) == pytest.approx(3 * math.log(100) + 20.0)
+
+
+# --------------------------------------------------------------------------------------------
+# screen
+# --------------------------------------------------------------------------------------------
+
+
+def _screen_problem(seed=0):
+    rng = np.random.default_rng(seed)
+    n = 15
+    variance = rng.uniform(0.5, 2.0, n) ** 2
+    J = rng.normal(size=(n, 2))
+    return rng, variance, J
+
+
+def test_screen_effect_equal_to_residual():
+    """An effect that is exactly the residual explains it all at coefficient 1 with theta untouched: the
+    extended chi-square is 0, delta chi-square is the base model's, p is tiny."""
+    rng, variance, J = _screen_problem()
+    r = 3 * np.sqrt(variance) * rng.standard_normal(15)
+    out = inf.screen(r, variance, J, r)
+    assert out["coefficient"] == pytest.approx(1.0)
+    np.testing.assert_allclose(out["theta_shift"], 0.0, atol=1e-9)
+    assert out["chi2_ext"] == pytest.approx(0.0, abs=1e-9)
+    assert out["delta_chi2"] == pytest.approx(out["chi2_base"]) and out["delta_chi2"] > 50
+    assert out["p"] < 1e-6
+
+
+def test_screen_orthogonal_and_wrong_way_effects():
+    """An effect orthogonal, in the 1/variance inner product, to the residual and to the Jacobian's columns
+    explains nothing (delta chi2 = 0, p = 1); an effect pointing against the residual is held at its
+    bound, coefficient 0, which is the base fit."""
+    rng, variance, J = _screen_problem(1)
+    w = 1 / np.sqrt(variance)
+    Q, _ = np.linalg.qr(np.column_stack([J * w[:, None], rng.normal(size=(15, 2))]))
+    r = Q[:, 2] * 4 / w  # weighted residual orthogonal to the weighted Jacobian
+    e = Q[:, 3] / w  # weighted effect orthogonal to both
+    out = inf.screen(r, variance, J, e)
+    assert out["delta_chi2"] == pytest.approx(0.0, abs=1e-9) and out["p"] == 1.0
+    assert out["chi2_base"] == pytest.approx(16.0)
+
+    out = inf.screen(r, variance, J, -r)
+    assert out["coefficient"] == 0.0
+    assert out["delta_chi2"] == pytest.approx(0.0, abs=1e-9) and out["p"] == 1.0
+
+
+def test_screen_against_the_projection_formula():
+    """With the coefficient unconstrained-positive, adding a regressor e to a weighted fit on J drops the
+    chi-square by (e_perp . r_perp)^2 / |e_perp|^2, with _perp the weighted residuals after projecting out
+    J (Frisch-Waugh-Lovell); the coefficient is (e_perp . r_perp) / |e_perp|^2. A Jacobian column of
+    zeros (a parameter with no sensitivity) changes nothing."""
+    rng, variance, J = _screen_problem(2)
+    r = np.sqrt(variance) * rng.standard_normal(15) + J @ [0.3, -0.2]
+    e = 0.5 * r + np.sqrt(variance) * rng.standard_normal(15)
+    w = 1 / np.sqrt(variance)
+    P = np.eye(15) - (J * w[:, None]) @ np.linalg.pinv(J * w[:, None])
+    r_perp, e_perp = P @ (r * w), P @ (e * w)
+    coef = (e_perp @ r_perp) / (e_perp @ e_perp)
+    assert coef > 0
+    out = inf.screen(r, variance, np.column_stack([J, np.zeros(15)]), e)
+    assert out["coefficient"] == pytest.approx(coef, rel=1e-6)
+    assert out["delta_chi2"] == pytest.approx((e_perp @ r_perp) ** 2 / (e_perp @ e_perp), rel=1e-6)
+    assert out["p"] == pytest.approx(0.5 * stats.chi2.sf(out["delta_chi2"], 1))
+
+
+# --------------------------------------------------------------------------------------------
+# held-out losses and bootstrap
+# --------------------------------------------------------------------------------------------
+
+
+def test_gaussian_nll_and_experiment_losses():
+    """The NLL is minus scipy's normal log-density; per experiment, z^2 and NLL are averaged over its rows
+    (hand-worked: e1 has z = 1 and 2, e2 has z = 3)."""
+    r, v = np.array([0.5, -2.0, 3.0]), np.array([0.25, 1.0, 1.0])
+    np.testing.assert_allclose(inf.gaussian_nll(r, v), -stats.norm.logpdf(r, scale=np.sqrt(v)))
+    losses = inf.experiment_losses(r, v, ["e1", "e1", "e2"])
+    assert list(losses.index) == ["e1", "e2"]
+    np.testing.assert_allclose(losses["z2"], [2.5, 9.0])
+    np.testing.assert_allclose(losses.loc["e2", "nll"], -stats.norm.logpdf(3.0))
+
+
+def test_bootstrap_covers_the_known_mean():
+    """Losses z^2 of standard-normal z have mean 1: the 95 % percentile interval of the mean of 100 such
+    losses covers 1 in about 95 % of 200 seeded data sets (>= 90 %: the percentile interval of a skewed
+    chi2_1 mean under-covers a little at n = 100)."""
+    rng = np.random.default_rng(0)
+    covered = 0
+    for i in range(200):
+        loss = rng.standard_normal(100) ** 2
+        row = inf.bootstrap({"m": loss}, seed=i, n_boot=1000)["models"].iloc[0]
+        assert row["mean"] == pytest.approx(loss.mean())
+        covered += row["low"] <= 1.0 <= row["high"]
+    assert covered / 200 >= 0.90
+
+
+def test_bootstrap_pairs_are_paired():
+    """Resamples are shared by all models: identical models differ by exactly 0 in every resample, a model
+    worse by a constant 0.5 on every experiment differs by 0.5 with a zero-width interval, and a noisier
+    model's difference interval covers its true excess (1 for z^2 of SD sqrt(2) vs 1)."""
+    rng = np.random.default_rng(1)
+    base = rng.standard_normal(200) ** 2
+    noisy = 2 * rng.standard_normal(200) ** 2
+    out = inf.bootstrap({"base": base, "same": base.copy(), "shifted": base + 0.5, "noisy": noisy}, seed=3)
+    pairs = out["pairs"].set_index(["model_a", "model_b"])
+    assert len(pairs) == 6
+    assert tuple(pairs.loc[("base", "same"), ["difference", "low", "high"]]) == (0.0, 0.0, 0.0)
+    np.testing.assert_allclose(pairs.loc[("base", "shifted"), ["difference", "low", "high"]], -0.5)
+    assert pairs.loc[("base", "noisy"), "low"] < -1.0 < pairs.loc[("base", "noisy"), "high"]
+    assert list(out["models"]["model"]) == ["base", "same", "shifted", "noisy"]

@@ -11,6 +11,11 @@ units) and on plain arrays; nothing here runs a simulation.
                    (world-seed scatter) and a cross-validated accuracy.
 ``calibrate``      MAP (multi-start L-BFGS-B) and posterior samples (emcee) of theta given measured means.
 ``adequacy``       chi-square, per-point and trend tests of the standardised residuals, Holm-adjusted together.
+``screen``         whether a candidate's effect, with theta re-tuned, can explain the residual (linearised).
+``lrt_boundary``   likelihood-ratio test of an extra parameter whose null value is on its range's boundary;
+                   ``aic`` and ``bic``.
+``bootstrap``      paired bootstrap over experiments of held-out losses (``experiment_losses``,
+                   ``gaussian_nll``) of several models.
 
 Every random choice takes a seed, so a diagnosis repeats exactly.
 """
@@ -19,7 +24,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -30,8 +35,15 @@ if TYPE_CHECKING:
 __all__ = [
     "Surrogate",
     "adequacy",
+    "aic",
+    "bic",
+    "bootstrap",
     "calibrate",
+    "experiment_losses",
+    "gaussian_nll",
     "holm",
+    "lrt_boundary",
+    "screen",
     "space_filling",
 ]
 
@@ -419,3 +431,146 @@ def adequacy(
     tests["significant"] = tests["p_holm"] < alpha
     tests = tests[columns + ["slope", "ci_low", "ci_high"]]
     return {"z": table, "tests": tests, "adequate": not bool(tests["significant"].any())}
+
+
+# --------------------------------------------------------------------------------------------
+# Model comparison
+# --------------------------------------------------------------------------------------------
+
+
+def lrt_boundary(loglik_base: float, loglik_ext: float, df: int = 1) -> tuple[float, float]:
+    """Likelihood-ratio test of an extension with ``df`` extra parameters, one of whose null (off) value lies
+    on the boundary of its range (Self & Liang 1987): LR = 2 (loglik_ext - loglik_base) is then a 50:50
+    mixture of chi2_(df-1) and chi2_df (chi2_0 = a point mass at 0), so for df = 1 p = P(chi2_1 > LR) / 2.
+    Returns (LR, p); p = 1 when LR <= 0 (the extension fits no better)."""
+    from scipy import stats
+
+    if df < 1:
+        raise ValueError("df must be >= 1")
+    lr = 2.0 * (float(loglik_ext) - float(loglik_base))
+    if not lr > 0:
+        return lr, 1.0
+    below = stats.chi2.sf(lr, df - 1) if df > 1 else 0.0
+    return lr, float(0.5 * stats.chi2.sf(lr, df) + 0.5 * below)
+
+
+def aic(loglik: float, k: int) -> float:
+    """Akaike information criterion 2k - 2 loglik of a model with k free parameters."""
+    return 2.0 * k - 2.0 * float(loglik)
+
+
+def bic(loglik: float, k: int, n: int) -> float:
+    """Bayesian information criterion k ln(n) - 2 loglik of a model with k parameters fitted to n values."""
+    return k * math.log(n) - 2.0 * float(loglik)
+
+
+def screen(residual, variance, jacobian, effect) -> dict:
+    """Can a candidate explain the residual, with theta re-tuned? A linearised check before any simulation
+    of the extended model.
+
+    ``residual`` (n,) measured - predicted by the base model, ``variance`` (n,), ``jacobian`` (n, d) the base
+    model's sensitivities to theta (so that re-tuning theta can absorb what it can), ``effect`` (n,) the
+    change of each prediction when the candidate moves from off to a test value with theta held. Weighted
+    least squares (weights 1 / variance) of the residual on [jacobian] and on [jacobian, effect], the
+    effect's coefficient constrained >= 0 since the candidate moves one way from off (scipy ``lsq_linear``).
+
+    Returns ``delta_chi2`` (drop of sum (residual - fit)^2 / variance from adding the effect), ``coefficient``
+    (the effect's: 1 = the test value explains it, to first order), ``p`` (of delta_chi2 under the boundary
+    mixture, as :func:`lrt_boundary`), ``chi2_base``, ``chi2_ext`` and ``theta_shift`` (d,) in the extended fit.
+    """
+    from scipy.optimize import lsq_linear
+
+    r = _vector("residual", residual)
+    n = r.size
+    w = 1.0 / np.sqrt(_variance("variance", variance, n))
+    J = np.asarray(jacobian, dtype=float).reshape(n, -1)
+    e = _vector("effect", effect, n)
+    rw, Jw, ew = r * w, J * w[:, None], e * w
+    d = J.shape[1]
+    base = rw - Jw @ np.linalg.lstsq(Jw, rw, rcond=None)[0] if d else rw
+    chi2_base = float(base @ base)
+    A = np.column_stack([Jw, ew])
+    lower = np.r_[np.full(d, -np.inf), 0.0]
+    sol = lsq_linear(A, rw, bounds=(lower, np.full(d + 1, np.inf)), method="bvls")
+    ext = rw - A @ sol.x
+    chi2_ext = float(ext @ ext)
+    delta = chi2_base - chi2_ext
+    # at a zero coefficient the two fits are the same problem: their difference is the solvers' rounding,
+    # and must not become p = 0.5 (the boundary mixture jumps from 1 to 1/2 at any positive delta)
+    if delta <= 1e-9 * max(chi2_base, 1.0):
+        delta = 0.0
+    _, p = lrt_boundary(0.0, 0.5 * delta)
+    return {
+        "delta_chi2": delta,
+        "coefficient": float(sol.x[-1]),
+        "p": p,
+        "chi2_base": chi2_base,
+        "chi2_ext": chi2_ext,
+        "theta_shift": sol.x[:d],
+    }
+
+
+def gaussian_nll(residual, variance) -> np.ndarray:
+    """Negative log-likelihood of each residual under N(0, variance), elementwise:
+    0.5 log(2 pi variance) + 0.5 residual^2 / variance."""
+    r = np.asarray(residual, dtype=float)
+    v = np.asarray(variance, dtype=float)
+    return 0.5 * np.log(2 * np.pi * v) + 0.5 * r**2 / v
+
+
+def experiment_losses(residual, variance, experiments: Sequence) -> pd.DataFrame:
+    """Held-out losses per experiment from residuals (n,) and predictive variances (n,) of the rows
+    (experiment, response), ``experiments`` (n,) labelling each row's experiment: a DataFrame indexed by
+    experiment (in first-seen order) with ``z2`` the mean squared standardised error (about 1 for a model
+    whose variance is right) and ``nll`` the mean :func:`gaussian_nll` over the experiment's rows."""
+    import pandas as pd
+
+    r = _vector("residual", residual)
+    v = _variance("variance", variance, r.size)
+    frame = pd.DataFrame({"experiment": list(experiments), "z2": r**2 / v, "nll": gaussian_nll(r, v)})
+    return frame.groupby("experiment", sort=False)[["z2", "nll"]].mean()
+
+
+def bootstrap(losses: Mapping[str, np.ndarray], seed: int = 0, n_boot: int = 2000, level: float = 0.95) -> dict:
+    """Paired bootstrap over experiments of the mean held-out loss of several models.
+
+    ``losses`` maps a model name to its loss per experiment (n,), the experiments in the same order for
+    every model (e.g. one column of :func:`experiment_losses`). Experiments are resampled with replacement,
+    the same resamples for every model, so that differences between models are paired.
+
+    Returns ``models`` (DataFrame: model, mean, low, high: the mean loss and its ``level`` percentile
+    interval) and ``pairs`` (DataFrame: model_a, model_b, difference = mean a - mean b, low, high).
+    """
+    import pandas as pd
+
+    names = list(losses)
+    if not names:
+        raise ValueError("no models")
+    L = [_vector(f"losses[{k!r}]", losses[k]) for k in names]
+    n = L[0].size
+    if n == 0 or any(a.size != n for a in L) or not all(np.all(np.isfinite(a)) for a in L):
+        raise ValueError("every model needs the same number (>= 1) of finite losses")
+    index = np.random.default_rng(seed).integers(0, n, size=(n_boot, n))
+    boot = np.array([a[index].mean(axis=1) for a in L])  # (models, n_boot)
+    q = 50.0 * (1.0 - level), 50.0 * (1.0 + level)
+    models = pd.DataFrame(
+        [
+            {"model": k, "mean": float(a.mean()), **dict(zip(("low", "high"), np.percentile(b, q)))}
+            for k, a, b in zip(names, L, boot)
+        ]
+    )
+    pairs = []
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            low, high = np.percentile(boot[i] - boot[j], q)
+            pairs.append(
+                {
+                    "model_a": names[i],
+                    "model_b": names[j],
+                    "difference": float(L[i].mean() - L[j].mean()),
+                    "low": float(low),
+                    "high": float(high),
+                }
+            )
+    columns = ["model_a", "model_b", "difference", "low", "high"]
+    return {"models": models, "pairs": pd.DataFrame(pairs, columns=columns)}
