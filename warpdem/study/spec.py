@@ -121,6 +121,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli ba
 from warpdem.engine.checks import did_you_mean, finite_number, is_number, not_allowed
 from warpdem.engine.keys import PER_WORLD, KeyGrammar, is_rig_key
 from warpdem.engine.materials import INTERACTION_SCALARS
+from warpdem.scene.runner import COMMON_METRICS, MEASURE_METRICS
 
 from . import designs
 from .analysis import model_terms
@@ -162,31 +163,9 @@ DESIGN_KINDS = (
 )
 """Design kinds of ``[design] kind``."""
 
-MEASURES = (
-    "angle_fit_deg",
-    "angle_fit_sd_deg",
-    "angle_image_deg",
-    "angle_image_sd_deg",
-    "angle_cone_deg",
-    "pile_height_m",
-    "particles",
-    "packing_fraction",
-    "bulk_density_kg_m3",
-    "discharge_rate_kg_s",
-    "dynamic_angle_deg",
-    "fluctuation_index",
-    "residual_set_ratio",
-    "loading_exponent",
-    "unloading_stiffness_n_m",
-    "max_displacement_m",
-    "compression_ratio",
-    "max_force_n",
-    "final_height_m",
-    "fill_height_m",
-    "inertial_number_max",
-    "time_s",
-)
-"""Scalar metric keys that :func:`warpdem.scene.runner.run_scene` writes per world (``metrics.json``)."""
+MEASURES = tuple(dict.fromkeys(k for keys in MEASURE_METRICS.values() for k in keys)) + COMMON_METRICS
+"""Scalar metric keys that :func:`warpdem.scene.runner.run_scene` writes per world (``metrics.json``): those of
+every measure kind (:data:`warpdem.scene.runner.MEASURE_METRICS`), then the common ones."""
 
 _POINT_TYPE = {"factorial": "factorial", "axial": "axial", "center": "centre"}
 _RESERVED = {"run", "std_order", "point_type", "replicate", "world_seed", "point_id", "kind", "run_order"}
