@@ -188,6 +188,71 @@ def independent_worlds(spec: SceneSpec) -> bool:
     return spec.measure.kind not in SHARED_WALL_MEASURES
 
 
+COMMON_METRICS = ("time_s",)
+"""Scalar metrics every world writes, whatever its scene measures."""
+
+MEASURE_METRICS = {
+    "angle_of_repose": (
+        "angle_fit_deg",
+        "angle_fit_sd_deg",
+        "angle_image_deg",
+        "angle_image_sd_deg",
+        "angle_cone_deg",
+        "pile_height_m",
+        "particles",
+        "packing_fraction",
+        "bulk_density_kg_m3",
+        "discharge_rate_kg_s",
+    ),
+    "drum": ("dynamic_angle_deg", "fluctuation_index"),
+    "press": (
+        "residual_set_ratio",
+        "loading_exponent",
+        "unloading_stiffness_n_m",
+        "max_displacement_m",
+        "compression_ratio",
+        "max_force_n",
+        "final_height_m",
+        "fill_height_m",
+        "inertial_number_max",
+    ),
+    "impacts": (),
+}
+"""The scalar metrics (keys of each world's ``metrics.json`` entry) that :func:`run_scene` writes for each measure
+kind (``MeasureSpec.kind``), besides :data:`COMMON_METRICS`; those of :data:`METRIC_NEEDS` only when the scene
+sets the measurement up. impacts writes only nested metrics (``phases.PHASE.WALL.KEY``). A failed measurement
+writes an ``*_error`` key instead of its metrics."""
+
+METRIC_NEEDS = {
+    "packing_fraction": "packing_time",
+    "bulk_density_kg_m3": "packing_time",
+    "discharge_rate_kg_s": "outlet_height",
+    "residual_set_ratio": "unload_speed",
+    "loading_exponent": "unload_speed",
+    "unloading_stiffness_n_m": "unload_speed",
+}
+"""Metrics of :data:`MEASURE_METRICS` written only when the ``MeasureSpec`` field named here is set (> 0, or for
+``outlet_height`` not None): the packing at ``packing_time``, the discharge rate below ``outlet_height``, the
+unloading branch of a press that retracts at ``unload_speed``."""
+
+
+def metric_needs_met(measure, metric: str) -> bool:
+    """True when a scene measuring with ``measure`` (a ``MeasureSpec``) sets up what ``metric`` needs
+    (:data:`METRIC_NEEDS`; always True for a metric that needs nothing)."""
+    need = METRIC_NEEDS.get(metric)
+    if need is None:
+        return True
+    v = getattr(measure, need)
+    return v is not None if need == "outlet_height" else v > 0
+
+
+def measured_metrics(measure) -> tuple[str, ...]:
+    """The scalar metrics a run of a scene measuring with ``measure`` (a ``MeasureSpec``) writes per world:
+    :data:`COMMON_METRICS` and its kind's :data:`MEASURE_METRICS` whose :data:`METRIC_NEEDS` it meets."""
+    own = MEASURE_METRICS.get(measure.kind, ())
+    return tuple(k for k in own if metric_needs_met(measure, k)) + COMMON_METRICS
+
+
 def run_scene(
     spec: SceneSpec,
     device: str = "cpu",
@@ -392,6 +457,7 @@ def run_scene(
                 raise RunStopped(ckpt, state.time, time.perf_counter() - t_wall0)
     wall_s = time.perf_counter() - t_wall0
 
+    # the scalar metrics each kind writes are listed in MEASURE_METRICS and METRIC_NEEDS: keep them in step
     metrics = []
     removed = state.world_removed.numpy()
     for w in range(W):

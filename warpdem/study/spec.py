@@ -108,7 +108,7 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pandas as pd
@@ -121,6 +121,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli ba
 from warpdem.engine.checks import did_you_mean, finite_number, is_number, not_allowed
 from warpdem.engine.keys import PER_WORLD, KeyGrammar, is_rig_key
 from warpdem.engine.materials import INTERACTION_SCALARS
+from warpdem.scene.runner import COMMON_METRICS, MEASURE_METRICS
 
 from . import designs
 from .analysis import model_terms
@@ -138,8 +139,11 @@ __all__ = [
     "StudySpec",
     "VerificationSpec",
     "batch_key",
+    "build_scene",
+    "check_override",
     "check_scene_overrides",
     "design_table",
+    "fixed_scene",
     "load_study",
     "point_key",
     "run_overrides",
@@ -163,31 +167,9 @@ DESIGN_KINDS = (
 )
 """Design kinds of ``[design] kind``."""
 
-MEASURES = (
-    "angle_fit_deg",
-    "angle_fit_sd_deg",
-    "angle_image_deg",
-    "angle_image_sd_deg",
-    "angle_cone_deg",
-    "pile_height_m",
-    "particles",
-    "packing_fraction",
-    "bulk_density_kg_m3",
-    "discharge_rate_kg_s",
-    "dynamic_angle_deg",
-    "fluctuation_index",
-    "residual_set_ratio",
-    "loading_exponent",
-    "unloading_stiffness_n_m",
-    "max_displacement_m",
-    "compression_ratio",
-    "max_force_n",
-    "final_height_m",
-    "fill_height_m",
-    "inertial_number_max",
-    "time_s",
-)
-"""Scalar metric keys that :func:`warpdem.scene.runner.run_scene` writes per world (``metrics.json``)."""
+MEASURES = tuple(dict.fromkeys(k for keys in MEASURE_METRICS.values() for k in keys)) + COMMON_METRICS
+"""Scalar metric keys that :func:`warpdem.scene.runner.run_scene` writes per world (``metrics.json``): those of
+every measure kind (:data:`warpdem.scene.runner.MEASURE_METRICS`), then the common ones."""
 
 _POINT_TYPE = {"factorial": "factorial", "axial": "axial", "center": "centre"}
 _RESERVED = {"run", "std_order", "point_type", "replicate", "world_seed", "point_id", "kind", "run_order"}
@@ -328,10 +310,13 @@ class FactorSpec:
     label: str = ""
     unit: str = ""
 
+    table: ClassVar[str] = "[[factors]]"
+    """The TOML table messages name (a subclass read from another file names its own)."""
+
     def __post_init__(self):
-        where = f"[[factors]] {self.name!r}"
+        where = f"{self.table} {self.name!r}"
         if not isinstance(self.name, str) or not _FACTOR_RE.match(self.name):
-            raise _bad("[[factors]]", "name", self.name, "letters, digits and _ starting with a letter (e.g. A, X1)")
+            raise _bad(self.table, "name", self.name, "letters, digits and _ starting with a letter (e.g. A, X1)")
         if self.name in _RESERVED or self.name.endswith("_actual"):
             raise _bad(
                 where,
@@ -574,6 +559,82 @@ _DEFAULT_MODEL = {
 }
 
 
+def _check_header(spec, w: str, doc: str) -> None:
+    """Check (and normalise, in place) the scene fields that a study and a diagnosis share in their first table
+    ``w``: name, title, rig or scene (relative to the ``doc``, e.g. "study file"), smoke, path, seed and batch."""
+    set_ = lambda k, v: object.__setattr__(spec, k, v)  # noqa: E731
+    if not isinstance(spec.name, str) or not _NAME_RE.match(spec.name):
+        raise _bad(w, "name", spec.name, "an identifier of lower-case letters, digits and _")
+    _string(w, "title", spec.title)
+    rigs = _rigs()
+    if (spec.rig is None) == (spec.scene is None):
+        raise StudyError(
+            f"{w}: rig = {spec.rig!r}, scene = {spec.scene!r}: expected exactly one of rig "
+            f"({', '.join(rigs.RIGS)}) and scene (a stage path relative to the {doc})"
+        )
+    if spec.rig is not None and spec.rig not in rigs.RIGS:
+        raise _bad(w, "rig", spec.rig, f"one of {', '.join(rigs.RIGS)}{did_you_mean(spec.rig, rigs.RIGS)}")
+    set_("smoke", _boolean(w, "smoke", spec.smoke))
+    if spec.path is not None:
+        set_("path", Path(spec.path))
+    if spec.scene is not None:
+        _string(w, "scene", spec.scene)
+        if spec.smoke:
+            raise StudyError(
+                f"{w}: smoke = true is not allowed with scene = {spec.scene!r}; the smoke "
+                "overrides belong to a rig (use rig = ...)"
+            )
+        if not spec.scene_path.is_file():
+            raise StudyError(
+                f"{w}: scene = {spec.scene!r} is not allowed: {spec.scene_path} does not exist; "
+                f"expected a stage path relative to the {doc}"
+            )
+    set_("seed", _integer(w, "seed", spec.seed, 0))
+    set_("batch", _integer(w, "batch", spec.batch, 0))
+
+
+def _check_fixed(fixed, rig: str | None) -> FrozenMap:
+    """``[fixed]``: override keys of ``rig`` (see :func:`_grammar`), each a string, a boolean or a finite number."""
+    if not isinstance(fixed, Mapping):
+        raise _bad("[fixed]", "fixed", fixed, "a table of overrides")
+    for k, v in fixed.items():
+        _grammar(rig, False).parse(k, "[fixed]", error=StudyError)
+        if not isinstance(v, (str, bool, int, float)) or (is_number(v) and not math.isfinite(v)):
+            raise _bad("[fixed]", k, v, "a string, a boolean or a finite number")
+    return FrozenMap(fixed)
+
+
+def _check_factors(factors, rig: str | None, fixed: Mapping, kind: type[FactorSpec], noun: str) -> tuple:
+    """The factors (``kind`` instances, at least one) as a tuple, refused when two share a name or a parameter,
+    a parameter is not a numeric override key of ``rig`` or ``fixed`` sets it too; ``noun`` is what a message
+    calls one ("factor")."""
+    table = kind.table
+    factors = tuple(factors)
+    if not factors or not all(isinstance(f, kind) for f in factors):
+        raise StudyError(f"{table}: expected at least one {noun} table (name, parameter, low, high)")
+    names = [f.name for f in factors]
+    params = [f.parameter for f in factors]
+    for i, f in enumerate(factors):
+        if f.name in names[:i]:
+            raise StudyError(
+                f"{table} {f.name!r}: name = {f.name!r} is not allowed; the name is used "
+                f"twice, expected unique {noun} names"
+            )
+        if f.parameter in params[:i]:
+            other = names[params.index(f.parameter)]
+            raise StudyError(
+                f"{table} {f.name!r}: parameter = {f.parameter!r} is not allowed; {noun} "
+                f"{other!r} already sets it, expected one {noun} per parameter"
+            )
+        _grammar(rig, True).parse(f.parameter, f"{table} {f.name!r}", "parameter", error=StudyError)
+        if f.parameter in fixed:
+            raise StudyError(
+                f"{table} {f.name!r}: parameter = {f.parameter!r} is not allowed; [fixed] sets "
+                f"it too, expected a parameter that is either fixed or a {noun}"
+            )
+    return factors
+
+
 @dataclass(frozen=True)
 class StudySpec:
     """A whole study (one TOML file). ``path`` is the TOML file (scene paths are relative to it);
@@ -596,72 +657,11 @@ class StudySpec:
     path: Path | None = None
 
     def __post_init__(self):
-        w = "[study]"
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
-        if not isinstance(self.name, str) or not _NAME_RE.match(self.name):
-            raise _bad(w, "name", self.name, "an identifier of lower-case letters, digits and _")
-        _string(w, "title", self.title)
-        _string(w, "source", self.source)
-        rigs = _rigs()
-        if (self.rig is None) == (self.scene is None):
-            raise StudyError(
-                f"{w}: rig = {self.rig!r}, scene = {self.scene!r}: expected exactly one of rig "
-                f"({', '.join(rigs.RIGS)}) and scene (a stage path relative to the study file)"
-            )
-        if self.rig is not None and self.rig not in rigs.RIGS:
-            raise _bad(w, "rig", self.rig, f"one of {', '.join(rigs.RIGS)}{did_you_mean(self.rig, rigs.RIGS)}")
-        set_("smoke", _boolean(w, "smoke", self.smoke))
-        if self.path is not None:
-            set_("path", Path(self.path))
-        if self.scene is not None:
-            _string(w, "scene", self.scene)
-            if self.smoke:
-                raise StudyError(
-                    f"{w}: smoke = true is not allowed with scene = {self.scene!r}; the smoke "
-                    "overrides belong to a rig (use rig = ...)"
-                )
-            if not self.scene_path.is_file():
-                raise StudyError(
-                    f"{w}: scene = {self.scene!r} is not allowed: {self.scene_path} does not exist; "
-                    "expected a stage path relative to the study file"
-                )
-        set_("seed", _integer(w, "seed", self.seed, 0))
-        set_("batch", _integer(w, "batch", self.batch, 0))
-
-        # fixed overrides
-        if not isinstance(self.fixed, Mapping):
-            raise _bad("[fixed]", "fixed", self.fixed, "a table of overrides")
-        for k, v in self.fixed.items():
-            _grammar(self.rig, False).parse(k, "[fixed]", error=StudyError)
-            if not isinstance(v, (str, bool, int, float)) or (is_number(v) and not math.isfinite(v)):
-                raise _bad("[fixed]", k, v, "a string, a boolean or a finite number")
-        set_("fixed", FrozenMap(self.fixed))
-
-        # factors
-        factors = tuple(self.factors)
-        if not factors or not all(isinstance(f, FactorSpec) for f in factors):
-            raise StudyError("[[factors]]: expected at least one factor table (name, parameter, low, high)")
-        names = [f.name for f in factors]
-        params = [f.parameter for f in factors]
-        for i, f in enumerate(factors):
-            if f.name in names[:i]:
-                raise StudyError(
-                    f"[[factors]] {f.name!r}: name = {f.name!r} is not allowed; the name is used "
-                    "twice, expected unique factor names"
-                )
-            if f.parameter in params[:i]:
-                other = names[params.index(f.parameter)]
-                raise StudyError(
-                    f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; factor "
-                    f"{other!r} already sets it, expected one factor per parameter"
-                )
-            _grammar(self.rig, True).parse(f.parameter, f"[[factors]] {f.name!r}", "parameter", error=StudyError)
-            if f.parameter in self.fixed:
-                raise StudyError(
-                    f"[[factors]] {f.name!r}: parameter = {f.parameter!r} is not allowed; [fixed] sets "
-                    "it too, expected a parameter that is either fixed or a factor"
-                )
-        set_("factors", factors)
+        _check_header(self, "[study]", "study file")
+        _string("[study]", "source", self.source)
+        set_("fixed", _check_fixed(self.fixed, self.rig))
+        set_("factors", _check_factors(self.factors, self.rig, self.fixed, FactorSpec, "factor"))
 
         # responses, analysis, verification
         responses = tuple(self.responses)
@@ -802,19 +802,24 @@ _REQUIRED = {
 }
 
 
-def _check_keys(table: str, data, label: str) -> dict:
+def _check_keys(table: str, data, label: str, tables=None, required=None, arrays=("factors", "responses")) -> dict:
+    """``data`` (TOML table ``table``, called ``label`` in messages) as a dict, refused unless it is a table whose
+    keys are all allowed (``tables``, default a study's) and that holds every required key (``required``);
+    ``arrays`` are the tables written [[name]]."""
+    tables = _TABLES if tables is None else tables
+    required = _REQUIRED if required is None else required
     if not isinstance(data, Mapping):
-        kind = "[[" + table + "]]" if table in ("factors", "responses") else "[" + table + "]"
+        kind = "[[" + table + "]]" if table in arrays else "[" + table + "]"
         raise StudyError(f"{label}: expected a table ({kind}), got {data!r}")
-    allowed = _TABLES[table]
+    allowed = tables[table]
     for k in data:
         if k not in allowed:
             raise StudyError(
                 f"{label}: key {k!r} is not allowed{did_you_mean(k, allowed)}; expected one of {', '.join(allowed)}"
             )
-    for k in _REQUIRED.get(table, ()):
+    for k in required.get(table, ()):
         if k not in data:
-            raise StudyError(f"{label}: {k} is missing; required: {', '.join(_REQUIRED[table])}")
+            raise StudyError(f"{label}: {k} is missing; required: {', '.join(required[table])}")
     return dict(data)
 
 
@@ -897,18 +902,24 @@ def load_study(path: str | Path, check_scene: bool = True) -> StudySpec:
     return spec
 
 
-def check_scene_overrides(spec: StudySpec) -> None:
-    """Build the study's scene and apply ``[fixed]`` and every factor's lowest and highest design value
-    to it; raise :class:`StudyError` naming the key and value the scene or the contact law refuses."""
+def build_scene(spec, rig_values: Mapping | None = None):
+    """The scene of ``spec`` (a :class:`StudySpec`, or anything with ``rig``, ``smoke``, ``scene_path``): the rig
+    built from ``rig_values`` (over its smoke set with ``smoke``), or the stage regenerated with them. Raises what
+    the rig or the stage raises (``StageError``, ``ValueError``, ``KeyError``)."""
+    rigs = _rigs()
+    if spec.rig is not None:
+        return rigs.spec(spec.rig, dict(rig_values or {}), spec.smoke)
+    return rigs.load(spec.scene_path, dict(rig_values or {}))
+
+
+def fixed_scene(spec):
+    """The scene of ``spec`` (see :func:`build_scene`) with its ``fixed`` overrides applied; raise
+    :class:`StudyError` naming the ``[fixed]`` key and value the scene or the contact law refuses."""
     from warpdem.scene.stage import StageError, apply_overrides
 
-    rigs = _rigs()
     rig_vals = {k: v for k, v in spec.fixed.items() if is_rig_key(k)}
     try:
-        if spec.rig is not None:
-            base = rigs.spec(spec.rig, rig_vals, spec.smoke)
-        else:
-            base = rigs.load(spec.scene_path, rig_vals)
+        base = build_scene(spec, rig_vals)
     except (StageError, ValueError, KeyError) as e:
         keys = ", ".join(f"{k} = {v!r}" for k, v in rig_vals.items()) or "(no rig parameters)"
         raise StudyError(f"[fixed]: the scene cannot be built from {keys}: {e}") from None
@@ -919,15 +930,34 @@ def check_scene_overrides(spec: StudySpec) -> None:
             apply_overrides(base, {k: v})
         except (StageError, ValueError, KeyError, TypeError) as e:
             raise StudyError(f"[fixed]: {k} = {v!r} is not allowed: {e}") from None
+    return base
+
+
+def check_override(spec, base, key: str, value) -> None:
+    """Apply override ``key = value`` to a copy of ``base`` (the scene of :func:`fixed_scene`; a rig parameter is
+    checked by the rig's parameters over those ``base`` was authored with). Raises what the scene or the contact
+    law raises (``StageError``, ``ValueError``, ``KeyError``, ``TypeError``)."""
+    from warpdem.scene.stage import apply_overrides
+
+    if is_rig_key(key):
+        rig_vals = {k: v for k, v in spec.fixed.items() if is_rig_key(k)}
+        _rigs().params(base.rig, {**base.authoring, **rig_vals, key: rig_value(spec, key, value)})
+    else:
+        apply_overrides(copy.deepcopy(base), {key: value})
+
+
+def check_scene_overrides(spec: StudySpec) -> None:
+    """Build the study's scene and apply ``[fixed]`` and every factor's lowest and highest design value
+    to it; raise :class:`StudyError` naming the key and value the scene or the contact law refuses."""
+    from warpdem.scene.stage import StageError
+
+    base = fixed_scene(spec)
     table = design_table(spec)
     for f in spec.factors:
         col = table[f"{f.name}_actual"]
         for which, v in (("lowest", float(col.min())), ("highest", float(col.max()))):
             try:
-                if is_rig_key(f.parameter):
-                    rigs.params(base.rig, {**base.authoring, **rig_vals, f.parameter: rig_value(spec, f.parameter, v)})
-                else:
-                    apply_overrides(copy.deepcopy(base), {f.parameter: v})
+                check_override(spec, base, f.parameter, v)
             except (StageError, ValueError, KeyError, TypeError) as e:
                 raise StudyError(
                     f"[[factors]] {f.name!r}: parameter {f.parameter} = {v!r} (the design's {which} "
