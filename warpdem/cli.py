@@ -1,4 +1,4 @@
-"""Command line: ``warpdem study | analyze | run | scene new | verify | bench | audit``."""
+"""Command line: ``warpdem study | analyze | diagnose | run | scene new | verify | bench | audit``."""
 
 from __future__ import annotations
 
@@ -257,6 +257,41 @@ def cmd_study(args) -> int:
     return 0
 
 
+def cmd_diagnose(args) -> int:
+    _quiet_warp()
+    from .diagnose.pipeline import diagnose
+    from .study.spec import StudyError
+
+    try:
+        res = diagnose(
+            args.data, args.out, device=args.device, progress=not args.no_progress, stop_after=args.stop_after
+        )
+    except StudyError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    if res["stopped"]:
+        print(f"stopped at the wall-time limit ({res['stopped']}); run the same command again to resume")
+        return 3
+    words = {
+        "adequate": "ADEQUATE: the calibrated base model fits the data within the noise",
+        "cause": f"CAUSE: {res.get('cause')} ({res.get('cause_words')})",
+        "ambiguous": f"AMBIGUOUS between {', '.join(res.get('tied') or [])}; measure "
+        f"{res.get('separating_measurement')} to separate them",
+        "unexplained": "UNEXPLAINED: the base model misfits and no candidate explains it",
+    }
+    print(words[res["verdict"]])
+    g = res.get("gain") or {}
+    for r, x in (g.get("rmse") or {}).items():
+        print(
+            f"held-out RMSE of {r}: base {x['base']:.4g}, extended {x['extended']:.4g} ({100 * x['reduction']:.0f} % lower)"
+        )
+    print(
+        f"{res['worlds']} simulated worlds ({res['launches']} launches now) in {res['wall_s']:.1f} s on {args.device}; "
+        f"report: {res['out']}/report.md"
+    )
+    return 0
+
+
 def cmd_analyze(args) -> int:
     from .study.execute import analyze
     from .study.spec import StudyError
@@ -356,6 +391,19 @@ def main(argv=None) -> int:
         "(exit code 3); the same command resumes (0: no limit)",
     )
     st.set_defaults(fn=cmd_study)
+    dg = sub.add_parser("diagnose", help="calibrate to measured data, test adequacy, name the cause of a misfit")
+    dg.add_argument("data", help="measured-data file (TOML; schema in warpdem/diagnose/data.py)")
+    dg.add_argument("--device", default="cpu", help="as for study: cpu, cuda, cuda:N, cuda:all or a list")
+    dg.add_argument("--out", default=None, help="output folder (default runs/diagnose/<name>)")
+    dg.add_argument("--no-progress", action="store_true", help="no progress bar")
+    dg.add_argument(
+        "--stop-after",
+        type=float,
+        default=0.0,
+        metavar="SECONDS",
+        help="stop by itself after SECONDS of wall time (exit code 3); the same command resumes (0: no limit)",
+    )
+    dg.set_defaults(fn=cmd_diagnose)
     an = sub.add_parser("analyze", help="fit, ANOVA, plots and report.md of a study folder")
     an.add_argument("out", help="a study's output folder")
     an.set_defaults(fn=cmd_analyze)

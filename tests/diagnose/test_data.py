@@ -534,3 +534,14 @@ def test_parameter_and_spec_refuse_bad_values_directly():
         DiagnosisSpec(**kw, curves="c.csv")
     with pytest.raises(DiagnoseError, match=r"\[\[parameters\]\]: expected at least one free parameter"):
         DiagnosisSpec(**{**kw, "parameters": ()})
+
+
+def test_cli_reports_a_bad_data_file_without_a_traceback(tmp_path, capsys):
+    """``warpdem diagnose`` prints the loader's error (file and key) and exits 2, with no traceback."""
+    from warpdem.cli import main
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[diagnose]\nname = "x"\nrig = "funnel"\n')
+    assert main(["diagnose", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and "bad.toml" in err and "[parameters]" in err and "Traceback" not in err

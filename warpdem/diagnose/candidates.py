@@ -1,6 +1,35 @@
-"""The library of candidate model extensions a diagnosis tries (filled in by the pipeline work)."""
+"""The library of candidate model extensions a diagnosis tries.
+
+Each candidate adds ONE parameter to the base model and reduces to the base model at a known ``off`` value:
+
+- ``cohesion``: the grain-grain JKR surface energy gamma [J/m^2] (the pair's law becomes JKR, which is
+  Hertz-Mindlin at gamma = 0). Off 0; range up to the gamma whose JKR pull-off force 1.5 pi gamma R* is
+  :data:`BOND_MAX` times a mean grain's weight (R* = R/2).
+- ``plasticity``: the grain-grain EEPA contact plasticity ratio lambda_p [-] (the pair's law becomes EEPA with
+  n = 1.5, no adhesion, no pull-off force, which is Hertz-Mindlin with its Tsuji damping at lambda_p = 0).
+  Off 0; range [0, 0.8].
+- ``shape``: the rig's ``aspect_ratio`` (a rod of overlapping spheres of the same volume). Off 1; range
+  [1, 2.5]. Only for sphere grains of a rig that has the parameter.
+- ``size_distribution``: the rig's relative radius SD ``radius_spread`` [-]. Off: the base value; range
+  [off, max(0.25, off)] (a truncated normal at +-2 SD keeps radii positive up to 0.5).
+- ``rolling_friction``: the grain-grain rolling friction mu_r [-] (the base's rolling model). Off: the base value;
+  range [0, max(0.5, 2 off)].
+- ``rolling_model``: not a one-parameter extension (type A and type C are two models, not one with an off
+  value), so it is named here but never applies; a diagnosis reports it as not tried.
+- ``wall_friction``: the static friction of the grain against the wall the measurement rests on (the funnel's
+  and lifting cylinder's base plate, the press's die, the drum's shell), separate from grain-grain friction.
+  Off: the base value; range [0.1, 1].
+
+A candidate does not apply when its parameter is already a free parameter of the base model, a condition of
+the experiments or a ``[fixed]`` key (the user has decided it), or when the scene cannot carry it.
+"""
 
 from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 CANDIDATE_NAMES = (
     "cohesion",
@@ -12,3 +41,146 @@ CANDIDATE_NAMES = (
     "wall_friction",
 )
 """Names of the candidate extensions, in the order they are tried and reported."""
+
+CAUSES = {
+    "cohesion": "cohesion (JKR surface energy)",
+    "plasticity": "plasticity (EEPA contact plasticity ratio)",
+    "shape": "particle shape (elongation)",
+    "size_distribution": "size distribution (PSD width)",
+    "rolling_friction": "rolling resistance (rolling friction)",
+    "rolling_model": "rolling-resistance model (type A vs C)",
+    "wall_friction": "particle-wall friction",
+}
+"""The cause each candidate stands for, in the report's words."""
+
+BOND_MAX = 5.0
+"""Largest granular Bond number (JKR pull-off force / a mean grain's weight) of the cohesion candidate's range."""
+
+_REST_WALL = {"angle_of_repose": ("Plate", "Base"), "press": ("Die",), "drum": ("Drum",)}
+"""The wall each measure kind's grains rest on or slide along (wall_friction)."""
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One extension: its extra parameter ``key`` (an override key or rig parameter), the value ``off`` at which
+    the model is the base model, the physical range [``low``, ``high``] (``off`` inside it), the overrides
+    ``shared`` every simulation of the extended model needs (e.g. the pair's law), and a ``unit``."""
+
+    name: str
+    key: str
+    off: float
+    low: float
+    high: float
+    unit: str = ""
+    shared: Mapping = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.name not in CANDIDATE_NAMES:
+            raise ValueError(f"Candidate: name = {self.name!r} is not allowed; expected one of {CANDIDATE_NAMES}")
+        if not (self.low < self.high and self.low <= self.off <= self.high):
+            raise ValueError(
+                f"Candidate {self.name!r}: range [{self.low}, {self.high}] with off = {self.off} is not allowed; "
+                "expected low < high and off within the range"
+            )
+
+    @property
+    def cause(self) -> str:
+        return CAUSES[self.name]
+
+    @property
+    def off_at_edge(self) -> bool:
+        """True when the off value is an end of the range (the likelihood-ratio test's boundary case)."""
+        return self.off in (self.low, self.high)
+
+    @property
+    def test_value(self) -> float:
+        """The value the screen moves the candidate to: halfway from off to the far end of its range."""
+        far = self.high if self.high - self.off >= self.off - self.low else self.low
+        return self.off + 0.5 * (far - self.off)
+
+
+def _grain(scene) -> tuple[str, float, float]:
+    """(material name, mean radius [m], density [kg/m^3]) of the scene's first factory's grains."""
+    fac = scene.factories[0]
+    sizes = fac.sizes
+    radius = float(sizes.get("radius", sizes.get("mean", sizes.get("median", 0.0))))
+    density = next(m.density for m in scene.materials if m.name == fac.material)
+    return fac.material, radius, float(density)
+
+
+def _pair(scene, a: str, b: str):
+    from warpdem.engine.materials import Interaction
+
+    for pa, pb, ia in scene.pairs:
+        if {pa, pb} == {a, b}:
+            return ia
+    return Interaction()
+
+
+def library(scene, rig_params: Mapping | None, taken: set[str]) -> tuple[list[Candidate], dict[str, str]]:
+    """The candidates that apply to ``scene`` (a SceneSpec built with the base model's overrides) and why the
+    others do not. ``rig_params``: the rig's parameter values (None for a stage without a rig), ``taken``: the
+    override keys the user has decided (free parameters, conditions, ``[fixed]`` keys).
+
+    Returns (candidates in :data:`CANDIDATE_NAMES` order, {name: reason it does not apply})."""
+    from warpdem.engine.types import ContactLaw
+
+    grain, radius, density = _grain(scene)
+    gg = _pair(scene, grain, grain)
+    out, skipped = [], {}
+
+    def add(name, key, off, low, high, unit="", shared=None):
+        if key in taken:
+            skipped[name] = f"{key} is already decided by the data file (a free parameter, condition or [fixed] key)"
+            return
+        if any(k in taken for k in (shared or {})):
+            skipped[name] = f"it changes {', '.join(shared)}, which the data file decides"
+            return
+        out.append(Candidate(name, key, float(off), float(low), float(high), unit, dict(shared or {})))
+
+    pp = f"interaction.{grain}.{grain}"
+    if gg.law == ContactLaw.HERTZ_MINDLIN and radius > 0:
+        weight = density * 9.81 * 4.0 / 3.0 * math.pi * radius**3
+        gamma_max = BOND_MAX * weight / (1.5 * math.pi * radius / 2.0)
+        add("cohesion", f"{pp}.surface_energy", 0.0, 0.0, gamma_max, "J/m^2", {f"{pp}.law": "JKR"})
+        add(
+            "plasticity",
+            f"{pp}.plasticity_ratio",
+            0.0,
+            0.0,
+            0.8,
+            "",
+            {f"{pp}.law": "EEPA", f"{pp}.slope_exponent": 1.5, f"{pp}.pull_off_force": 0.0},
+        )
+    else:
+        why = f"the grain-grain law is {gg.law.name}, not Hertz-Mindlin"
+        skipped["cohesion"] = skipped["plasticity"] = why
+    params = dict(rig_params or {})
+    shape = scene.shapes[0].kind if scene.shapes else "sphere"
+    if "aspect_ratio" not in params:
+        skipped["shape"] = "the scene has no aspect_ratio rig parameter"
+    elif shape != "sphere" or float(params["aspect_ratio"]) != 1.0:
+        skipped["shape"] = "the base grains are not spheres"
+    else:
+        add("shape", "aspect_ratio", 1.0, 1.0, 2.5)
+    if "radius_spread" in params:
+        s = float(params["radius_spread"])
+        add("size_distribution", "radius_spread", s, s, max(0.25, s))
+    else:
+        skipped["size_distribution"] = "the scene has no radius_spread rig parameter"
+    mu_r = float(gg.rolling_friction)
+    add("rolling_friction", f"{pp}.rolling_friction", mu_r, 0.0, max(0.5, 2.0 * mu_r))
+    skipped["rolling_model"] = "type A and type C are two models, not one parameter with an off value"
+    rest = [w for w in scene.walls if w.name in _REST_WALL.get(scene.measure.kind, ())]
+    if rest:
+        mat = rest[0].material
+        mu_w = float(_pair(scene, grain, mat).static_friction)
+        add("wall_friction", f"interaction.{grain}.{mat}.static_friction", mu_w, min(0.1, mu_w), max(1.0, mu_w))
+    else:
+        skipped["wall_friction"] = f"no wall the {scene.measure.kind} measurement rests on"
+    return out, skipped
+
+
+def with_range(c: Candidate, low: float, high: float) -> Candidate:
+    """``c`` over the user's range [low, high] (``[candidates] ranges``); the off value must stay inside it."""
+    return dataclasses.replace(c, low=float(low), high=float(high))

@@ -1,0 +1,800 @@
+"""The diagnosis: calibrate the base model, test its adequacy, try the candidate extensions, name the cause and
+measure its gain on held-out data (``warpdem diagnose DATA.toml``).
+
+Stages (every simulated world is stored as it finishes, ``OUT/runs/<id>.json``, so a rerun reuses them):
+
+1. **Noise budget.** The SD of one measurement: the stated ``sd_<response>`` or the pooled scatter of the
+   replicates. The simulation's own scatter: :attr:`DiagnosisSpec.sim_seeds` world seeds at the centre of the
+   free parameters' ranges at every training condition, pooled, or, where larger, the scatter of the base
+   model's design runs about its surrogates (their white-noise term: a response that is not smooth in the
+   parameters scatters over them as it does over seeds). A measured mean of n replicates is compared
+   with the model through the variance max(s_meas^2, s_sim^2) / n (a measurement cannot be known better than
+   the pile-to-pile scatter the model itself shows) plus the model side's own variance: s_sim^2 / k for the
+   mean of k confirming simulations, or the surrogate's variance.
+2. **Calibration.** A space-filling design (:func:`inference.space_filling`) over the free parameters, at every
+   condition (training and test), each condition's worlds batched in one launch where the scene allows; a
+   Gaussian-process surrogate per (condition, response) (:class:`inference.Surrogate`: smooth, interpolating,
+   with its own predictive variance, which the likelihood takes in); the posterior on a flat prior over the
+   ranges by MCMC on the surrogates (:func:`inference.calibrate`); the maximum a posteriori point confirmed by
+   :attr:`DiagnosisSpec.confirm_seeds` real simulations at every condition.
+3. **Adequacy.** Standardised residuals of the confirmed means against the training data; chi-square, per
+   experiment and trend tests against the noise budget, Holm-corrected as one family
+   (:func:`inference.adequacy`). Nothing significant: ADEQUATE, and the diagnosis stops.
+4. **Candidates** (:mod:`.candidates`): each one's effect at the calibrated point (simulations at its screening
+   value with the confirming runs' world seeds, so most of the seed scatter cancels) against the residual
+   pattern, with the base parameters free to re-tune along the surrogates' gradients (:func:`inference.screen`);
+   the :data:`SURVIVORS` best that pass (p < alpha) are recalibrated as in step 2 with their parameter added.
+5. **Held-out data.** With a ``split`` column, the test experiments; without, each training condition in turn is
+   left out, the model recalibrated on the rest (on the surrogates) and simulated at the left-out condition.
+   Per experiment: squared standardised error and Gaussian negative log-likelihood, from real simulations.
+
+The naming rule (:func:`verdict`), fixed here and never tuned to a data set: a candidate *contends* when its
+likelihood-ratio test against the base (on the training data, from the confirming simulations; boundary
+corrected when its off value is an end of its range) has p < alpha and its held-out NLL beats the base's by
+more than the bootstrap allows (95 % interval of the paired difference above 0; with no held-out data this
+condition is waived and the report says so). The best contender (lowest held-out NLL) is the CAUSE when its
+95 % posterior interval excludes the off value, the extended model passes the adequacy test, and its held-out
+NLL beats every other contender's by more than the bootstrap allows; contenders it does not beat tie with it:
+AMBIGUOUS, and the report names the measurement that separates them best (:func:`separating_measurement`).
+No contender that qualifies: UNEXPLAINED (the model is wrong in a way no candidate fixes).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from warpdem.study import execute
+from warpdem.study import spec as sp
+
+from . import candidates as cands
+from . import inference as inf
+from .data import DiagnoseError, DiagnosisSpec, Experiments, load_diagnosis
+
+SURVIVORS = 3
+"""Most candidates recalibrated after the screen (the largest screen statistics among those that pass)."""
+
+DESIGN_SEED = 0
+"""World seed of the space-filling design's simulations (the factories' own placement)."""
+
+CENTRE_SEEDS = 1
+"""First world seed of the simulation-scatter runs at the centre of the ranges (then +1, +2, ...)."""
+
+CONFIRM_SEEDS = 101
+"""First world seed of the confirming simulations (then +1, +2, ...); the screen reuses them."""
+
+SEPARATING = (
+    "bulk_density_kg_m3",
+    "angle_fit_deg",
+    "pile_height_m",
+    "discharge_rate_kg_s",
+    "dynamic_angle_deg",
+    "fluctuation_index",
+    "residual_set_ratio",
+    "max_displacement_m",
+    "compression_ratio",
+    "unloading_stiffness_n_m",
+    "loading_exponent",
+)
+"""The measurements a lab can make that :func:`separating_measurement` may name (packing fraction is bulk
+density over the solid density; the angle's other estimators measure the same pile)."""
+
+FOLD_STEPS = 100
+"""MCMC steps of a held-out fold's calibration (only its maximum is used)."""
+
+VERDICTS = ("adequate", "cause", "ambiguous", "unexplained")
+"""The verdicts of diagnosis.json."""
+
+
+# --------------------------------------------------------------------------------------------------
+# simulations
+# --------------------------------------------------------------------------------------------------
+
+
+class Simulations:
+    """Simulated worlds by identity (:func:`warpdem.study.spec.point_key` of the overrides and world seed),
+    stored one JSON per world under ``OUT/runs`` the moment its launch finishes; requests already stored are
+    never run again."""
+
+    def __init__(self, study, out: Path, devices: list[str], progress: bool, log, stop_after: float):
+        self.study, self.out, self.devices, self.progress, self.log = study, out, devices, progress, log
+        self.stop_after, self.t0 = stop_after, time.perf_counter()
+        self.runs = out / "runs"
+        self.runs.mkdir(parents=True, exist_ok=True)
+        self._cache: dict[str, dict] = {}
+        self.launched = 0
+
+    def key(self, overrides: dict, seed: int) -> str:
+        return sp.point_key(self.study, overrides, seed)
+
+    def run(self, requests: list[tuple[dict, int]], stage: str) -> list[dict]:
+        """The metrics of each (overrides, world seed) in ``requests``, running those not yet stored (batched
+        by what they share); raises ``runner.RunStopped`` when the wall-time limit stops a launch."""
+        from warpdem.scene.runner import RunStopped
+
+        rows, seen = [], set()
+        for ov, seed in requests:
+            pid = self.key(ov, seed)
+            if pid in seen or (self.runs / f"{pid}.json").exists():
+                continue
+            seen.add(pid)
+            rows.append({"run": len(rows) + 1, "point_id": pid, "world_seed": int(seed), "overrides": ov})
+            rows[-1]["row"] = {"stage": stage}
+        if rows:
+            batches = execute._batches(self.study, rows, len(self.devices))
+            self.log(f"{stage}: {len(rows)} simulation(s) in {len(batches)} launch(es)")
+            bar = execute._progress_bar(len(rows), 0, stage, self.progress)
+            try:
+                if len(self.devices) > 1:
+                    stopped = execute._run_parallel(
+                        self.study,
+                        self.out,
+                        batches,
+                        self.devices,
+                        bar,
+                        self.t0,
+                        60.0,
+                        self.stop_after,
+                        self.log,
+                        on_done=lambda *a: None,
+                    )
+                    if stopped:
+                        raise RunStopped(stopped)
+                else:
+                    self._serial(batches, bar)
+            finally:
+                if bar is not None:
+                    bar.close()
+            self.launched += len(batches)
+        return [self.metrics(self.key(ov, seed)) for ov, seed in requests]
+
+    def _serial(self, batches, bar) -> None:
+        import functools
+
+        for k, batch in enumerate(batches):
+            base = bar.n if bar is not None else 0
+            tick = functools.partial(execute._batch_tick, bar, base, len(batch), f"launch {k + 1}/{len(batches)}")
+            tb = time.perf_counter()
+            records = execute.run_batch(
+                self.study,
+                batch,
+                self.devices[0],
+                progress=tick,
+                out_dir=self.out / "launches" / execute._launch_id(batch),
+                checkpoint_every=60.0,
+                stop_after=execute._time_left(self.stop_after, self.t0),
+            )
+            execute._save_batch(self.study, self.runs, batch, records, time.perf_counter() - tb, self.devices[0])
+            if bar is not None:
+                bar.n = base + len(batch)
+                bar.refresh()
+
+    def metrics(self, pid: str) -> dict:
+        if pid not in self._cache:
+            with open(self.runs / f"{pid}.json") as fh:
+                self._cache[pid] = json.load(fh)["metrics"]
+        return self._cache[pid]
+
+
+def response(metrics: dict, name: str) -> float:
+    """Response ``name`` (a metric key) of one world's metrics; NaN where the run could not measure it."""
+    return execute._response(metrics, name)
+
+
+# --------------------------------------------------------------------------------------------------
+# models
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Dim:
+    """One calibrated parameter: its ``name``, override ``key`` and range [``low``, ``high``]."""
+
+    name: str
+    key: str
+    low: float
+    high: float
+    unit: str = ""
+
+    def value(self, u: float) -> float:
+        return self.low + float(u) * (self.high - self.low)
+
+    def unit_value(self, v: float) -> float:
+        return (float(v) - self.low) / (self.high - self.low)
+
+
+@dataclass
+class Model:
+    """The base model (``candidate`` None) or the base plus one candidate (its parameter the last dimension)."""
+
+    name: str
+    dims: list[Dim]
+    shared: dict = field(default_factory=dict)
+    candidate: cands.Candidate | None = None
+
+    def overrides(self, u) -> dict:
+        """The overrides of the model at unit-cube point ``u`` (d,)."""
+        out = dict(self.shared)
+        for d, x in zip(self.dims, u):
+            out[d.key] = d.value(x)
+        return out
+
+
+@dataclass
+class Problem:
+    """The data of one diagnosis, arranged for the stages: ``obs`` (one row per measured mean: experiment id,
+    response, condition index, mean, replicates n, variance of one measurement, split), the distinct
+    ``conditions`` (override dicts) and the training condition indices."""
+
+    spec: DiagnosisSpec
+    experiments: Experiments
+    obs: pd.DataFrame
+    conditions: list[dict]
+    sim_var: dict = field(default_factory=dict)
+
+    @property
+    def train(self) -> np.ndarray:
+        return (self.obs["split"] == "train").to_numpy()
+
+    def budget(self, k_model) -> np.ndarray:
+        """Variance (per observation) of measured mean minus model mean: max(s_meas^2, s_sim^2) / n plus
+        s_sim^2 / k_model (k_model: the simulations averaged, an array or a number; inf for a surrogate)."""
+        s_sim = self.obs["response"].map(self.sim_var).to_numpy(dtype=float)
+        one = np.maximum(self.obs["var_one"].to_numpy(dtype=float), s_sim)
+        return one / self.obs["n"].to_numpy(dtype=float) + s_sim / np.asarray(k_model, dtype=float)
+
+
+def _problem(spec: DiagnosisSpec, ex: Experiments) -> Problem:
+    summ = ex.summary()
+    cond_cols = list(ex.conditions)
+    keys, conditions, rows = {}, [], []
+    pooled = {r: ex.replicate_sd(r) for r in ex.responses}
+    for _, e in summ.iterrows():
+        ckey = tuple(sp._canon(e[c]) for c in cond_cols)
+        if ckey not in keys:
+            keys[ckey] = len(conditions)
+            conditions.append(ex.overrides(e["id"]))
+        for r in ex.responses:
+            if not (e[f"n_{r}"] > 0 and np.isfinite(e[r])):
+                continue
+            sd = e.get(f"sd_{r}", math.nan)
+            if not np.isfinite(sd):
+                sd = pooled[r][0]
+            if not np.isfinite(sd):
+                raise DiagnoseError(
+                    f"{ex.source}: response {r!r} has no replicates (no id with two or more values) and no "
+                    f"sd_{r} column: its measurement noise is unknown; give replicates or the stated SD"
+                )
+            rows.append(
+                {
+                    "id": e["id"],
+                    "response": r,
+                    "condition": keys[ckey],
+                    "mean": float(e[r]),
+                    "n": int(e[f"n_{r}"]),
+                    "var_one": float(sd) ** 2,
+                    "split": e["split"],
+                    **{c: e[c] for c in cond_cols},
+                }
+            )
+    return Problem(spec, ex, pd.DataFrame(rows), conditions)
+
+
+# --------------------------------------------------------------------------------------------------
+# one model: design, surrogates, calibration, confirmation, held-out
+# --------------------------------------------------------------------------------------------------
+
+
+def _seed(spec: DiagnosisSpec, text: str) -> int:
+    """A seed for one stage, derived from the data file's ``seed`` and the stage's name."""
+    return int(hashlib.sha1(f"{spec.seed}:{text}".encode()).hexdigest()[:8], 16)
+
+
+class Evaluator:
+    """Runs and evaluates models of one problem (:meth:`evaluate`)."""
+
+    def __init__(self, prob: Problem, sims: Simulations, log):
+        self.prob, self.sims, self.log = prob, sims, log
+        self.spec = prob.spec
+        self.responses = list(prob.experiments.responses)
+
+    def _request(self, model: Model, u, cond: int, seed: int) -> tuple[dict, int]:
+        ov = {**self.spec.fixed, **self.prob.conditions[cond], **model.overrides(u)}
+        return ov, seed
+
+    def _values(self, metrics: list[dict]) -> np.ndarray:
+        """(len(metrics), responses) response values."""
+        return np.array([[response(m, r) for r in self.responses] for m in metrics], dtype=float)
+
+    def design(self, model: Model) -> np.ndarray:
+        d = len(model.dims)
+        n = self.spec.points or 4 + 4 * d
+        return inf.space_filling(n, d, _seed(self.spec, f"design:{model.name}"))
+
+    def surrogates(self, model: Model, stage: str) -> tuple[dict, pd.DataFrame]:
+        """Design simulations at every condition and one surrogate per (condition, response)."""
+        U = self.design(model)
+        C = len(self.prob.conditions)
+        reqs = [self._request(model, u, c, DESIGN_SEED) for c in range(C) for u in U]
+        vals = self._values(self.sims.run(reqs, stage)).reshape(C, len(U), len(self.responses))
+        gps, acc = {}, []
+        for c in range(C):
+            for j, r in enumerate(self.responses):
+                gp = inf.Surrogate(seed=_seed(self.spec, f"gp:{model.name}:{c}:{r}")).fit(U, vals[c, :, j])
+                gps[(c, r)] = gp
+                acc.append({"model": model.name, "condition": c, "response": r, **gp.cv(), "noise_sd": gp.noise_sd})
+        return gps, pd.DataFrame(acc)
+
+    def predictor(self, gps: dict, mask: np.ndarray):
+        obs = self.prob.obs[mask]
+        pairs = list(zip(obs["condition"], obs["response"]))
+
+        def predict(U):
+            U = np.atleast_2d(U)
+            mean = np.empty((len(U), len(pairs)))
+            var = np.empty_like(mean)
+            for k, key in enumerate(pairs):
+                m, s = gps[key].predict(U)
+                mean[:, k], var[:, k] = m, s**2
+            return mean, var
+
+        return predict
+
+    def calibrate(self, model: Model, gps: dict, mask: np.ndarray, tag: str, sample: bool = True) -> dict:
+        obs = self.prob.obs[mask]
+        var = self.prob.budget(np.inf)[mask]
+        return inf.calibrate(
+            self.predictor(gps, mask),
+            obs["mean"].to_numpy(dtype=float),
+            var,
+            len(model.dims),
+            seed=_seed(self.spec, f"mcmc:{model.name}:{tag}"),
+            steps=self.spec.mcmc_steps if sample else FOLD_STEPS,
+        )
+
+    def confirm(self, model: Model, u, conds, stage: str) -> dict:
+        """Real simulations of ``model`` at ``u`` at conditions ``conds``: {condition: (seeds, responses) values,
+        and the full metrics}."""
+        seeds = [CONFIRM_SEEDS + k for k in range(self.spec.confirm_seeds)]
+        reqs = [self._request(model, u, c, s) for c in conds for s in seeds]
+        mets = self.sims.run(reqs, stage)
+        out = {}
+        for i, c in enumerate(conds):
+            m = mets[i * len(seeds) : (i + 1) * len(seeds)]
+            out[c] = {"values": self._values(m), "metrics": m}
+        return out
+
+    def _sim_means(self, conf: dict, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Simulated mean and the number of finite simulations per observation of ``mask``."""
+        obs = self.prob.obs[mask]
+        mean, k = np.full(len(obs), np.nan), np.zeros(len(obs))
+        for i, (c, r) in enumerate(zip(obs["condition"], obs["response"])):
+            if c in conf:
+                v = conf[c]["values"][:, self.responses.index(r)]
+                v = v[np.isfinite(v)]
+                if len(v):
+                    mean[i], k[i] = v.mean(), len(v)
+        return mean, k
+
+    def residuals(self, conf: dict, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        sim, k = self._sim_means(conf, mask)
+        r = self.prob.obs["mean"].to_numpy(dtype=float)[mask] - sim
+        var = self.prob.budget(np.maximum(k, 1))[mask]
+        return r, var
+
+    def evaluate(self, model: Model) -> dict:
+        """Everything about one model: surrogates and their accuracy, posterior, confirmation at every
+        condition, adequacy on the training data, held-out errors, the likelihood of the training data."""
+        prob = self.prob
+        train = prob.train
+        gps, acc = self.surrogates(model, f"{model.name}: design")
+        if model.candidate is None:
+            # the world seeds measure the scatter a factory's placement gives; a model whose response is not
+            # smooth in its parameters (contact networks rearrange) scatters over them too, which the surrogates'
+            # white-noise term measures: the budget takes the larger, per response
+            for r in self.responses:
+                nug = float(np.nanmean([gps[(c, r)].noise_sd ** 2 for c in range(len(prob.conditions))]))
+                prob.sim_var[r] = max(prob.sim_var[r], nug) if np.isfinite(nug) else prob.sim_var[r]
+        cal = self.calibrate(model, gps, train, "all")
+        u_map = np.asarray(cal["map"], dtype=float)
+        conf = self.confirm(model, u_map, range(len(prob.conditions)), f"{model.name}: confirm")
+        r, var = self.residuals(conf, train)
+        obs_t = prob.obs[train]
+        cond_df = obs_t[[c for c in prob.experiments.conditions if _numeric(obs_t[c])]].astype(float)
+        cond_df.index = obs_t["id"].to_numpy()
+        labels = obs_t["response"].to_numpy()
+        ok = np.isfinite(r)
+        if not ok.all():
+            bad = obs_t[~ok]
+            raise DiagnoseError(
+                f"{self.spec.path}: the {model.name} model's confirming simulations could not measure "
+                f"{', '.join(sorted(set(bad['response'])))} at experiment(s) {', '.join(map(str, bad['id']))}"
+            )
+        adequacy = inf.adequacy(r, var, len(model.dims), cond_df, labels, self.spec.alpha)
+        loglik = float(-np.sum(inf.gaussian_nll(r[ok], var[ok])))
+        held = self.held_out(model, gps, u_map, conf)
+        return {
+            "model": model,
+            "gps": gps,
+            "surrogate_accuracy": acc,
+            "calibration": cal,
+            "u_map": u_map,
+            "theta": {d.name: d.value(x) for d, x in zip(model.dims, u_map)},
+            "interval": {
+                d.name: (d.value(lo), d.value(hi)) for d, (lo, hi) in zip(model.dims, np.asarray(cal["interval"]))
+            },
+            "confirm": conf,
+            "residual": r,
+            "variance": var,
+            "adequacy": adequacy,
+            "loglik": loglik,
+            "n_train": int(ok.sum()),
+            "held_out": held,
+        }
+
+    def folds(self) -> list[tuple[np.ndarray, np.ndarray, int | None]]:
+        """(fit mask, held-out mask, held-out condition or None) per fold: the data's split, or each training
+        condition left out in turn."""
+        obs = self.prob.obs
+        train = self.prob.train
+        test = ~train
+        if test.any():
+            # the data's split: one fold, the test experiments simulated at the training calibration
+            return [(train, test, None)]
+        conds = sorted(set(obs.loc[train, "condition"]))
+        if len(conds) < 2:
+            return []
+        return [
+            (train & (obs["condition"] != c).to_numpy(), train & (obs["condition"] == c).to_numpy(), c) for c in conds
+        ]
+
+    def held_out(self, model: Model, gps: dict, u_map, conf: dict) -> pd.DataFrame | None:
+        folds = self.folds()
+        if not folds:
+            return None
+        parts = []
+        for fit, test, c in folds:
+            if c is None:
+                fconf = conf
+            else:
+                u = np.asarray(self.calibrate(model, gps, fit, f"fold{c}", sample=False)["map"], dtype=float)
+                fconf = self.confirm(model, u, [c], f"{model.name}: held-out")
+            r, var = self.residuals(fconf, test)
+            part = self.prob.obs[test][["id", "response", "condition"]].copy()
+            part["residual"], part["variance"] = r, var
+            parts.append(part)
+        out = pd.concat(parts, ignore_index=True)
+        out["sq"] = out["residual"] ** 2 / out["variance"]
+        out["nll"] = inf.gaussian_nll(out["residual"].to_numpy(), out["variance"].to_numpy())
+        return out
+
+    def jacobian(self, gps: dict, mask: np.ndarray, u_map, h: float = 0.05) -> np.ndarray:
+        """d(prediction)/d(u) of the surrogates at ``u_map`` by central differences, (n_obs, d)."""
+        predict = self.predictor(gps, mask)
+        d = len(u_map)
+        J = np.zeros((int(mask.sum()), d))
+        for i in range(d):
+            a, b = u_map.copy(), u_map.copy()
+            a[i], b[i] = max(u_map[i] - h, 0.0), min(u_map[i] + h, 1.0)
+            J[:, i] = (predict(b[None])[0][0] - predict(a[None])[0][0]) / (b[i] - a[i])
+        return J
+
+
+def _numeric(col: pd.Series) -> bool:
+    return pd.api.types.is_numeric_dtype(col) and col.nunique() >= 3
+
+
+# --------------------------------------------------------------------------------------------------
+# the diagnosis
+# --------------------------------------------------------------------------------------------------
+
+
+def _sim_scatter(ev: Evaluator, base: Model) -> dict:
+    """Pooled SD of the responses over world seeds at the centre of the ranges, at every training condition:
+    {response: variance}."""
+    prob = ev.prob
+    conds = sorted(set(prob.obs.loc[prob.train, "condition"]))
+    seeds = [CENTRE_SEEDS + k for k in range(ev.spec.sim_seeds)]
+    centre = np.full(len(base.dims), 0.5)
+    reqs = [ev._request(base, centre, c, s) for c in conds for s in seeds]
+    vals = ev._values(ev.sims.run(reqs, "noise: simulation scatter")).reshape(len(conds), len(seeds), -1)
+    out = {}
+    for j, r in enumerate(ev.responses):
+        ss, df = 0.0, 0
+        for c in range(len(conds)):
+            v = vals[c, :, j]
+            v = v[np.isfinite(v)]
+            if len(v) > 1:
+                ss += float(((v - v.mean()) ** 2).sum())
+                df += len(v) - 1
+        out[r] = ss / df if df else math.nan
+        if not np.isfinite(out[r]):
+            raise DiagnoseError(
+                f"{ev.spec.path}: the simulations could not measure {r!r} at the centre of the parameter ranges "
+                f"(values {vals[:, :, j].tolist()}); check the scene and the response"
+            )
+    return out
+
+
+def screen(ev: Evaluator, base_eval: dict, gps: dict, cand: cands.Candidate) -> dict:
+    """The candidate's effect at the calibrated point against the base residuals (:func:`inference.screen`)."""
+    prob = ev.prob
+    train = prob.train
+    model = Model(cand.name, list(base_eval["model"].dims), dict(cand.shared), cand)
+    u = base_eval["u_map"]
+    conds = sorted(set(prob.obs.loc[train, "condition"]))
+    test = dict(model.shared)
+    test[cand.key] = cand.test_value
+    moved = Model(cand.name, model.dims, test)
+    conf = ev.confirm(moved, u, conds, f"screen: {cand.name}")
+    sim_c, _ = ev._sim_means(conf, train)
+    sim_b, _ = ev._sim_means(base_eval["confirm"], train)
+    effect = sim_c - sim_b
+    J = ev.jacobian(gps, train, u)
+    r, var = base_eval["residual"], base_eval["variance"]
+    ok = np.isfinite(effect) & np.isfinite(r)
+    res = inf.screen(r[ok], var[ok], J[ok], np.where(effect[ok] * 0 == 0, effect[ok], 0.0))
+    if not cand.off_at_edge:
+        # an interior off value: the candidate may move either way; screen both directions
+        res2 = inf.screen(r[ok], var[ok], J[ok], -effect[ok])
+        if res2["delta_chi2"] > res["delta_chi2"]:
+            res = res2
+    return {"candidate": cand.name, "test_value": cand.test_value, "effect": effect, **res}
+
+
+def _boot(losses: dict, seed: int) -> dict:
+    """:func:`inference.bootstrap` as {"mean": {model: mean}, "interval": {model: (low, high)}, "difference":
+    {(a, b): (low, high) of mean a - mean b}}."""
+    b = inf.bootstrap(losses, seed=seed)
+    out = {"mean": {}, "interval": {}, "difference": {}}
+    for _, m in b["models"].iterrows():
+        out["mean"][m["model"]] = float(m["mean"])
+        out["interval"][m["model"]] = (float(m["low"]), float(m["high"]))
+    for _, p in b["pairs"].iterrows():
+        out["difference"][(p["model_a"], p["model_b"])] = (float(p["low"]), float(p["high"]))
+        out["difference"][(p["model_b"], p["model_a"])] = (-float(p["high"]), -float(p["low"]))
+    return out
+
+
+def _lrt(base: dict, ext: dict, cand: cands.Candidate) -> tuple[float, float]:
+    from scipy import stats
+
+    if cand.off_at_edge:
+        return inf.lrt_boundary(base["loglik"], ext["loglik"])
+    lr = max(2.0 * (ext["loglik"] - base["loglik"]), 0.0)
+    return lr, float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
+
+
+def verdict(base: dict, results: list[dict], alpha: float, seed: int) -> dict:
+    """The fixed naming rule (module docstring) over the recalibrated candidates ``results``."""
+    held_base = base["held_out"]
+    rows = []
+    for res in results:
+        c = res["model"].candidate
+        stat, p = _lrt(base, res, c)
+        lo, hi = res["interval"][c.name]
+        excludes = not (lo <= c.off <= hi)
+        row = {
+            "candidate": c.name,
+            "lrt": stat,
+            "p": p,
+            "aic": inf.aic(res["loglik"], len(res["model"].dims)),
+            "bic": inf.bic(res["loglik"], len(res["model"].dims), res["n_train"]),
+            "estimate": res["theta"][c.name],
+            "interval": (lo, hi),
+            "excludes_off": excludes,
+            "adequate": bool(res["adequacy"]["adequate"]),
+            "held_out_nll": math.nan,
+            "beats_base": None,
+        }
+        if held_base is not None and res["held_out"] is not None:
+            boot = _boot({"base": held_base["nll"].to_numpy(), c.name: res["held_out"]["nll"].to_numpy()}, seed)
+            row["held_out_nll"] = boot["mean"][c.name]
+            row["gain_interval"] = boot["difference"][("base", c.name)]
+            row["beats_base"] = bool(boot["difference"][("base", c.name)][0] > 0)
+        rows.append(row)
+    contenders = [r for r in rows if r["p"] < alpha and r["beats_base"] in (True, None)]
+    out = {"table": rows, "verdict": "unexplained", "cause": None, "tied": []}
+    if not contenders:
+        return out
+    if held_base is not None:
+        contenders.sort(key=lambda r: r["held_out_nll"])
+    else:
+        contenders.sort(key=lambda r: r["aic"])
+    best = contenders[0]
+    by_name = {res["model"].candidate.name: res for res in results}
+    tied = []
+    for other in contenders[1:]:
+        if held_base is None:
+            # no held-out data: only the likelihood can separate them; AIC within 2 is a tie
+            if other["aic"] - best["aic"] < 2.0:
+                tied.append(other["candidate"])
+            continue
+        boot = _boot(
+            {
+                other["candidate"]: by_name[other["candidate"]]["held_out"]["nll"].to_numpy(),
+                best["candidate"]: by_name[best["candidate"]]["held_out"]["nll"].to_numpy(),
+            },
+            seed,
+        )
+        if boot["difference"][(other["candidate"], best["candidate"])][0] <= 0:
+            tied.append(other["candidate"])
+    if tied:
+        out.update(verdict="ambiguous", tied=[best["candidate"], *tied])
+    elif best["excludes_off"] and best["adequate"]:
+        out.update(verdict="cause", cause=best["candidate"])
+    else:
+        out["best"] = best["candidate"]
+    return out
+
+
+def separating_measurement(prob: Problem, results: dict, names: list[str]) -> list[dict]:
+    """Rank the measurements of :data:`SEPARATING` the data do not hold by how far the calibrated models
+    ``names`` apart predict them: per condition |difference of means| / its standard error (from the
+    confirming simulations' seed scatter), averaged over the conditions; best first."""
+    have = set(prob.experiments.responses)
+    scores = []
+    for metric in SEPARATING:
+        if metric in have:
+            continue
+        per = []
+        for c in range(len(prob.conditions)):
+            vals = []
+            for n in names[:2]:
+                conf = results[n]["confirm"].get(c)
+                v = np.array([response(m, metric) for m in conf["metrics"]]) if conf else np.array([])
+                vals.append(v[np.isfinite(v)])
+            a, b = vals
+            if len(a) < 2 or len(b) < 2:
+                continue
+            se = math.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b))
+            diff = abs(a.mean() - b.mean())
+            per.append(diff / se if se > 0 else (math.inf if diff > 0 else 0.0))
+        if per:
+            scores.append({"measurement": metric, "z": float(np.mean(per)), "conditions": len(per)})
+    return sorted(scores, key=lambda s: -s["z"])
+
+
+def gain(prob: Problem, base: dict, ext: dict, seed: int) -> dict:
+    """Held-out RMSE (per response, in its units) and NLL of the base and the extended model, with bootstrap
+    intervals over the held-out experiments, and how far the base parameters moved."""
+    hb, he = base["held_out"], ext["held_out"]
+    out = {"rmse": {}, "nll": None, "shift": {}}
+    if hb is not None and he is not None:
+        for r in sorted(set(hb["response"])):
+            a = hb.loc[hb["response"] == r, "residual"].to_numpy() ** 2
+            b = he.loc[he["response"] == r, "residual"].to_numpy() ** 2
+            boot = _boot({"base": a, "extended": b}, seed)
+            rb, re_ = math.sqrt(a.mean()), math.sqrt(b.mean())
+            out["rmse"][r] = {
+                "base": rb,
+                "extended": re_,
+                "base_interval": tuple(math.sqrt(max(x, 0.0)) for x in boot["interval"]["base"]),
+                "extended_interval": tuple(math.sqrt(max(x, 0.0)) for x in boot["interval"]["extended"]),
+                "reduction": 1.0 - re_ / rb if rb > 0 else math.nan,
+            }
+        boot = _boot({"base": hb["nll"].to_numpy(), "extended": he["nll"].to_numpy()}, seed)
+        out["nll"] = {
+            "base": boot["mean"]["base"],
+            "extended": boot["mean"]["extended"],
+            "base_interval": boot["interval"]["base"],
+            "extended_interval": boot["interval"]["extended"],
+            "difference_interval": boot["difference"][("base", "extended")],
+        }
+    for d in base["model"].dims:
+        b, e = base["theta"][d.name], ext["theta"][d.name]
+        lo, hi = base["interval"][d.name]
+        out["shift"][d.name] = {"base": b, "extended": e, "shift": e - b, "base_interval": (lo, hi)}
+    return out
+
+
+def diagnose(
+    source,
+    out_dir=None,
+    device: str = "cpu",
+    progress: bool = True,
+    log=print,
+    stop_after: float = 0.0,
+) -> dict:
+    """Diagnose the data file ``source`` (a path, or a (DiagnosisSpec, Experiments) pair) into ``out_dir``
+    (default ``runs/diagnose/<name>``): report.md, diagnosis.json and PNGs (:mod:`.report`). Resumable: every
+    simulation is stored as it finishes and a rerun reuses it. ``device`` is any a study accepts (one device,
+    or a comma-separated list, launches then spread over them). With ``stop_after`` [wall s] the diagnosis
+    stops once that much time has passed (a launch saves its checkpoint); the same call resumes. Returns the
+    diagnosis (as written to diagnosis.json) plus ``out``, ``wall_s``, ``worlds``, ``launches`` and ``stopped``."""
+    from warpdem.scene.runner import RunStopped
+
+    from .report import write
+
+    spec, ex = load_diagnosis(source) if not isinstance(source, tuple) else source
+    out = Path(out_dir) if out_dir else Path("runs") / "diagnose" / spec.name
+    out.mkdir(parents=True, exist_ok=True)
+    if spec.path is not None:
+        shutil.copyfile(spec.path, out / "data.toml")
+        shutil.copyfile(ex.source, out / "experiments.csv")
+    study = spec.study(list(ex.responses))
+    sims = Simulations(study, out, execute.parse_devices(device), progress, log, stop_after)
+    t0 = time.perf_counter()
+    prob = _problem(spec, ex)
+    ev = Evaluator(prob, sims, log)
+    base = Model("base", [Dim(p.name, p.parameter, p.low, p.high, p.unit) for p in spec.parameters])
+    result: dict = {"name": spec.name, "out": str(out), "stopped": None}
+    try:
+        prob.sim_var = _sim_scatter(ev, base)
+        base_eval = ev.evaluate(base)
+        evals = {"base": base_eval}
+        screens, skipped, results, decision = [], {}, [], None
+        if base_eval["adequacy"]["adequate"]:
+            decision = {"verdict": "adequate", "cause": None, "tied": [], "table": []}
+        else:
+            lib, skipped = _library(spec, ex, study)
+            screens = [screen(ev, base_eval, base_eval["gps"], c) for c in lib]
+            passed = sorted([s for s in screens if s["p"] < spec.alpha], key=lambda s: -s["delta_chi2"])[:SURVIVORS]
+            for s in passed:
+                c = next(c for c in lib if c.name == s["candidate"])
+                model = Model(c.name, [*base.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c)
+                evals[c.name] = ev.evaluate(model)
+                results.append(evals[c.name])
+            decision = verdict(base_eval, results, spec.alpha, _seed(spec, "bootstrap"))
+        separating = []
+        if decision["verdict"] == "ambiguous":
+            separating = separating_measurement(prob, evals, decision["tied"])
+        named = decision.get("cause") or (decision["tied"][0] if decision["tied"] else decision.get("best"))
+        gains = gain(prob, base_eval, evals[named], _seed(spec, "gain")) if named else None
+        result.update(
+            write(
+                out,
+                prob,
+                evals,
+                decision,
+                screens=screens,
+                skipped=skipped,
+                separating=separating,
+                gains=gains,
+            )
+        )
+    except RunStopped as e:
+        result["stopped"] = str(e)
+        log(f"{spec.name}: stopped; {e}; run the same command again to resume")
+    result["wall_s"] = time.perf_counter() - t0
+    result["worlds"] = len(list((out / "runs").glob("*.json")))
+    result["launches"] = sims.launched
+    return result
+
+
+def _library(spec: DiagnosisSpec, ex: Experiments, study) -> tuple[list, dict]:
+    """The candidates that apply (the data file's ``use`` list, ranges replaced as it says)."""
+    from warpdem.scene import rigs
+
+    scene = execute._scene(study, dict(spec.fixed))
+    rig_params = None
+    if spec.rig is not None:
+        base = dict(rigs.SMOKE[spec.rig]) if spec.smoke else {}
+        base.update({k: v for k, v in spec.fixed.items() if sp.is_rig_key(k)})
+        p = rigs.params(spec.rig, base)
+        rig_params = {f: getattr(p, f) for f in p.__dataclass_fields__}
+    taken = {p.parameter for p in spec.parameters} | set(ex.conditions) | set(spec.fixed)
+    lib, skipped = cands.library(scene, rig_params, taken)
+    if spec.candidates is not None:
+        for c in lib:
+            if c.name not in spec.candidates:
+                skipped[c.name] = "not in the data file's [candidates] use list"
+        lib = [c for c in lib if c.name in spec.candidates]
+    out = []
+    for c in lib:
+        if c.name in spec.candidate_ranges:
+            lo, hi = spec.candidate_ranges[c.name]
+            try:
+                c = cands.with_range(c, lo, hi)
+            except ValueError as e:
+                raise DiagnoseError(f"{spec.path}: [candidates] ranges.{c.name} = [{lo}, {hi}]: {e}") from None
+        out.append(c)
+    return out, skipped
