@@ -110,11 +110,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli backport
-    import tomli as tomllib
-
 from warpdem.engine.checks import did_you_mean, not_allowed
 from warpdem.engine.keys import is_rig_key
 from warpdem.study.spec import (
@@ -139,6 +134,7 @@ from warpdem.study.spec import (
     build_scene,
     check_override,
     fixed_scene,
+    read_toml,
     rig_value,
 )
 
@@ -870,14 +866,7 @@ def load_diagnosis(path: str | Path, check_scene: bool = True) -> tuple[Diagnosi
     Raises :class:`DiagnoseError`.
     """
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise DiagnoseError(f"{path}: no such diagnosis file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise DiagnoseError(f"{path}: not valid TOML: {e}") from None
-    spec = DiagnosisSpec.from_dict(data, path)
+    spec = DiagnosisSpec.from_dict(read_toml(path, "diagnosis", DiagnoseError), path)
     src = spec.experiments_path
     if not src.is_file():
         raise DiagnoseError(

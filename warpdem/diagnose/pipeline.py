@@ -540,8 +540,8 @@ def screen(ev: Evaluator, base_eval: dict, gps: dict, cand: cands.Candidate) -> 
     effect = sim_c - sim_b
     J = ev.jacobian(gps, train, u)
     r, var = base_eval["residual"], base_eval["variance"]
-    ok = np.isfinite(effect) & np.isfinite(r)
-    res = inf.screen(r[ok], var[ok], J[ok], np.where(effect[ok] * 0 == 0, effect[ok], 0.0))
+    ok = np.isfinite(effect) & np.isfinite(r)  # a candidate run that could not measure drops out
+    res = inf.screen(r[ok], var[ok], J[ok], effect[ok])
     if not cand.off_at_edge:
         # an interior off value: the candidate may move either way; screen both directions
         res2 = inf.screen(r[ok], var[ok], J[ok], -effect[ok])

@@ -146,6 +146,7 @@ __all__ = [
     "fixed_scene",
     "load_study",
     "point_key",
+    "read_toml",
     "run_overrides",
     "varies_per_world",
 ]
@@ -878,6 +879,18 @@ def _from_dict(data: Mapping, path) -> StudySpec:
     )
 
 
+def read_toml(path: Path, what: str, error: type[StudyError] = StudyError) -> dict:
+    """The parsed TOML file ``path`` (a ``what`` file: "study", "diagnosis"); a missing file or bad TOML raises
+    ``error`` naming the file."""
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise error(f"{path}: no such {what} file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise error(f"{path}: not valid TOML: {e}") from None
+
+
 def load_study(path: str | Path, check_scene: bool = True) -> StudySpec:
     """Read and validate a study file (TOML, schema in the module docstring).
 
@@ -886,14 +899,7 @@ def load_study(path: str | Path, check_scene: bool = True) -> StudySpec:
     rig refuses and contact parameters the law refuses are reported here. Raises :class:`StudyError`.
     """
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise StudyError(f"{path}: no such study file") from None
-    except tomllib.TOMLDecodeError as e:
-        raise StudyError(f"{path}: not valid TOML: {e}") from None
-    spec = StudySpec.from_dict(data, path)
+    spec = StudySpec.from_dict(read_toml(path, "study", StudyError), path)
     if check_scene:
         try:
             check_scene_overrides(spec)
