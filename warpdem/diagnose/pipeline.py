@@ -28,15 +28,19 @@ Stages (every simulated world is stored as it finishes, ``OUT/runs/<id>.json``, 
    left out, the model recalibrated on the rest (on the surrogates) and simulated at the left-out condition.
    Per experiment: squared standardised error and Gaussian negative log-likelihood, from real simulations.
 
-The naming rule (:func:`verdict`), fixed here and never tuned to a data set: a candidate *contends* when its
-likelihood-ratio test against the base (on the training data, from the confirming simulations; boundary
-corrected when its off value is an end of its range) has p < alpha and its held-out NLL beats the base's by
-more than the bootstrap allows (95 % interval of the paired difference above 0; with no held-out data this
-condition is waived and the report says so). The best contender (lowest held-out NLL) is the CAUSE when its
-95 % posterior interval excludes the off value, the extended model passes the adequacy test, and its held-out
-NLL beats every other contender's by more than the bootstrap allows; contenders it does not beat tie with it:
-AMBIGUOUS, and the report names the measurement that separates them best (:func:`separating_measurement`).
-No contender that qualifies: UNEXPLAINED (the model is wrong in a way no candidate fixes).
+The naming rule (:func:`verdict`), fixed here and never tuned to a data set. One model *beats* another on the
+held-out data when its summed held-out log predictive likelihood exceeds the other's by more than
+:data:`EVIDENCE` (2 ln K > 6: "strong" evidence on Kass & Raftery's 1995 scale). The noise enters through
+the likelihoods, whose variances are the noise budget's; a likelihood ratio, unlike a bootstrap of per-experiment
+differences, still means something with three held-out experiments (the report gives the bootstrap interval too).
+A candidate *contends* when its likelihood-ratio test against the base (on the training data, from the confirming
+simulations; boundary corrected when its off value is an end of its range) has p < alpha and it beats the base
+on the held-out data (with no held-out data this condition is waived and the report says so). The best
+contender (lowest held-out NLL) is the CAUSE when its 95 % posterior interval excludes the off value, the
+extended model passes the adequacy test, and it beats every other contender; contenders it does not beat tie
+with it: AMBIGUOUS, and the report names the measurement that separates them best
+(:func:`separating_measurement`). No contender that qualifies: UNEXPLAINED (the model is wrong in a way no
+candidate fixes).
 """
 
 from __future__ import annotations
@@ -89,6 +93,10 @@ density over the solid density; the angle's other estimators measure the same pi
 
 FOLD_STEPS = 100
 """MCMC steps of a held-out fold's calibration (only its maximum is used)."""
+
+EVIDENCE = 3.0
+"""Log likelihood ratio [nats] by which one model must beat another: summed over the held-out data, or, with none,
+half the AIC difference (2 ln K = 6)."""
 
 VERDICTS = ("adequate", "cause", "ambiguous", "unexplained")
 """The verdicts of diagnosis.json."""
@@ -573,6 +581,11 @@ def _lrt(base: dict, ext: dict, cand: cands.Candidate) -> tuple[float, float]:
     return lr, float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
 
 
+def _evidence(a: pd.DataFrame, b: pd.DataFrame) -> float:
+    """Summed held-out log predictive likelihood of ``b`` over ``a`` [nats] (both on the same held-out rows)."""
+    return float(a["nll"].sum() - b["nll"].sum())
+
+
 def verdict(base: dict, results: list[dict], alpha: float, seed: int) -> dict:
     """The fixed naming rule (module docstring) over the recalibrated candidates ``results``."""
     held_base = base["held_out"]
@@ -599,7 +612,8 @@ def verdict(base: dict, results: list[dict], alpha: float, seed: int) -> dict:
             boot = _boot({"base": held_base["nll"].to_numpy(), c.name: res["held_out"]["nll"].to_numpy()}, seed)
             row["held_out_nll"] = boot["mean"][c.name]
             row["gain_interval"] = boot["difference"][("base", c.name)]
-            row["beats_base"] = bool(boot["difference"][("base", c.name)][0] > 0)
+            row["held_out_evidence"] = _evidence(held_base, res["held_out"])
+            row["beats_base"] = row["held_out_evidence"] > EVIDENCE
         rows.append(row)
     contenders = [r for r in rows if r["p"] < alpha and r["beats_base"] in (True, None)]
     out = {"table": rows, "verdict": "unexplained", "cause": None, "tied": []}
@@ -614,18 +628,12 @@ def verdict(base: dict, results: list[dict], alpha: float, seed: int) -> dict:
     tied = []
     for other in contenders[1:]:
         if held_base is None:
-            # no held-out data: only the likelihood can separate them; AIC within 2 is a tie
-            if other["aic"] - best["aic"] < 2.0:
+            # no held-out data: only the training likelihood, penalised for parameters, can separate them
+            if (other["aic"] - best["aic"]) / 2.0 <= EVIDENCE:
                 tied.append(other["candidate"])
             continue
-        boot = _boot(
-            {
-                other["candidate"]: by_name[other["candidate"]]["held_out"]["nll"].to_numpy(),
-                best["candidate"]: by_name[best["candidate"]]["held_out"]["nll"].to_numpy(),
-            },
-            seed,
-        )
-        if boot["difference"][(other["candidate"], best["candidate"])][0] <= 0:
+        held = by_name[other["candidate"]]["held_out"], by_name[best["candidate"]]["held_out"]
+        if _evidence(*held) <= EVIDENCE:
             tied.append(other["candidate"])
     if tied:
         out.update(verdict="ambiguous", tied=[best["candidate"], *tied])

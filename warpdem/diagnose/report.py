@@ -28,6 +28,14 @@ def _interval(iv, digits: int = 4) -> str:
     return f"[{_f(iv[0], digits)}, {_f(iv[1], digits)}]" if iv is not None else "-"
 
 
+def _on(test) -> str:
+    """What an adequacy test is on: its experiment, or the condition of a trend, or nothing (the chi-square)."""
+    for k in ("experiment", "condition"):
+        if isinstance(test[k], str):
+            return test[k]
+    return ""
+
+
 def _model_json(ev: dict) -> dict:
     m = ev["model"]
     out = {
@@ -227,7 +235,7 @@ def _markdown(prob, evals, decision, diag, screens, skipped, separating, gains) 
     L += ["| test | response | on | statistic | p | p (Holm) | significant |", "|---|---|---|---|---|---|---|"]
     for _, t in tests.iterrows():
         L.append(
-            f"| {t['kind']} | {t['response']} | {t['experiment'] or t['condition'] or ''} | {_f(t['statistic'], 3)} | {_f(t['p'], 3)} | "
+            f"| {t['kind']} | {t['response']} | {_on(t)} | {_f(t['statistic'], 3)} | {_f(t['p'], 3)} | "
             f"{_f(t['p_holm'], 3)} | {'yes' if t['significant'] else 'no'} |"
         )
     if screens:
@@ -246,14 +254,15 @@ def _markdown(prob, evals, decision, diag, screens, skipped, separating, gains) 
         L += ["", "Recalibrated candidates:", ""]
         L += [
             "| candidate | estimate [95 % interval] | excludes off | LRT | p | AIC | BIC | adequate | held-out NLL | "
-            "held-out gain over base (NLL, 95 %) |",
-            "|---|---|---|---|---|---|---|---|---|---|",
+            "held-out evidence over base [nats] | mean NLL gain per experiment (bootstrap 95 %) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for r in decision["table"]:
             L.append(
                 f"| {r['candidate']} | {_f(r['estimate'])} {_interval(r['interval'])} | {'yes' if r['excludes_off'] else 'no'} "
                 f"| {_f(r['lrt'], 3)} | {_f(r['p'], 3)} | {_f(r['aic'], 4)} | {_f(r['bic'], 4)} | "
-                f"{'yes' if r['adequate'] else 'no'} | {_f(r['held_out_nll'], 3)} | {_interval(r.get('gain_interval'), 3)} |"
+                f"{'yes' if r['adequate'] else 'no'} | {_f(r['held_out_nll'], 3)} | "
+                f"{_f(r.get('held_out_evidence', math.nan), 3)} | {_interval(r.get('gain_interval'), 3)} |"
             )
         for name, ev in evals.items():
             if name == "base":
