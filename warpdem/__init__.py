@@ -5,7 +5,7 @@ The public API, listed once in ``__all__``.
 
 from .engine import geometry
 from .engine.builder import ModelBuilder
-from .engine.clumps import ClumpTemplate, pellet_template, phosphate_template
+from .engine.clumps import ClumpTemplate, pellet_template, phosphate_template, rod_template
 from .engine.factories import (
     Box,
     Cone,
@@ -59,6 +59,7 @@ __all__ = [
     "fill_region",
     "pellet_template",
     "phosphate_template",
+    "rod_template",
     "random_quaternions",
     "ContactLaw",
     "Contacts",

@@ -62,26 +62,59 @@ def _check_order(p, name: str, relation: str, bound_name: str, bound: float) -> 
     )
 
 
-def _bound3(shape: ShapeSpec) -> float:
-    """(bounding radius / equivalent radius)^3 of a shape: a static fill places clumps by their bounding
-    spheres, so a fill region needs this much more room than the particles' own volume suggests."""
+def _bound_ratio(shape: ShapeSpec) -> float:
+    """Bounding radius / volume-equivalent radius of a shape (1 for a sphere): how far a particle reaches from
+    its centre, in the radii that the rigs' particle_radius and the factories' sizes give."""
     if shape.kind == "sphere":
         return 1.0
     t = shape.template()
-    return (t.bounding_radius / t.equivalent_radius) ** 3
+    return t.bounding_radius / t.equivalent_radius
 
 
-def _shape(kind: str, where: str) -> tuple[ShapeSpec, float]:
-    """Shape spec and its volume-equivalent radius at template scale [m]."""
-    from warpdem.engine.clumps import pellet_template, phosphate_template
+def _bound3(shape: ShapeSpec) -> float:
+    """(bounding radius / equivalent radius)^3 of a shape: a static fill places clumps by their bounding
+    spheres, so a fill region needs this much more room than the particles' own volume suggests."""
+    return _bound_ratio(shape) ** 3
 
-    if kind == "sphere":
+
+ASPECT_RATIO_MAX = 3.0
+"""Largest ``aspect_ratio`` of a rig's rods (length / width)."""
+
+
+def _check_aspect_ratio(p) -> None:
+    """A rig's ``aspect_ratio`` lies in [1, ASPECT_RATIO_MAX], and only spheres are elongated (``particle``, where
+    the rig has one)."""
+    where = type(p).__name__
+    check(
+        1.0 <= p.aspect_ratio <= ASPECT_RATIO_MAX,
+        where,
+        "aspect_ratio",
+        p.aspect_ratio,
+        f"a length / width in [1, {ASPECT_RATIO_MAX:g}]",
+    )
+    particle = getattr(p, "particle", "sphere")
+    if p.aspect_ratio != 1 and particle != "sphere":
+        raise ValueError(
+            f"{where}: aspect_ratio = {p.aspect_ratio} is not allowed with particle = {particle!r}; expected 1 "
+            "(only spheres are elongated into rods)"
+        )
+
+
+def _shape(kind: str, where: str, aspect_ratio: float = 1.0) -> tuple[ShapeSpec, float]:
+    """Shape spec and its volume-equivalent radius at template scale [m]. A sphere with ``aspect_ratio`` > 1 is
+    a rod (:func:`warpdem.engine.clumps.rod_template`) of the sphere's volume."""
+    from warpdem.engine.clumps import pellet_template, phosphate_template, rod_template
+
+    if kind == "sphere" and aspect_ratio == 1:
         return ShapeSpec("sphere", "sphere"), 1.0
     templates = {"pellet": pellet_template, "phosphate": phosphate_template}
-    if kind not in templates:
+    if kind == "sphere":
+        name, t = "rod", rod_template(aspect_ratio)
+    elif kind in templates:
+        name, t = kind, templates[kind]()
+    else:
         raise ValueError(f"{where}: particle = {kind!r} is not allowed; expected sphere, " + ", ".join(templates))
-    t = templates[kind]()
-    return ShapeSpec(kind, "clump", np.asarray(t.sphere_offset), np.asarray(t.sphere_radius)), t.equivalent_radius
+    return ShapeSpec(name, "clump", np.asarray(t.sphere_offset), np.asarray(t.sphere_radius)), t.equivalent_radius
 
 
 def _sizes(radius: float, spread: float) -> dict:
@@ -280,11 +313,13 @@ class Funnel:
     density are measured just before it opens. 0: no gate, the funnel is fed while it discharges.
     ``output_interval`` [s]: time between outputs (the discharged-mass samples). Materials and pairs are seed 000's calibrated values (Hertz-Mindlin with
     constant-torque rolling friction); ``particle`` sphere | pellet (141-sphere clump of seed 000) |
-    phosphate; ``particle_radius`` 0 keeps the clump's true size (a sphere needs one).
+    phosphate; ``particle_radius`` 0 keeps the clump's true size (a sphere needs one). ``aspect_ratio`` > 1
+    (at most 3, spheres only) elongates the spheres into rods of that length / width and the same volume.
     """
 
     particle: str = "pellet"
     particle_radius: float = 0.0
+    aspect_ratio: float = 1.0
     radius_spread: float = 0.03
     material: str = "pellet"
     surface_energy: float = 0.0
@@ -308,6 +343,7 @@ class Funnel:
     _may_be_negative = ("plate_static_friction", "plate_rolling_friction")
 
     def __post_init__(self):
+        _check_aspect_ratio(self)
         _check_params(self)
         if self.material not in ("pellet", "feed"):
             raise ValueError(f"Funnel: material = {self.material!r} is not allowed; expected pellet or feed")
@@ -320,8 +356,8 @@ class Funnel:
             _check_order(self, "gate_time", "less than", "duration", self.duration)
 
     def spec(self) -> SceneSpec:
-        shape, r_eq = _shape(self.particle, "Funnel")
-        radius = self.particle_radius or (r_eq if shape.kind == "clump" else 0.0)
+        shape, r_eq = _shape(self.particle, "Funnel", self.aspect_ratio)
+        radius = self.particle_radius or (r_eq if self.particle != "sphere" else 0.0)
         if radius <= 0:
             raise ValueError("Funnel: particle_radius = 0 is not allowed for spheres; expected a radius > 0 m")
         ct = RollingModel.CONSTANT_TORQUE
@@ -347,7 +383,10 @@ class Funnel:
             min(self.cell, self.outlet_diameter / 4),
         )
         pv, pt = geo.grid_plate(self.plate_size, self.plate_size, max(self.cell, self.plate_size / 40))
-        bound = radius * (1 + 2 * self.radius_spread) * (1.42 if shape.kind == "clump" else 1.0)
+        # a clump's bounding sphere, at least the 1.42 equivalent radii the pellet and phosphate scenes were made with
+        bound = (
+            radius * (1 + 2 * self.radius_spread) * (max(1.42, _bound_ratio(shape)) if shape.kind == "clump" else 1.0)
+        )
         region = ("cylinder", (0.0, 0.0, top_z + 2 * bound), 0.4 * self.top_diameter, max(8 * bound, 0.02), None)
         fac = _pour(
             "pour",
@@ -440,10 +479,13 @@ class LiftingCylinder:
     between particles at seed 002's optimum (mu_s 0.7, mu_r 0.3, surface energy 1.0 J/m^2), 15-sphere clumps
     coarse-grained to ``particle_radius`` (seed: 0.39 mm mean). A monodisperse coarse bed packs near 0.6, so
     the 300 mm cylinder holds about 13 kg of it, not the seed's 15 kg: ``mass`` defaults to 11 kg.
+    ``aspect_ratio`` > 1 (at most 3, with ``particle`` sphere) elongates the spheres into rods of that
+    length / width and the volume of a sphere of ``particle_radius``.
     """
 
     particle: str = "phosphate"
     particle_radius: float = 0.005
+    aspect_ratio: float = 1.0
     radius_spread: float = 0.1
     mass: float = 11.0
     count: int = 0
@@ -479,12 +521,13 @@ class LiftingCylinder:
     _may_be_negative = ("pull_off_force", "plate_static_friction", "plate_rolling_friction")
 
     def __post_init__(self):
+        _check_aspect_ratio(self)
         _check_params(self)
         if (self.count == 0) == (self.mass == 0):
             raise ValueError(f"LiftingCylinder: count = {self.count}, mass = {self.mass}: expected exactly one > 0")
 
     def spec(self) -> SceneSpec:
-        shape, _ = _shape(self.particle, "LiftingCylinder")
+        shape, _ = _shape(self.particle, "LiftingCylinder", self.aspect_ratio)
         r = self.particle_radius
         ore_steel = Interaction(restitution=0.15, static_friction=0.5, rolling_friction=0.1)
         plate, plate_pairs = _plate_pairs(self, "ore", "steel", ore_steel)
@@ -492,7 +535,9 @@ class LiftingCylinder:
         R, H = self.inner_diameter / 2, self.height
         lift = self.lift_height or H + 0.02
         coat_r = self.coat_radius or r
-        margin = (2 * coat_r if self.coated else 0.0) + r * (1 + 2 * self.radius_spread) * 1.45
+        margin = (2 * coat_r if self.coated else 0.0) + r * (1 + 2 * self.radius_spread) * max(
+            1.45, _bound_ratio(shape)
+        )
         v_mean = 4.0 / 3.0 * math.pi * r**3 * (1 + 3 * self.radius_spread**2)
         count = self.count or self.mass / (ORE.density * v_mean)
         pour_r = R - margin
@@ -858,6 +903,7 @@ class RotatingDrum:
     instrument's powders: a free-flowing reference bed), ``radius_spread``, with a moderately damped
     (restitution 0.6), frictional (mu_s 0.4) contact and a little rolling resistance (EPSD, mu_r 0.02, as for
     the funnel's spheres, which need it to rest); cohesionless by default (``surface_energy`` 0; > 0: JKR).
+    ``aspect_ratio`` > 1 (at most 3) elongates them into rods of that length / width and the same volume.
     The drum is aluminium (:data:`DRUM`) with mu_s 0.6 against the beads: a smooth drum lets the bed slide
     instead of turning with it. The end walls are a material of their own, ``window``, whose contact with the
     beads is the drum's unless ``window_static_friction`` (negative: the drum's) sets it: their friction raises
@@ -877,6 +923,7 @@ class RotatingDrum:
     """
 
     particle_radius: float = 0.001
+    aspect_ratio: float = 1.0
     radius_spread: float = 0.05
     inner_diameter: float = 0.084
     width: float = 0.02
@@ -896,6 +943,7 @@ class RotatingDrum:
     _may_be_negative = ("window_static_friction",)
 
     def __post_init__(self):
+        _check_aspect_ratio(self)
         _check_params(self)
         if not self.fill_fraction <= 0.6:
             raise ValueError(
@@ -913,6 +961,7 @@ class RotatingDrum:
 
     def spec(self) -> SceneSpec:
         r, R, W = self.particle_radius, self.inner_diameter / 2, self.width
+        shape, _ = _shape("sphere", "RotatingDrum", self.aspect_ratio)
         pp = _sphere_pair(0.6, 0.4, 0.02, self.surface_energy)
         pw = _sphere_pair(0.6, 0.6, 0.02)
         pwin = (
@@ -940,16 +989,18 @@ class RotatingDrum:
         count = int(self.fill_fraction * math.pi * R**2 * W * 0.6 / v_mean)
         # pour region: a box between the bed's level (plus a diameter) and 0.8 R, inside the circle and clear of
         # the end walls by a largest particle
-        margin = 1.45 * r * (1 + 2 * self.radius_spread)
+        margin = max(1.45, _bound_ratio(shape)) * r * (1 + 2 * self.radius_spread)
         z_lo, z_hi = _segment_level(self.fill_fraction) * R + 2 * r, 0.8 * R
         half = math.sqrt(R**2 - z_hi**2) - margin
         region = ("box", (-half, -W / 2 + margin, z_lo), (half, W / 2 - margin, z_hi))
-        rate = _pour_rate(2 * half * (W - 2 * margin) * (z_hi - z_lo), v_mean, 1.0, z_hi - z_lo, self.pour_speed)
+        rate = _pour_rate(
+            2 * half * (W - 2 * margin) * (z_hi - z_lo), v_mean, _bound3(shape), z_hi - z_lo, self.pour_speed
+        )
         fac = _pour(
             "pour",
             region,
             "glass",
-            "sphere",
+            shape.name,
             r,
             self.radius_spread,
             count=count,
@@ -975,7 +1026,7 @@ class RotatingDrum:
             rig="rotating_drum",
             materials=[GLASS, DRUM, window],
             pairs=pairs,
-            shapes=[ShapeSpec("sphere", "sphere")],
+            shapes=[shape],
             walls=walls,
             factories=[fac],
             run=RunSpec(duration=float(end), dt_fraction=self.dt_fraction, output_interval=self.frame_interval),
