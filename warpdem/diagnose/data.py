@@ -797,6 +797,32 @@ def _check_parameters(spec: DiagnosisSpec, scene, where: str) -> None:
                 ) from None
 
 
+def _first_scene(spec: DiagnosisSpec, exps: Experiments, path: Path):
+    """The rig's scene with ``[fixed]`` and the first experiment's rig-parameter conditions (a scene may need
+    one to be built at all, as a sphere needs its radius)."""
+    from warpdem.scene.stage import apply_overrides
+
+    first = {k: v for k, v in exps.overrides(exps.ids[0]).items() if is_rig_key(k)}
+    if not first:
+        with _as_diagnose(f"{path}: "):
+            return fixed_scene(spec)
+    fixed_rig = {k: v for k, v in spec.fixed.items() if is_rig_key(k)}
+    try:
+        scene = build_scene(spec, {**fixed_rig, **first})
+    except _SCENE_ERRORS as e:
+        keys = ", ".join(f"{k} = {v!r}" for k, v in {**fixed_rig, **first}.items())
+        raise DiagnoseError(
+            f"{exps.source}: experiment {exps.ids[0]!r}: the scene cannot be built from {keys}: {e}"
+        ) from None
+    for k, v in spec.fixed.items():
+        if not is_rig_key(k):
+            try:
+                apply_overrides(scene, {k: v})
+            except _SCENE_ERRORS as e:
+                raise DiagnoseError(f"{path}: [fixed]: {k} = {v!r} is not allowed: {e}") from None
+    return scene
+
+
 def _check_scene(spec: DiagnosisSpec, exps: Experiments, base) -> None:
     """Build each experiment's scene (``base``, the scene with ``[fixed]``, rebuilt for rig-parameter
     conditions), apply its conditions and the free parameters' ranges, and refuse a response it does not
@@ -874,14 +900,18 @@ def load_diagnosis(path: str | Path, check_scene: bool = True) -> tuple[Diagnosi
             "expected a CSV file relative to the diagnosis file"
         )
     rig, base = spec.rig, None
-    if check_scene:
+    if check_scene and rig is None:
+        # a stage: its rig (whose parameters may be conditions) is known once it is built
         with _as_diagnose(f"{path}: "):
             base = fixed_scene(spec)
         _check_parameters(spec, base, f"{path}: ")
-        if rig is None and base.rig in _rig_names():
+        if base.rig in _rig_names():
             rig = base.rig
     exps = _read_experiments(spec, rig)
     if check_scene:
+        if base is None:
+            base = _first_scene(spec, exps, path)
+            _check_parameters(spec, base, f"{path}: ")
         _check_scene(spec, exps, base)
     _check_enough(spec, exps)
     exps.curves = _read_curves(spec, exps)

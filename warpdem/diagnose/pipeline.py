@@ -107,6 +107,10 @@ VERDICTS = ("adequate", "cause", "ambiguous", "unexplained")
 # --------------------------------------------------------------------------------------------------
 
 
+class Stopped(RuntimeError):
+    """The wall-time limit stopped the launches of several devices (each saved its checkpoint)."""
+
+
 class Simulations:
     """Simulated worlds by identity (:func:`warpdem.study.spec.point_key` of the overrides and world seed),
     stored one JSON per world under ``OUT/runs`` the moment its launch finishes; requests already stored are
@@ -125,9 +129,8 @@ class Simulations:
 
     def run(self, requests: list[tuple[dict, int]], stage: str) -> list[dict]:
         """The metrics of each (overrides, world seed) in ``requests``, running those not yet stored (batched
-        by what they share); raises ``runner.RunStopped`` when the wall-time limit stops a launch."""
-        from warpdem.scene.runner import RunStopped
-
+        by what they share); raises ``runner.RunStopped`` (one device) or :class:`Stopped` (several) when the
+        wall-time limit stops a launch."""
         rows, seen = [], set()
         for ov, seed in requests:
             pid = self.key(ov, seed)
@@ -155,7 +158,7 @@ class Simulations:
                         on_done=lambda *a: None,
                     )
                     if stopped:
-                        raise RunStopped(stopped)
+                        raise Stopped(stopped)
                 else:
                     self._serial(batches, bar)
             finally:
@@ -332,10 +335,27 @@ class Evaluator:
         U = self.design(model)
         C = len(self.prob.conditions)
         reqs = [self._request(model, u, c, DESIGN_SEED) for c in range(C) for u in U]
-        vals = self._values(self.sims.run(reqs, stage)).reshape(C, len(U), len(self.responses))
+        mets = self.sims.run(reqs, stage)
+        vals = self._values(mets).reshape(C, len(U), len(self.responses))
         gps, acc = {}, []
         for c in range(C):
             for j, r in enumerate(self.responses):
+                ok = int(np.isfinite(vals[c, :, j]).sum())
+                if ok < len(model.dims) + 2:
+                    # a surrogate needs a few points per parameter; name what the failed runs said
+                    errs = sorted(
+                        {
+                            str(v)
+                            for m in mets[c * len(U) : (c + 1) * len(U)]
+                            for k, v in m.items()
+                            if k.endswith("_error")
+                        }
+                    )
+                    raise DiagnoseError(
+                        f"{self.spec.path}: the {model.name} model's design simulations measured {r!r} in only {ok} "
+                        f"of {len(U)} worlds at conditions {self.prob.conditions[c]}; at least {len(model.dims) + 2} are "
+                        f"needed for a surrogate. The runs said: {'; '.join(errs) or 'nothing (no *_error metric)'}"
+                    )
                 gp = inf.Surrogate(seed=_seed(self.spec, f"gp:{model.name}:{c}:{r}")).fit(U, vals[c, :, j])
                 gps[(c, r)] = gp
                 acc.append({"model": model.name, "condition": c, "response": r, **gp.cv(), "noise_sd": gp.noise_sd})
@@ -395,8 +415,9 @@ class Evaluator:
     def residuals(self, conf: dict, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         sim, k = self._sim_means(conf, mask)
         r = self.prob.obs["mean"].to_numpy(dtype=float)[mask] - sim
-        var = self.prob.budget(np.maximum(k, 1))[mask]
-        return r, var
+        k_all = np.ones(len(self.prob.obs))
+        k_all[mask] = np.maximum(k, 1)
+        return r, self.prob.budget(k_all)[mask]
 
     def evaluate(self, model: Model) -> dict:
         """Everything about one model: surrogates and their accuracy, posterior, confirmation at every
@@ -468,13 +489,17 @@ class Evaluator:
         folds = self.folds()
         if not folds:
             return None
+        # every fold's calibration first, so that their confirming simulations share launches
+        us = [
+            None if c is None else np.asarray(self.calibrate(model, gps, fit, f"fold{c}", sample=False)["map"], float)
+            for fit, _, c in folds
+        ]
+        seeds = [CONFIRM_SEEDS + k for k in range(self.spec.confirm_seeds)]
+        reqs = [self._request(model, u, c, s) for (_, _, c), u in zip(folds, us) if c is not None for s in seeds]
+        self.sims.run(reqs, f"{model.name}: held-out")
         parts = []
-        for fit, test, c in folds:
-            if c is None:
-                fconf = conf
-            else:
-                u = np.asarray(self.calibrate(model, gps, fit, f"fold{c}", sample=False)["map"], dtype=float)
-                fconf = self.confirm(model, u, [c], f"{model.name}: held-out")
+        for (_, test, c), u in zip(folds, us):
+            fconf = conf if c is None else self.confirm(model, u, [c], f"{model.name}: held-out")
             r, var = self.residuals(fconf, test)
             part = self.prob.obs[test][["id", "response", "condition"]].copy()
             part["residual"], part["variance"] = r, var
@@ -483,6 +508,12 @@ class Evaluator:
         out["sq"] = out["residual"] ** 2 / out["variance"]
         out["nll"] = inf.gaussian_nll(out["residual"].to_numpy(), out["variance"].to_numpy())
         return out
+
+    def prefetch(self, models: list[Model], stage: str) -> None:
+        """Run the design simulations of ``models`` in one request, so that models that can share launches do."""
+        C = len(self.prob.conditions)
+        reqs = [self._request(m, u, c, DESIGN_SEED) for m in models for c in range(C) for u in self.design(m)]
+        self.sims.run(reqs, stage)
 
     def jacobian(self, gps: dict, mask: np.ndarray, u_map, h: float = 0.05) -> np.ndarray:
         """d(prediction)/d(u) of the surrogates at ``u_map`` by central differences, (n_obs, d)."""
@@ -532,30 +563,36 @@ def _sim_scatter(ev: Evaluator, base: Model) -> dict:
     return out
 
 
-def screen(ev: Evaluator, base_eval: dict, gps: dict, cand: cands.Candidate) -> dict:
-    """The candidate's effect at the calibrated point against the base residuals (:func:`inference.screen`)."""
+def screen(ev: Evaluator, base_eval: dict, gps: dict, lib: list[cands.Candidate]) -> list[dict]:
+    """Each candidate's effect at the calibrated point against the base residuals (:func:`inference.screen`); the
+    candidates' simulations go in one request, so that those that can share launches do."""
     prob = ev.prob
     train = prob.train
-    model = Model(cand.name, list(base_eval["model"].dims), dict(cand.shared), cand)
     u = base_eval["u_map"]
     conds = sorted(set(prob.obs.loc[train, "condition"]))
-    test = dict(model.shared)
-    test[cand.key] = cand.test_value
-    moved = Model(cand.name, model.dims, test)
-    conf = ev.confirm(moved, u, conds, f"screen: {cand.name}")
-    sim_c, _ = ev._sim_means(conf, train)
+    moved = []
+    for cand in lib:
+        test = dict(cand.shared)
+        test[cand.key] = cand.test_value
+        moved.append(Model(cand.name, list(base_eval["model"].dims), test))
+    seeds = [CONFIRM_SEEDS + k for k in range(ev.spec.confirm_seeds)]
+    ev.sims.run([ev._request(m, u, c, s) for m in moved for c in conds for s in seeds], "screen")
     sim_b, _ = ev._sim_means(base_eval["confirm"], train)
-    effect = sim_c - sim_b
     J = ev.jacobian(gps, train, u)
     r, var = base_eval["residual"], base_eval["variance"]
-    ok = np.isfinite(effect) & np.isfinite(r)  # a candidate run that could not measure drops out
-    res = inf.screen(r[ok], var[ok], J[ok], effect[ok])
-    if not cand.off_at_edge:
-        # an interior off value: the candidate may move either way; screen both directions
-        res2 = inf.screen(r[ok], var[ok], J[ok], -effect[ok])
-        if res2["delta_chi2"] > res["delta_chi2"]:
-            res = res2
-    return {"candidate": cand.name, "test_value": cand.test_value, "effect": effect, **res}
+    out = []
+    for cand, m in zip(lib, moved):
+        sim_c, _ = ev._sim_means(ev.confirm(m, u, conds, f"screen: {cand.name}"), train)
+        effect = sim_c - sim_b
+        ok = np.isfinite(effect) & np.isfinite(r)  # a candidate run that could not measure drops out
+        res = inf.screen(r[ok], var[ok], J[ok], effect[ok])
+        if not cand.off_at_edge:
+            # an interior off value: the candidate may move either way; screen both directions
+            res2 = inf.screen(r[ok], var[ok], J[ok], -effect[ok])
+            if res2["delta_chi2"] > res["delta_chi2"]:
+                res = res2
+        out.append({"candidate": cand.name, "test_value": cand.test_value, "effect": effect, **res})
+    return out
 
 
 def _boot(losses: dict, seed: int) -> dict:
@@ -743,14 +780,18 @@ def diagnose(
         if base_eval["adequacy"]["adequate"]:
             decision = {"verdict": "adequate", "cause": None, "tied": [], "table": []}
         else:
-            lib, skipped = _library(spec, ex, study)
-            screens = [screen(ev, base_eval, base_eval["gps"], c) for c in lib]
+            lib, skipped = _library(spec, ex, study, prob.conditions)
+            screens = screen(ev, base_eval, base_eval["gps"], lib) if lib else []
             passed = sorted([s for s in screens if s["p"] < spec.alpha], key=lambda s: -s["delta_chi2"])[:SURVIVORS]
+            models = []
             for s in passed:
                 c = next(c for c in lib if c.name == s["candidate"])
-                model = Model(c.name, [*base.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c)
-                evals[c.name] = ev.evaluate(model)
-                results.append(evals[c.name])
+                models.append(Model(c.name, [*base.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c))
+            if models:
+                ev.prefetch(models, "candidates: design")
+            for model in models:
+                evals[model.name] = ev.evaluate(model)
+                results.append(evals[model.name])
             decision = verdict(base_eval, results, spec.alpha, _seed(spec, "bootstrap"))
         separating = []
         if decision["verdict"] == "ambiguous":
@@ -769,7 +810,7 @@ def diagnose(
                 gains=gains,
             )
         )
-    except RunStopped as e:
+    except (RunStopped, Stopped) as e:
         result["stopped"] = str(e)
         log(f"{spec.name}: stopped; {e}; run the same command again to resume")
     result["wall_s"] = time.perf_counter() - t0
@@ -778,19 +819,28 @@ def diagnose(
     return result
 
 
-def _library(spec: DiagnosisSpec, ex: Experiments, study) -> tuple[list, dict]:
-    """The candidates that apply (the data file's ``use`` list, ranges replaced as it says)."""
+def _library(spec: DiagnosisSpec, ex: Experiments, study, conditions: list[dict]) -> tuple[list, dict]:
+    """The candidates that apply (the data file's ``use`` list, ranges replaced as it says). A range that
+    depends on the scene (cohesion's, through the grain's weight) is the widest over the conditions."""
     from warpdem.scene import rigs
 
-    scene = execute._scene(study, dict(spec.fixed))
-    rig_params = None
-    if spec.rig is not None:
-        base = dict(rigs.SMOKE[spec.rig]) if spec.smoke else {}
-        base.update({k: v for k, v in spec.fixed.items() if sp.is_rig_key(k)})
-        p = rigs.params(spec.rig, base)
-        rig_params = {f: getattr(p, f) for f in p.__dataclass_fields__}
     taken = {p.parameter for p in spec.parameters} | set(ex.conditions) | set(spec.fixed)
-    lib, skipped = cands.library(scene, rig_params, taken)
+    merged: dict[str, cands.Candidate] = {}
+    skipped: dict[str, str] = {}
+    for cond in conditions:
+        ov = {**spec.fixed, **cond}
+        scene = execute._scene(study, ov)
+        rig_params = None
+        if spec.rig is not None:
+            base = dict(rigs.SMOKE[spec.rig]) if spec.smoke else {}
+            base.update({k: v for k, v in ov.items() if sp.is_rig_key(k)})
+            p = rigs.params(spec.rig, base)
+            rig_params = {f: getattr(p, f) for f in p.__dataclass_fields__}
+        lib, skipped = cands.library(scene, rig_params, taken)
+        for c in lib:
+            m = merged.get(c.name)
+            merged[c.name] = c if m is None else cands.with_range(m, min(m.low, c.low), max(m.high, c.high))
+    lib = [merged[n] for n in cands.CANDIDATE_NAMES if n in merged]
     if spec.candidates is not None:
         for c in lib:
             if c.name not in spec.candidates:

@@ -1,0 +1,51 @@
+"""The noise budget and residuals of the diagnosis (pipeline.Problem.budget, Evaluator.residuals) on constructed
+data: two responses, a subset of the observations (a held-out fold), against the formula written out by hand."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+pytest.importorskip("scipy")
+
+from warpdem.diagnose.pipeline import Evaluator, Problem  # noqa: E402
+
+
+def _problem() -> Problem:
+    obs = pd.DataFrame(
+        {
+            "id": ["A", "A", "B", "B"],
+            "response": ["angle", "density", "angle", "density"],
+            "condition": [0, 0, 1, 1],
+            "mean": [30.0, 800.0, 25.0, 820.0],
+            "n": [3, 3, 2, 2],
+            "var_one": [0.25, 100.0, 0.25, 100.0],
+            "split": ["train"] * 4,
+        }
+    )
+    spec = SimpleNamespace(path="case.toml", confirm_seeds=2)
+    prob = Problem(spec, SimpleNamespace(responses=["angle", "density"]), obs, [{}, {}])
+    prob.sim_var = {"angle": 1.0, "density": 25.0}
+    return prob
+
+
+def test_budget_is_the_larger_scatter_over_n_plus_the_model_side():
+    prob = _problem()
+    k = np.array([2.0, 2.0, 4.0, 4.0])
+    expect = np.array([1.0 / 3 + 1.0 / 2, 100.0 / 3 + 25.0 / 2, 1.0 / 2 + 1.0 / 4, 100.0 / 2 + 25.0 / 4])
+    np.testing.assert_allclose(prob.budget(k), expect)
+
+
+def test_residuals_of_a_fold_with_two_responses():
+    """A fold holds one condition's two responses: each residual gets its own response's budget with the number of
+    simulations that measured it (a failed one drops out)."""
+    prob = _problem()
+    ev = Evaluator(prob, sims=None, log=print)
+    conf = {1: {"values": np.array([[24.0, 810.0], [26.0, np.nan]]), "metrics": [{}, {}]}}
+    mask = np.array([False, False, True, True])
+    r, var = ev.residuals(conf, mask)
+    np.testing.assert_allclose(r, [25.0 - 25.0, 820.0 - 810.0])
+    np.testing.assert_allclose(var, [1.0 / 2 + 1.0 / 2, 100.0 / 2 + 25.0 / 1])
