@@ -1,0 +1,139 @@
+"""Synthetic "measured" data for checking a diagnosis: the engine run with a hidden setting the diagnosis never
+sees, at world seeds it never uses, plus Gaussian measurement noise of a stated SD, written as a data file.
+
+Used by the tests, the false-positive benchmark (``benchmarks/diagnose_false_positives.py``) and the README's
+worked example.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+DATA_SEEDS = (501, 502, 503)
+"""Default world seeds of the 'measurements' (a diagnosis uses 0, 1, 2, ... and 101, 102, ...)."""
+
+
+def run_worlds(rig: str, smoke: bool, rig_values: dict, overrides: dict, seeds, device: str = "cpu") -> list[dict]:
+    """The metrics of one world per world seed in ``seeds``, from the rig ``rig`` with ``rig_values`` and the
+    override keys ``overrides`` (the hidden setting among them), on ``device``. A scene whose worlds share the
+    wall they are measured by (the die press) runs one world per launch."""
+    from warpdem.scene import rigs
+    from warpdem.scene.runner import independent_worlds, run_scene
+    from warpdem.scene.stage import apply_overrides
+
+    scene = apply_overrides(rigs.spec(rig, rig_values, smoke), overrides)
+    seeds = [int(s) for s in seeds]
+    if independent_worlds(scene):
+        return run_scene(scene, device, world_count=len(seeds), world_seeds=seeds, frames=False, quiet=True).metrics
+    return [
+        run_scene(scene, device, world_count=1, world_seeds=[s], frames=False, quiet=True).metrics[0] for s in seeds
+    ]
+
+
+def noisy_rows(experiments: list[dict], metrics: list[list[dict]], sd: dict, rng: np.random.Generator) -> list[dict]:
+    """Table rows: for experiment k (a dict of ``id`` and its condition columns) one row per world of
+    ``metrics[k]`` (replicates 1, 2, ...), with each response of ``sd`` ({metric: noise SD}) plus N(0, SD) noise
+    drawn from ``rng``. Raises ValueError when a world did not measure a response."""
+    rows = []
+    for e, mets in zip(experiments, metrics):
+        for j, m in enumerate(mets):
+            row = {**e, "replicate": j + 1}
+            for r, s in sd.items():
+                if r not in m:
+                    raise ValueError(f"experiment {e['id']!r}, replicate {j + 1}: the run did not measure {r!r}")
+                row[r] = float(m[r]) + float(rng.normal(0.0, s))
+            rows.append(row)
+    return rows
+
+
+def write_case(directory, name: str, toml: str, rows: list[dict]) -> Path:
+    """Write ``rows`` as ``NAME.csv`` and ``toml`` (a template with ``{name}`` and ``{csv}`` fields) as
+    ``NAME.toml`` into ``directory``; return the TOML's path."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    pd.DataFrame(rows).to_csv(directory / f"{name}.csv", index=False)
+    path = directory / f"{name}.toml"
+    path.write_text(toml.format(csv=f"{name}.csv", name=name))
+    return path
+
+
+# --------------------------------------------------------------------------------------------------
+# the die press case: residual set after pressing to three force limits
+# --------------------------------------------------------------------------------------------------
+
+PRESS_RIG = {
+    "die_diameter": 0.005,
+    "fill_height": 0.006,
+    "inlet_diameter": 0.008,
+    "gap": 0.001,
+    "settle_time": 0.05,
+    "surface_energy": 0.0,
+}
+"""A 94-sphere die press (about 2 s of one CPU core per world)."""
+
+PRESS_SOFT = {"material.feed.shear_modulus": 1.0e6}
+"""Softer feed: a longer step, and a residual set well above the noise."""
+
+PRESS_FORCES = (0.5, 1.0, 2.0)
+"""Force limits [N] of the experiments (their condition)."""
+
+PRESS_TOML = """
+[diagnose]
+name = "{name}"
+rig = "die_press"
+smoke = true
+seed = 1
+
+[fixed]
+law = "hertz_mindlin"
+die_diameter = 0.005
+fill_height = 0.006
+inlet_diameter = 0.008
+gap = 0.001
+settle_time = 0.05
+surface_energy = 0.0
+"material.feed.shear_modulus" = 1.0e6
+
+[[parameters]]
+name = "mu_s"
+parameter = "interaction.feed.feed.static_friction"
+low = 0.1
+high = 1.0
+
+[experiments]
+file = "{csv}"
+
+[noise]
+sim_seeds = 2
+
+[calibration]
+points = 6
+confirm_seeds = 2
+mcmc_steps = 400
+
+[candidates]
+use = ["plasticity", "cohesion"]
+"""
+"""The press case's data file: Hertz-Mindlin with mu_s free; plasticity and cohesion the candidates."""
+
+
+def press_rows(law: str, plasticity: float, mu_s: float, sd: float, rng, seeds=DATA_SEEDS) -> list[dict]:
+    """Residual-set ratios of the press case with the feed-feed ``law`` ("hertz_mindlin" or "eepa" with
+    ``plasticity``) and static friction ``mu_s``, one replicate per world seed at each force limit, plus
+    N(0, ``sd``) noise."""
+    experiments, metrics = [], []
+    for k, force in enumerate(PRESS_FORCES):
+        experiments.append({"id": f"F{k}", "force_limit": force})
+        metrics.append(
+            run_worlds(
+                "die_press",
+                True,
+                {**PRESS_RIG, "law": law, "plasticity_ratio": plasticity, "force_limit": force},
+                {**PRESS_SOFT, "interaction.feed.feed.static_friction": mu_s},
+                seeds,
+            )
+        )
+    return noisy_rows(experiments, metrics, {"residual_set_ratio": sd}, rng)
