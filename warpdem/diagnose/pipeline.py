@@ -56,6 +56,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from warpdem.scene.runner import RunStopped
 from warpdem.study import execute
 from warpdem.study import spec as sp
 
@@ -107,6 +108,14 @@ VERDICTS = ("adequate", "cause", "ambiguous", "unexplained")
 # --------------------------------------------------------------------------------------------------
 
 
+class LaunchesStopped(RunStopped):
+    """The wall-time limit stopped launches spread over several devices: each device saved its own checkpoint,
+    and the message (execute._run_parallel's) says where each stopped."""
+
+    def __init__(self, message: str):
+        RuntimeError.__init__(self, message)
+
+
 class Simulations:
     """Simulated worlds by identity (:func:`warpdem.study.spec.point_key` of the overrides and world seed),
     stored one JSON per world under ``OUT/runs`` the moment its launch finishes; requests already stored are
@@ -126,8 +135,6 @@ class Simulations:
     def run(self, requests: list[tuple[dict, int]], stage: str) -> list[dict]:
         """The metrics of each (overrides, world seed) in ``requests``, running those not yet stored (batched
         by what they share); raises ``runner.RunStopped`` when the wall-time limit stops a launch."""
-        from warpdem.scene.runner import RunStopped
-
         rows, seen = [], set()
         for ov, seed in requests:
             pid = self.key(ov, seed)
@@ -155,7 +162,7 @@ class Simulations:
                         on_done=lambda *a: None,
                     )
                     if stopped:
-                        raise RunStopped(stopped)
+                        raise LaunchesStopped(stopped)
                 else:
                     self._serial(batches, bar)
             finally:
@@ -718,8 +725,6 @@ def diagnose(
     or a comma-separated list, launches then spread over them). With ``stop_after`` [wall s] the diagnosis
     stops once that much time has passed (a launch saves its checkpoint); the same call resumes. Returns the
     diagnosis (as written to diagnosis.json) plus ``out``, ``wall_s``, ``worlds``, ``launches`` and ``stopped``."""
-    from warpdem.scene.runner import RunStopped
-
     from .report import write
 
     spec, ex = load_diagnosis(source) if not isinstance(source, tuple) else source

@@ -334,7 +334,7 @@ def _run_parallel(
                 checkpoint_every,
                 q,
                 i,
-                (bool(wp.config.quiet), getattr(wp.config, "log_level", None)),
+                (bool(getattr(wp.config, "quiet", False)), getattr(wp.config, "log_level", None)),
             )
             for i, (d, bs) in enumerate(plan)
         ]
