@@ -824,6 +824,27 @@ def test_params_press_law_and_plasticity():
         rigs.spec("die_press", {"law": "eepa", "plasticity_ratio": 1.0}, smoke=True)
 
 
+def test_lifting_cylinder_law(tmp_path):
+    """The lifting cylinder's ore-ore law is seed 002's EEPA by default, or elastic Hertz-Mindlin (no adhesion,
+    no plasticity) with the same friction and restitution; it survives the stage, and any other law is refused
+    as a StageError naming the parameter and what is allowed."""
+
+    def ore_ore(spec):
+        return next(ia for a, b, ia in spec.pairs if a == b == "ore")
+
+    eepa = ore_ore(rigs.spec("lifting_cylinder", smoke=True))
+    hm = ore_ore(rigs.spec("lifting_cylinder", {"law": "hertz_mindlin"}, smoke=True))
+    assert eepa.law.name == "EEPA" and hm.law.name == "HERTZ_MINDLIN"
+    assert hm.surface_energy == 0.0 and hm.pull_off_force == 0.0 and hm.plasticity_ratio == 0.0
+    for f in ("restitution", "static_friction", "rolling_friction", "rolling_model"):
+        assert getattr(hm, f) == getattr(eepa, f), f
+    path = tmp_path / "lc.usda"
+    write_stage(rigs.spec("lifting_cylinder", {"law": "hertz_mindlin"}, smoke=True), path)
+    assert ore_ore(read_stage(path)).law.name == "HERTZ_MINDLIN"
+    with pytest.raises(StageError, match="law = 'jkr' is not allowed; expected eepa, hertz_mindlin"):
+        rigs.spec("lifting_cylinder", {"law": "jkr"}, smoke=True)
+
+
 @pytest.mark.parametrize("rig, particle, wall", [("funnel", "grain", "Plate"), ("lifting_cylinder", "ore", "Base")])
 def test_plate_friction_reaches_the_stage(tmp_path, rig, particle, wall):
     """The base plate is a material of its own: by default its contact with the particles is the other walls',

@@ -229,6 +229,16 @@ def _ore_eepa(surface_energy: float = 1.0, pull_off_force: float = -0.009) -> In
     )
 
 
+ORE_LAWS = {
+    "eepa": lambda p: _ore_eepa(p.surface_energy, p.pull_off_force),
+    "hertz_mindlin": lambda p: dataclasses.replace(
+        _ore_eepa(0.0, 0.0), law=ContactLaw.HERTZ_MINDLIN, plasticity_ratio=0.0
+    ),
+}
+"""The lifting cylinder's ore-ore laws (``LiftingCylinder.law``): seed 002's EEPA, or elastic Hertz-Mindlin with
+its friction and restitution."""
+
+
 def _pairs(particle: str, wall: str, particle_particle: Interaction, particle_wall: Interaction) -> list:
     """A rig's three pairs: particle-particle, particle-wall and wall-wall (walls never touch each other, but
     every pair of materials needs a value)."""
@@ -481,6 +491,10 @@ class LiftingCylinder:
     the 300 mm cylinder holds about 13 kg of it, not the seed's 15 kg: ``mass`` defaults to 11 kg.
     ``aspect_ratio`` > 1 (at most 3, with ``particle`` sphere) elongates the spheres into rods of that
     length / width and the volume of a sphere of ``particle_radius``.
+    ``law`` swaps the ore-ore normal law (:data:`ORE_LAWS`): ``eepa`` (seed 002's, by default) or
+    ``hertz_mindlin`` (elastic, no adhesion: ``surface_energy`` and ``pull_off_force`` unused), with the same
+    friction and restitution; a rig parameter, so that a study or diagnosis can start from Hertz-Mindlin without
+    deciding the pair's ``law`` override key.
     """
 
     particle: str = "phosphate"
@@ -508,6 +522,7 @@ class LiftingCylinder:
     packing_margin: float = 2.0
     plate_static_friction: float = -1.0
     plate_rolling_friction: float = -1.0
+    law: str = "eepa"
     _may_be_zero = (
         "count",
         "mass",
@@ -525,13 +540,15 @@ class LiftingCylinder:
         _check_params(self)
         if (self.count == 0) == (self.mass == 0):
             raise ValueError(f"LiftingCylinder: count = {self.count}, mass = {self.mass}: expected exactly one > 0")
+        if self.law not in ORE_LAWS:
+            raise ValueError(f"LiftingCylinder: law = {self.law!r} is not allowed; expected {', '.join(ORE_LAWS)}")
 
     def spec(self) -> SceneSpec:
         shape, _ = _shape(self.particle, "LiftingCylinder", self.aspect_ratio)
         r = self.particle_radius
         ore_steel = Interaction(restitution=0.15, static_friction=0.5, rolling_friction=0.1)
         plate, plate_pairs = _plate_pairs(self, "ore", "steel", ore_steel)
-        pairs = _pairs("ore", "steel", _ore_eepa(self.surface_energy, self.pull_off_force), ore_steel) + plate_pairs
+        pairs = _pairs("ore", "steel", ORE_LAWS[self.law](self), ore_steel) + plate_pairs
         R, H = self.inner_diameter / 2, self.height
         lift = self.lift_height or H + 0.02
         coat_r = self.coat_radius or r
