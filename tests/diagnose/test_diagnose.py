@@ -1,9 +1,9 @@
 """The diagnosis end to end on data with a hidden effect it never sees, and on data with none.
 
-"Measured" data are made here by running the engine with a hidden setting (world seeds the diagnosis never uses,
-so its scatter is the model's own) and adding measurement noise of a stated SD; the diagnosis sees only the CSV.
-The scenes are cut to a few seconds of one CPU core per world (a 94-sphere die press, lifting-cylinder piles of
-500 spheres).
+"Measured" data are made by :mod:`warpdem.diagnose.synthetic`: the engine run with a hidden setting at world seeds
+the diagnosis never uses (so their scatter is the model's own), plus measurement noise of a stated SD; the
+diagnosis sees only the CSV. The scenes are cut to a few seconds of one CPU core per world (a 94-sphere die
+press, lifting-cylinder piles of 500 spheres).
 """
 
 from __future__ import annotations
@@ -17,123 +17,37 @@ pytest.importorskip("warp")
 pytest.importorskip("sklearn")
 pytest.importorskip("emcee")
 
+from warpdem.diagnose import synthetic as syn  # noqa: E402
 from warpdem.diagnose.pipeline import diagnose  # noqa: E402
 from warpdem.scene import rigs  # noqa: E402
-from warpdem.scene.runner import run_scene  # noqa: E402
-from warpdem.scene.stage import apply_overrides  # noqa: E402
-
-DATA_SEEDS = (501, 502, 503)
-"""World seeds of the 'measurements' (the diagnosis uses 0, 1, 2, ... and 101, 102, ...)."""
 
 
-def _measure(rig: str, smoke: bool, rig_values: dict, overrides: dict, seeds, measure: str) -> list[float]:
-    """Run the engine with the hidden setting: one value of ``measure`` per world seed."""
-    scene = apply_overrides(rigs.spec(rig, rig_values, smoke), overrides)
-    if scene.measure.kind == "press":
-        mets = [run_scene(scene, world_count=1, world_seeds=[s], frames=False).metrics[0] for s in seeds]
-    else:
-        mets = run_scene(scene, world_count=len(seeds), world_seeds=list(seeds), frames=False).metrics
-    return [float(m[measure]) for m in mets]
-
-
-def _write_case(tmp_path, name: str, toml: str, rows: list[dict]) -> str:
-    import pandas as pd
-
-    pd.DataFrame(rows).to_csv(tmp_path / f"{name}.csv", index=False)
-    path = tmp_path / f"{name}.toml"
-    path.write_text(toml.format(csv=f"{name}.csv", name=name))
-    return str(path)
+def _diagnose(path, out, runs=None):
+    """Diagnose on two CPU processes (CI has two cores); with ``runs``, a store of simulated worlds shared with
+    other cases (as a rerun would reuse its own)."""
+    out.mkdir()
+    if runs is not None:
+        (out / "runs").symlink_to(runs, target_is_directory=True)
+    return diagnose(str(path), out, device="cpu,cpu", progress=False, log=lambda *a: None)
 
 
 # --------------------------------------------------------------------------------------------------
-# the die press: plasticity hidden
+# the die press (synthetic.PRESS_*): plasticity hidden, and the null case
 # --------------------------------------------------------------------------------------------------
-
-PRESS_RIG = {
-    "die_diameter": 0.005,
-    "fill_height": 0.006,
-    "inlet_diameter": 0.008,
-    "gap": 0.001,
-    "settle_time": 0.05,
-    "surface_energy": 0.0,
-}
-PRESS_SOFT = {"material.feed.shear_modulus": 1.0e6}
-FORCES = (0.5, 1.0, 2.0)
-PRESS_TOML = """
-[diagnose]
-name = "{name}"
-rig = "die_press"
-smoke = true
-seed = 1
-
-[fixed]
-law = "hertz_mindlin"
-die_diameter = 0.005
-fill_height = 0.006
-inlet_diameter = 0.008
-gap = 0.001
-settle_time = 0.05
-surface_energy = 0.0
-"material.feed.shear_modulus" = 1.0e6
-
-[[parameters]]
-name = "mu_s"
-parameter = "interaction.feed.feed.static_friction"
-low = 0.1
-high = 1.0
-
-[experiments]
-file = "{csv}"
-
-[noise]
-sim_seeds = 2
-
-[calibration]
-points = 6
-confirm_seeds = 2
-mcmc_steps = 400
-
-[candidates]
-use = ["plasticity", "cohesion"]
-"""
-
-
-def _press_rows(hidden_law: str, plasticity: float, sd: float, rng, mu_s: float = 0.5) -> list[dict]:
-    rows = []
-    for k, force in enumerate(FORCES):
-        values = _measure(
-            "die_press",
-            True,
-            {**PRESS_RIG, "law": hidden_law, "plasticity_ratio": plasticity, "force_limit": force},
-            {**PRESS_SOFT, "interaction.feed.feed.static_friction": mu_s},
-            DATA_SEEDS,
-            "residual_set_ratio",
-        )
-        for j, v in enumerate(values):
-            rows.append(
-                {"id": f"F{k}", "replicate": j + 1, "force_limit": force, "residual_set_ratio": v + rng.normal(0, sd)}
-            )
-    return rows
 
 
 @pytest.fixture(scope="module")
 def press_runs(tmp_path_factory):
     """One store of simulated worlds for the press cases: the null and the plasticity case share the scene, the
-    conditions and the base model's design, so the second reuses the first's worlds (as a rerun would)."""
+    conditions and the base model's design, so the second reuses the first's worlds."""
     return tmp_path_factory.mktemp("press_runs")
-
-
-def _diagnose_sharing(path, out, runs):
-    out.mkdir()
-    (out / "runs").symlink_to(runs, target_is_directory=True)
-    return diagnose(path, out, device="cpu,cpu", progress=False, log=lambda *a: None)
 
 
 def test_press_null_is_adequate(tmp_path, press_runs):
     """Data from the base model itself (Hertz-Mindlin, mu_s = 0.5): ADEQUATE, and the diagnosis stops."""
-    rng = np.random.default_rng(8)
-    path = _write_case(tmp_path, "press_null", PRESS_TOML, _press_rows("hertz_mindlin", 0.0, 0.005, rng, mu_s=0.5))
-    res = _diagnose_sharing(path, tmp_path / "out", press_runs)
+    rows = syn.press_rows("hertz_mindlin", 0.0, 0.5, 0.005, np.random.default_rng(8))
+    path = syn.write_case(tmp_path, "press_null", syn.PRESS_TOML, rows)
+    res = _diagnose(path, tmp_path / "out", press_runs)
     assert res["verdict"] == "adequate", res
     assert res["cause"] is None and not res["candidates"]
     assert not any(t["significant"] for t in res["adequacy_tests"])
@@ -143,9 +57,9 @@ def test_press_plasticity_is_named(tmp_path, press_runs):
     """EEPA plasticity (lambda_p = 0.7) hidden in the press data: the diagnosis names plasticity (not cohesion,
     the other candidate tried), its interval covers 0.7, and the held-out error of the residual set falls by at
     least half."""
-    rng = np.random.default_rng(7)
-    path = _write_case(tmp_path, "press_plastic", PRESS_TOML, _press_rows("eepa", 0.7, 0.005, rng))
-    res = _diagnose_sharing(path, tmp_path / "out", press_runs)
+    rows = syn.press_rows("eepa", 0.7, 0.5, 0.005, np.random.default_rng(7))
+    path = syn.write_case(tmp_path, "press_plastic", syn.PRESS_TOML, rows)
+    res = _diagnose(path, tmp_path / "out", press_runs)
     assert res["verdict"] == "cause", res
     assert res["cause"] == "plasticity"
     lo, hi = res["extended"]["plasticity"]["parameters"]["plasticity"]["interval_95"]
@@ -218,12 +132,13 @@ file = "{csv}"
 sim_seeds = 2
 
 [calibration]
-points = 5
+points = 8
 confirm_seeds = 2
 mcmc_steps = 400
 
 [candidates]
 use = ["cohesion", "plasticity", "wall_friction"]
+ranges = {{ cohesion = [0.0, {gamma_max}] }}
 """
 
 
@@ -248,37 +163,36 @@ def _bond_gamma(bond: float, radius: float, density: float = rigs.ORE.density) -
     return bond * weight / (1.5 * np.pi * radius / 2.0)
 
 
-def _cohesive_rows(gamma: float, mu_r: float, sd: float, rng) -> list[dict]:
-    rows = []
+NOISE = {"angle_cone_deg": 0.5, "bulk_density_kg_m3": 10.0}
+"""Measurement noise SD of the cohesion case's responses: 0.5 deg, 10 kg/m^3."""
+
+
+def _cohesive_rows(gamma: float, mu_r: float, rng) -> list[dict]:
+    exps, mets = [], []
     for k, radius in enumerate(RADII):
         geo = _cylinder(radius)
-        values = _measure(
-            "lifting_cylinder",
-            True,
-            {**LIFT_RIG, **geo},
-            {
-                **LIFT_SOFT,
-                "interaction.ore.ore.rolling_friction": mu_r,
-                "interaction.ore.ore.law": "JKR",
-                "interaction.ore.ore.surface_energy": gamma,
-            },
-            DATA_SEEDS,
-            "angle_cone_deg",
-        )
-        for j, v in enumerate(values):
-            rows.append({"id": f"R{k}", "replicate": j + 1, **geo, "angle_cone_deg": v + rng.normal(0, sd)})
-    return rows
+        exps.append({"id": f"R{k}", **geo})
+        hidden = {
+            **LIFT_SOFT,
+            "interaction.ore.ore.rolling_friction": mu_r,
+            "interaction.ore.ore.law": "JKR",
+            "interaction.ore.ore.surface_energy": gamma,
+        }
+        mets.append(syn.run_worlds("lifting_cylinder", True, {**LIFT_RIG, **geo}, hidden, syn.DATA_SEEDS))
+    return syn.noisy_rows(exps, mets, NOISE, rng)
 
 
 @pytest.mark.skip(
-    reason="UNEXPLAINED on this honest case (139 s): cohesion passes the screen and its interval [0.26, 0.55] "
-    "covers 0.52, but its LRT has p = 0.068 and its confirming runs fail the adequacy test"
+    reason="#19: UNEXPLAINED on this honest case (about 150 s). With 8 design points cohesion passes the screen "
+    "and the LRT (p 5e-5), its extended model is adequate and its interval [0.49, 1.19] covers 0.52, but on "
+    "leave-one-size-out data it predicts worse than the base (-4.3 nats): three sizes of 500-grain piles, "
+    "scatter about 1 deg, are too few to extrapolate a 1/R^2 effect. The lab-size GPU case names cohesion."
 )
 def test_cohesion_is_named(tmp_path):
     """JKR cohesion hidden in lifting-cylinder angles of repose measured at three grain sizes (rolling friction
     0.1, the base model's one free parameter): the diagnosis names cohesion (not plasticity or wall friction, the
-    rivals tried), its interval covers the hidden surface energy, and the held-out error of the angle falls by at
-    least half.
+    rivals tried), its interval covers the hidden surface energy, and the held-out error (RMS of the standardised
+    errors of both responses) falls by at least half.
 
     The hidden surface energy is the one of Bond number 1/2 at the smallest grain (5 mm: gamma = 0.52 J/m^2),
     so 0.22 and 0.1 at the others: cohesion matters (Bond number of order 1) and falls off with the square of
@@ -286,13 +200,20 @@ def test_cohesion_is_named(tmp_path):
     cylinder lifts, begin to stand as columns near Bond number 1, and a lab that measured an angle at every size
     had a powder below that. The angle is the cone formula's (seed 002's atan(2h/d), what a ruler gives): its
     pile-to-pile scatter here is about 1 deg, half the surface fit's. Rolling friction is free over [0.02, 0.5],
-    the top of the range the rolling_friction candidate gives it. Measurement noise: SD 0.5 deg."""
+    the top of the range the rolling_friction candidate gives it. Measurement noise: SD 0.5 deg on the angle, 10
+    kg/m^3 on the bulk density, which the cylinder measures before it lifts (a size series of a cohesive powder
+    packs looser as it gets finer).
+
+    The cohesion candidate's range is the data file's, up to Bond number 1.25 at the smallest grain: the lab saw
+    a cone at every size (no column), which bounds it so in this rig; the default (5) would put most of the
+    design's piles at 5 mm out of reach of any angle measurement."""
     gamma = _bond_gamma(0.5, RADII[0])
     rng = np.random.default_rng(11)
-    path = _write_case(tmp_path, "lift_cohesion", LIFT_TOML, _cohesive_rows(gamma, 0.1, 0.5, rng))
-    res = diagnose(path, tmp_path / "out", device="cpu,cpu", progress=False, log=lambda *a: None)
+    toml = LIFT_TOML.replace("{gamma_max}", f"{_bond_gamma(1.25, RADII[0]):.4f}")
+    path = syn.write_case(tmp_path, "lift_cohesion", toml, _cohesive_rows(gamma, 0.1, rng))
+    res = _diagnose(path, tmp_path / "out")
     assert res["verdict"] == "cause", res
     assert res["cause"] == "cohesion"
     lo, hi = res["extended"]["cohesion"]["parameters"]["cohesion"]["interval_95"]
     assert lo <= gamma <= hi
-    assert res["gain"]["rmse"]["angle_cone_deg"]["reduction"] >= 0.5
+    assert res["gain"]["z_rms"]["reduction"] >= 0.5

@@ -709,11 +709,22 @@ def separating_measurement(prob: Problem, results: dict, names: list[str]) -> li
 
 
 def gain(prob: Problem, base: dict, ext: dict, seed: int) -> dict:
-    """Held-out RMSE (per response, in its units) and NLL of the base and the extended model, with bootstrap
-    intervals over the held-out experiments, and how far the base parameters moved."""
+    """Held-out RMSE (per response, in its units), RMS standardised error (``z_rms``, over every response; each
+    error over its noise-budget SD) and NLL of the base and the extended model, with bootstrap intervals over the
+    held-out experiments, and how far the base parameters moved."""
     hb, he = base["held_out"], ext["held_out"]
-    out = {"rmse": {}, "nll": None, "shift": {}}
+    out = {"rmse": {}, "z_rms": None, "nll": None, "shift": {}}
     if hb is not None and he is not None:
+        # one held-out error over every response: the root mean square of the standardised errors
+        boot = _boot({"base": hb["sq"].to_numpy(), "extended": he["sq"].to_numpy()}, seed)
+        zb, ze = math.sqrt(hb["sq"].mean()), math.sqrt(he["sq"].mean())
+        out["z_rms"] = {
+            "base": zb,
+            "extended": ze,
+            "base_interval": tuple(math.sqrt(max(x, 0.0)) for x in boot["interval"]["base"]),
+            "extended_interval": tuple(math.sqrt(max(x, 0.0)) for x in boot["interval"]["extended"]),
+            "reduction": 1.0 - ze / zb if zb > 0 else math.nan,
+        }
         for r in sorted(set(hb["response"])):
             a = hb.loc[hb["response"] == r, "residual"].to_numpy() ** 2
             b = he.loc[he["response"] == r, "residual"].to_numpy() ** 2
@@ -812,7 +823,7 @@ def diagnose(
         )
     except (RunStopped, Stopped) as e:
         result["stopped"] = str(e)
-        log(f"{spec.name}: stopped; {e}; run the same command again to resume")
+        log(f"{spec.name}: stopped; {e}")
     result["wall_s"] = time.perf_counter() - t0
     result["worlds"] = len(list((out / "runs").glob("*.json")))
     result["launches"] = sims.launched
@@ -821,7 +832,9 @@ def diagnose(
 
 def _library(spec: DiagnosisSpec, ex: Experiments, study, conditions: list[dict]) -> tuple[list, dict]:
     """The candidates that apply (the data file's ``use`` list, ranges replaced as it says). A range that
-    depends on the scene (cohesion's, through the grain's weight) is the widest over the conditions."""
+    depends on the scene (cohesion's, through the grain's weight) is the narrowest over the conditions: its
+    bound then holds for every grain of the data (the widest gave the smallest grains of a size series Bond
+    numbers of 25, piles that stand as columns and cannot be measured)."""
     from warpdem.scene import rigs
 
     taken = {p.parameter for p in spec.parameters} | set(ex.conditions) | set(spec.fixed)
@@ -839,7 +852,7 @@ def _library(spec: DiagnosisSpec, ex: Experiments, study, conditions: list[dict]
         lib, skipped = cands.library(scene, rig_params, taken)
         for c in lib:
             m = merged.get(c.name)
-            merged[c.name] = c if m is None else cands.with_range(m, min(m.low, c.low), max(m.high, c.high))
+            merged[c.name] = c if m is None else cands.with_range(m, max(m.low, c.low), min(m.high, c.high))
     lib = [merged[n] for n in cands.CANDIDATE_NAMES if n in merged]
     if spec.candidates is not None:
         for c in lib:
