@@ -49,3 +49,27 @@ def test_residuals_of_a_fold_with_two_responses():
     r, var = ev.residuals(conf, mask)
     np.testing.assert_allclose(r, [25.0 - 25.0, 820.0 - 810.0])
     np.testing.assert_allclose(var, [1.0 / 2 + 1.0 / 2, 100.0 / 2 + 25.0 / 1])
+
+
+def test_trend_conditions_drop_repeats_and_columns_of_two_values():
+    """A cylinder scaled with the grain repeats the radius's trend test; the count (radius^-3) does not; a
+    column with two values has no trend to test."""
+    radius = np.array([0.005, 0.0075, 0.01125])
+    obs = pd.DataFrame(
+        {
+            "id": ["A", "B", "C"],
+            "response": ["angle"] * 3,
+            "condition": [0, 1, 2],
+            "mean": [30.0, 28.0, 26.0],
+            "n": [3] * 3,
+            "var_one": [0.25] * 3,
+            "split": ["train"] * 3,
+            "particle_radius": radius,
+            "inner_diameter": 22 * radius,
+            "count": np.round(500 * (0.005 / radius) ** 3),
+            "plate": [0.3, 0.8, 0.3],
+        }
+    )
+    ex = SimpleNamespace(responses=["angle"], conditions=["particle_radius", "inner_diameter", "count", "plate"])
+    prob = Problem(SimpleNamespace(path="case.toml"), ex, obs, [{}, {}, {}])
+    assert prob.trend_conditions == ["particle_radius", "count"]

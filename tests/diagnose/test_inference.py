@@ -462,3 +462,18 @@ def test_bootstrap_pairs_are_paired():
     np.testing.assert_allclose(pairs.loc[("base", "shifted"), ["difference", "low", "high"]], -0.5)
     assert pairs.loc[("base", "noisy"), "low"] < -1.0 < pairs.loc[("base", "noisy"), "high"]
     assert list(out["models"]["model"]) == ["base", "same", "shifted", "noisy"]
+
+
+def test_pooled_variance_is_the_one_way_anova_residual_mean_square():
+    """Pooled within-group variance = the residual mean square of OLS on group dummies (statsmodels); groups of
+    one value and NaNs add nothing."""
+    rng = np.random.default_rng(3)
+    groups = [rng.normal(m, 2.0, n) for m, n in ((0.0, 4), (5.0, 3), (-2.0, 6))]
+    var, dof = inf.pooled_variance([*groups, np.array([7.0]), np.array([np.nan, np.nan])])
+    y = np.concatenate(groups)
+    X = np.zeros((len(y), 3))
+    X[np.arange(len(y)), np.repeat(np.arange(3), [4, 3, 6])] = 1.0
+    fit = sm.OLS(y, X).fit()
+    assert dof == int(fit.df_resid) == 10
+    assert var == pytest.approx(fit.scale, rel=1e-12)
+    assert inf.pooled_variance([np.array([1.0])]) == (pytest.approx(float("nan"), nan_ok=True), 0)

@@ -482,14 +482,11 @@ class Experiments:
         """(pooled within-experiment SD of ``response``, its degrees of freedom) over every experiment with two or
         more values: sqrt(sum of squared deviations from each experiment's mean / sum (n - 1)); (NaN, 0) when no
         experiment has two values."""
+        from .inference import pooled_variance
+
         self._response(response)
-        ss, dof = 0.0, 0
-        for _, v in self.table.groupby("id", sort=False)[response]:
-            v = v.dropna().to_numpy(dtype=float)
-            if len(v) >= 2:
-                ss += float(((v - v.mean()) ** 2).sum())
-                dof += len(v) - 1
-        return (math.sqrt(ss / dof), dof) if dof else (math.nan, 0)
+        var, dof = pooled_variance(v.to_numpy(dtype=float) for _, v in self.table.groupby("id", sort=False)[response])
+        return math.sqrt(var) if dof else math.nan, dof
 
     def overrides(self, experiment: str) -> dict:
         """The condition overrides of ``experiment``: override key or rig parameter -> value (a rig parameter in

@@ -78,6 +78,20 @@ def _variance(name: str, v, n: int) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
+def pooled_variance(groups) -> tuple[float, int]:
+    """(pooled within-group variance, its degrees of freedom) of ``groups`` (an iterable of 1-D arrays; NaNs
+    dropped): sum of squared deviations from each group's mean over sum (n - 1), from the groups with two or more
+    values; (NaN, 0) when none has two."""
+    ss, dof = 0.0, 0
+    for g in groups:
+        v = np.asarray(g, dtype=float)
+        v = v[np.isfinite(v)]
+        if len(v) >= 2:
+            ss += float(((v - v.mean()) ** 2).sum())
+            dof += len(v) - 1
+    return (ss / dof, dof) if dof else (math.nan, 0)
+
+
 def space_filling(n: int, d: int, seed: int = 0) -> np.ndarray:
     """``n`` points in [0, 1]^d, shape (n, d): a Latin hypercube (each dimension has exactly one point in each
     of its n equal strata) whose centred discrepancy is lowered by random coordinate swaps (``random-cd``,

@@ -252,6 +252,23 @@ class Problem:
     sim_var: dict = field(default_factory=dict)
 
     @property
+    def trend_conditions(self) -> list[str]:
+        """The condition columns a residual trend is tested (and plotted) against: numeric, with three or more
+        distinct values among the training rows, and not a linear function of an earlier one (a cylinder scaled
+        with the grain: its diameter, height and base would repeat the radius's test in the Holm family)."""
+        obs = self.obs[self.train]
+        keep: list[str] = []
+        for c in self.experiments.conditions:
+            col = obs[c]
+            if not (pd.api.types.is_numeric_dtype(col) and col.nunique() >= 3):
+                continue
+            x = col.to_numpy(dtype=float)
+            if any(abs(np.corrcoef(x, obs[k].to_numpy(dtype=float))[0, 1]) > 1 - 1e-9 for k in keep):
+                continue
+            keep.append(c)
+        return keep
+
+    @property
     def train(self) -> np.ndarray:
         return (self.obs["split"] == "train").to_numpy()
 
@@ -437,7 +454,7 @@ class Evaluator:
         conf = self.confirm(model, u_map, range(len(prob.conditions)), f"{model.name}: confirm")
         r, var = self.residuals(conf, train)
         obs_t = prob.obs[train]
-        cond_df = obs_t[[c for c in prob.experiments.conditions if _numeric(obs_t[c])]].astype(float)
+        cond_df = obs_t[prob.trend_conditions].astype(float)
         cond_df.index = obs_t["id"].to_numpy()
         labels = obs_t["response"].to_numpy()
         ok = np.isfinite(r)
@@ -527,10 +544,6 @@ class Evaluator:
         return J
 
 
-def _numeric(col: pd.Series) -> bool:
-    return pd.api.types.is_numeric_dtype(col) and col.nunique() >= 3
-
-
 # --------------------------------------------------------------------------------------------------
 # the diagnosis
 # --------------------------------------------------------------------------------------------------
@@ -547,14 +560,7 @@ def _sim_scatter(ev: Evaluator, base: Model) -> dict:
     vals = ev._values(ev.sims.run(reqs, "noise: simulation scatter")).reshape(len(conds), len(seeds), -1)
     out = {}
     for j, r in enumerate(ev.responses):
-        ss, df = 0.0, 0
-        for c in range(len(conds)):
-            v = vals[c, :, j]
-            v = v[np.isfinite(v)]
-            if len(v) > 1:
-                ss += float(((v - v.mean()) ** 2).sum())
-                df += len(v) - 1
-        out[r] = ss / df if df else math.nan
+        out[r] = inf.pooled_variance(vals[c, :, j] for c in range(len(conds)))[0]
         if not np.isfinite(out[r]):
             raise DiagnoseError(
                 f"{ev.spec.path}: the simulations could not measure {r!r} at the centre of the parameter ranges "

@@ -73,13 +73,14 @@ def _plots(out: Path, prob, evals: dict, named: str | None) -> list[str]:
 
     files = []
     obs = prob.obs
-    conds = [c for c in prob.experiments.conditions if obs[c].dtype.kind in "if"]
+    numeric = [c for c in prob.experiments.conditions if obs[c].dtype.kind in "if"]
+    conds = prob.trend_conditions
     models = ["base"] + ([named] if named and named in evals else [])
     for r in prob.experiments.responses:
         o = obs[obs["response"] == r]
         if o.empty:
             continue
-        x_name = conds[0] if conds else None
+        x_name = numeric[0] if numeric else None
         x = o[x_name].to_numpy(dtype=float) if x_name else np.arange(len(o), dtype=float)
         fig, ax = plt.subplots(figsize=(6, 4))
         sd = np.sqrt(np.maximum(o["var_one"].to_numpy(), prob.sim_var.get(r, 0.0)) / o["n"].to_numpy())
