@@ -121,21 +121,21 @@ from warpdem.study.spec import (
     ResponseSpec,
     StudyError,
     StudySpec,
-    _bad,
-    _check_factors,
-    _check_fixed,
-    _check_header,
-    _check_keys,
-    _flatten,
-    _grammar,
-    _integer,
-    _number,
-    _rig_fields,
     build_scene,
+    check_factors,
+    check_fixed,
+    check_header,
     check_override,
+    check_table_keys,
     fixed_scene,
+    flatten_keys,
+    override_grammar,
     read_toml,
+    rig_fields,
     rig_value,
+    spec_error,
+    spec_integer,
+    spec_number,
 )
 
 from .candidates import CANDIDATE_NAMES
@@ -244,27 +244,27 @@ class DiagnosisSpec:
     def __post_init__(self):
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
         with _as_diagnose():
-            _check_header(self, "[diagnose]", "diagnosis file")
-            set_("fixed", _check_fixed(self.fixed, self.rig))
-            set_("parameters", _check_factors(self.parameters, self.rig, self.fixed, ParameterSpec, "free parameter"))
+            check_header(self, "[diagnose]", "diagnosis file")
+            set_("fixed", check_fixed(self.fixed, self.rig))
+            set_("parameters", check_factors(self.parameters, self.rig, self.fixed, ParameterSpec, "free parameter"))
             w = "[experiments]"
             if not isinstance(self.experiments_file, str) or not self.experiments_file.strip():
-                raise _bad(w, "file", self.experiments_file, "a CSV path relative to the diagnosis file")
+                raise spec_error(w, "file", self.experiments_file, "a CSV path relative to the diagnosis file")
             if self.curves is not None and (not isinstance(self.curves, str) or "{id}" not in self.curves):
-                raise _bad(
+                raise spec_error(
                     w,
                     "curves",
                     self.curves,
                     'a path with {id} (the experiment id) relative to the diagnosis file, e.g. "curves/{id}.csv"',
                 )
-            set_("sim_seeds", _integer("[noise]", "sim_seeds", self.sim_seeds, 2))
+            set_("sim_seeds", spec_integer("[noise]", "sim_seeds", self.sim_seeds, 2))
             w = "[calibration]"
-            set_("points", _integer(w, "points", self.points, 0))
-            set_("confirm_seeds", _integer(w, "confirm_seeds", self.confirm_seeds, 1))
-            set_("mcmc_steps", _integer(w, "mcmc_steps", self.mcmc_steps, 100))
-            alpha = _number(w, "alpha", self.alpha)
+            set_("points", spec_integer(w, "points", self.points, 0))
+            set_("confirm_seeds", spec_integer(w, "confirm_seeds", self.confirm_seeds, 1))
+            set_("mcmc_steps", spec_integer(w, "mcmc_steps", self.mcmc_steps, 100))
+            alpha = spec_number(w, "alpha", self.alpha)
             if not 0 < alpha < 0.5:
-                raise _bad(w, "alpha", self.alpha, "a significance level in (0, 0.5)")
+                raise spec_error(w, "alpha", self.alpha, "a significance level in (0, 0.5)")
             set_("alpha", alpha)
         self._check_candidates()
 
@@ -383,7 +383,7 @@ def _as_number(x) -> float | None:
 
 
 def _table(data: Mapping, name: str, label: str) -> dict:
-    return _check_keys(name, data.get(name, {}), label, _TABLES, _REQUIRED, _ARRAYS)
+    return check_table_keys(name, data.get(name, {}), label, _TABLES, _REQUIRED, _ARRAYS)
 
 
 def _from_dict(data: Mapping, path) -> DiagnosisSpec:
@@ -409,12 +409,12 @@ def _from_dict(data: Mapping, path) -> DiagnosisSpec:
     parameters = []
     for i, p in enumerate(data["parameters"]):
         label = f"[[parameters]] #{i + 1}" + (f" {p['name']!r}" if isinstance(p, Mapping) and "name" in p else "")
-        parameters.append(ParameterSpec(**_check_keys("parameters", p, label, _TABLES, _REQUIRED, _ARRAYS)))
+        parameters.append(ParameterSpec(**check_table_keys("parameters", p, label, _TABLES, _REQUIRED, _ARRAYS)))
     experiments = _table(data, "experiments", "[experiments]")
     candidates = _table(data, "candidates", "[candidates]")
     return DiagnosisSpec(
         **head,
-        fixed=_flatten(fixed),
+        fixed=flatten_keys(fixed),
         parameters=tuple(parameters),
         experiments_file=experiments["file"],
         curves=experiments.get("curves"),
@@ -555,17 +555,17 @@ def _condition_kind(col: str, rig: str | None, src: Path, responses: Sequence[st
     """How condition column ``col`` reads its cells: "number", "text", "bool" or "any" (a number when it is one,
     else text: a rig parameter of a rig not known); refused when it is not an override key or rig parameter."""
     if "." in col or col == "gravity":
-        _grammar(rig, True).parse(col, str(src), "column", error=DiagnoseError)
+        override_grammar(rig, True).parse(col, str(src), "column", error=DiagnoseError)
         return "number"
     if rig is None:
         return "any"
-    fields = _rig_fields(rig)
+    fields = rig_fields(rig)
     if col not in fields:
         known = [*MEASURES, *_RESERVED, *(f"sd_{r}" for r in responses), *fields]
         raise DiagnoseError(
             f"{src}: column {col!r} is not allowed{did_you_mean(col, known)}; expected id, replicate, split, a "
             f"response ({', '.join(MEASURES)}), sd_<response>, an override key "
-            f"({_grammar(rig, True).forms(('material', 'interaction', 'run'))}) or a {rig} parameter "
+            f"({override_grammar(rig, True).forms(('material', 'interaction', 'run'))}) or a {rig} parameter "
             f"({', '.join(fields)})"
         )
     d = fields[col].default

@@ -128,26 +128,37 @@ from .analysis import model_terms
 from .designs import Factor
 
 __all__ = [
-    "DESIGN_KINDS",
-    "MEASURES",
     "AnalysisSpec",
+    "DESIGN_KINDS",
     "DesignSpec",
     "FactorSpec",
     "FrozenMap",
+    "MEASURES",
     "ResponseSpec",
     "StudyError",
     "StudySpec",
     "VerificationSpec",
     "batch_key",
     "build_scene",
+    "check_factors",
+    "check_fixed",
+    "check_header",
     "check_override",
     "check_scene_overrides",
+    "check_table_keys",
     "design_table",
     "fixed_scene",
+    "flatten_keys",
     "load_study",
+    "override_grammar",
     "point_key",
     "read_toml",
+    "rig_fields",
+    "rig_value",
     "run_overrides",
+    "spec_error",
+    "spec_integer",
+    "spec_number",
     "varies_per_world",
 ]
 
@@ -190,29 +201,29 @@ def _rigs():
     return rigs
 
 
-def _bad(where: str, key: str, value, expected: str) -> StudyError:
+def spec_error(where: str, key: str, value, expected: str) -> StudyError:
     return StudyError(not_allowed(where, key, value, expected))
 
 
-def _number(where: str, key: str, v) -> float:
+def spec_number(where: str, key: str, v) -> float:
     return finite_number(where, key, v, error=StudyError)
 
 
-def _integer(where: str, key: str, v, minimum: int) -> int:
+def spec_integer(where: str, key: str, v, minimum: int) -> int:
     if not is_number(v) or float(v) != int(v) or int(v) < minimum:
-        raise _bad(where, key, v, f"an integer >= {minimum}")
+        raise spec_error(where, key, v, f"an integer >= {minimum}")
     return int(v)
 
 
 def _boolean(where: str, key: str, v) -> bool:
     if not isinstance(v, (bool, np.bool_)):
-        raise _bad(where, key, v, "true or false")
+        raise spec_error(where, key, v, "true or false")
     return bool(v)
 
 
 def _string(where: str, key: str, v) -> str:
     if not isinstance(v, str):
-        raise _bad(where, key, v, "a string")
+        raise spec_error(where, key, v, "a string")
     return v
 
 
@@ -242,7 +253,7 @@ class FrozenMap(dict):
 def _mapping(where: str, key: str, v, names: Sequence[str], need_all: bool) -> FrozenMap:
     """A read-only {factor name: finite number} table."""
     if not isinstance(v, Mapping):
-        raise _bad(where, key, v, "a table {factor = number, ...}")
+        raise spec_error(where, key, v, "a table {factor = number, ...}")
     unknown = [k for k in v if k not in names]
     if unknown:
         raise StudyError(
@@ -256,17 +267,17 @@ def _mapping(where: str, key: str, v, names: Sequence[str], need_all: bool) -> F
                 f"{where}: {key} = {dict(v)!r} lacks factor(s) {', '.join(missing)}; expected a "
                 f"value for every factor ({', '.join(names)})"
             )
-    return FrozenMap({k: _number(where, f"{key}.{k}", v[k]) for k in names if k in v})
+    return FrozenMap({k: spec_number(where, f"{key}.{k}", v[k]) for k in names if k in v})
 
 
-def _rig_fields(rig: str | None) -> dict[str, dataclasses.Field]:
+def rig_fields(rig: str | None) -> dict[str, dataclasses.Field]:
     if rig is None:
         return {}
     return {f.name: f for f in dataclasses.fields(_rigs().RIGS[rig])}
 
 
 @functools.cache
-def _grammar(rig: str | None, factor: bool) -> KeyGrammar:
+def override_grammar(rig: str | None, factor: bool) -> KeyGrammar:
     """The override keys of a study on ``rig`` (None: rig parameters not checked): the scene's
     (:data:`warpdem.scene.stage.OVERRIDES`) and the rig's parameters; for a ``factor`` only numbers: material
     and numeric interaction fields, run settings and numeric rig parameters."""
@@ -279,7 +290,7 @@ def _grammar(rig: str | None, factor: bool) -> KeyGrammar:
         labels["interaction"] = "a numeric interaction field"
     fields["rig"] = None
     if rig is not None:
-        rf = _rig_fields(rig)
+        rf = rig_fields(rig)
         words = [k for k, f in rf.items() if isinstance(f.default, (bool, str))]
         fields["rig"] = tuple(k for k in rf if not (factor and k in words))
         labels["rig"] = f"a numeric {rig} parameter" if factor else f"a {rig} parameter"
@@ -317,17 +328,17 @@ class FactorSpec:
     def __post_init__(self):
         where = f"{self.table} {self.name!r}"
         if not isinstance(self.name, str) or not _FACTOR_RE.match(self.name):
-            raise _bad(self.table, "name", self.name, "letters, digits and _ starting with a letter (e.g. A, X1)")
+            raise spec_error(self.table, "name", self.name, "letters, digits and _ starting with a letter (e.g. A, X1)")
         if self.name in _RESERVED or self.name.endswith("_actual"):
-            raise _bad(
+            raise spec_error(
                 where,
                 "name",
                 self.name,
                 f"a name that is not a design-table column ({', '.join(sorted(_RESERVED))}, *_actual)",
             )
-        _grammar(None, True).parse(self.parameter, where, "parameter", error=StudyError)
-        low = _number(where, "low", self.low)
-        high = _number(where, "high", self.high)
+        override_grammar(None, True).parse(self.parameter, where, "parameter", error=StudyError)
+        low = spec_number(where, "low", self.low)
+        high = spec_number(where, "high", self.high)
         if low == high:
             raise StudyError(
                 f"{where}: low = {low!r} and high = {high!r} are not allowed; expected two "
@@ -396,7 +407,9 @@ class DesignSpec:
     def __post_init__(self):
         w = "[design]"
         if self.kind not in DESIGN_KINDS:
-            raise _bad(w, "kind", self.kind, f"one of {', '.join(DESIGN_KINDS)}{did_you_mean(self.kind, DESIGN_KINDS)}")
+            raise spec_error(
+                w, "kind", self.kind, f"one of {', '.join(DESIGN_KINDS)}{did_you_mean(self.kind, DESIGN_KINDS)}"
+            )
         for opt in _OPTIONS:
             if getattr(self, opt) is not None and opt not in _KIND_OPTIONS[self.kind]:
                 kinds = [k for k, o in _KIND_OPTIONS.items() if opt in o]
@@ -405,16 +418,16 @@ class DesignSpec:
                     f"it applies to {', '.join(kinds)}"
                 )
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
-        set_("replicates", _integer(w, "replicates", self.replicates, 1))
+        set_("replicates", spec_integer(w, "replicates", self.replicates, 1))
         set_("randomize", _boolean(w, "randomize", self.randomize))
         if self.runs is not None:
             if not is_number(self.runs) or self.runs not in (12, 20):
-                raise _bad(w, "runs", self.runs, "12 or 20 (Plackett-Burman runs)")
+                raise spec_error(w, "runs", self.runs, "12 or 20 (Plackett-Burman runs)")
             set_("runs", int(self.runs))
         if self.center_points is not None:
-            set_("center_points", _integer(w, "center_points", self.center_points, 0))
+            set_("center_points", spec_integer(w, "center_points", self.center_points, 0))
             if self.kind == "box_behnken" and self.center_points < 1:
-                raise _bad(
+                raise spec_error(
                     w,
                     "center_points",
                     self.center_points,
@@ -430,21 +443,21 @@ class DesignSpec:
             if isinstance(gens, str):
                 gens = [gens]
             if not gens or not isinstance(gens, (list, tuple)) or not all(isinstance(g, str) for g in gens):
-                raise _bad(w, "generators", self.generators, 'a list of generator strings, e.g. ["E = ABCD"]')
+                raise spec_error(w, "generators", self.generators, 'a list of generator strings, e.g. ["E = ABCD"]')
             set_("generators", tuple(gens))
         if self.alpha is not None:
             if isinstance(self.alpha, str):
                 if self.alpha.lower() not in ("rotatable", "orthogonal", "face"):
-                    raise _bad(w, "alpha", self.alpha, 'a number > 0, "rotatable", "orthogonal" or "face"')
+                    raise spec_error(w, "alpha", self.alpha, 'a number > 0, "rotatable", "orthogonal" or "face"')
                 set_("alpha", self.alpha.lower())
             elif not is_number(self.alpha) or not (math.isfinite(self.alpha) and self.alpha > 0):
-                raise _bad(w, "alpha", self.alpha, 'a number > 0, "rotatable", "orthogonal" or "face"')
+                raise spec_error(w, "alpha", self.alpha, 'a number > 0, "rotatable", "orthogonal" or "face"')
             else:
                 set_("alpha", float(self.alpha))
         if self.kind == "steepest_ascent":
             if self.steps is None:
                 raise StudyError(f"{w}: steps is missing; expected the number of runs on the path (start included)")
-            set_("steps", _integer(w, "steps", self.steps, 2))
+            set_("steps", spec_integer(w, "steps", self.steps, 2))
             by_step = self.step is not None
             by_gradient = any(getattr(self, k) is not None for k in ("coefficients", "base", "base_step"))
             if by_step == by_gradient:
@@ -457,9 +470,9 @@ class DesignSpec:
                     if getattr(self, k) is None:
                         raise StudyError(f"{w}: {k} is missing; a gradient path needs coefficients, base and base_step")
                 _string(w, "base", self.base)
-                bs = _number(w, "base_step", self.base_step)
+                bs = spec_number(w, "base_step", self.base_step)
                 if bs <= 0:
-                    raise _bad(w, "base_step", self.base_step, "a step > 0 in the base factor's actual units")
+                    raise spec_error(w, "base_step", self.base_step, "a step > 0 in the base factor's actual units")
                 set_("base_step", bs)
                 set_("descent", _boolean(w, "descent", self.descent if self.descent is not None else False))
             elif self.descent is not None:
@@ -475,7 +488,7 @@ class DesignSpec:
         if self.kind == "explicit":
             pts = self.points
             if not isinstance(pts, (list, tuple)) or not pts or not all(isinstance(p, Mapping) for p in pts):
-                raise _bad(w, "points", pts, "a non-empty list of tables {factor = actual value, ...}")
+                raise spec_error(w, "points", pts, "a non-empty list of tables {factor = actual value, ...}")
             set_("points", tuple(_mapping(w, f"points[{i}]", p, list(p), need_all=False) for i, p in enumerate(pts)))
 
 
@@ -490,11 +503,11 @@ class ResponseSpec:
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not _FACTOR_RE.match(self.name):
-            raise _bad("[[responses]]", "name", self.name, "letters, digits and _ starting with a letter")
+            raise spec_error("[[responses]]", "name", self.name, "letters, digits and _ starting with a letter")
         where = f"[[responses]] {self.name!r}"
         m = self.measure
         if not isinstance(m, str) or not m or ("." not in m and m not in MEASURES):
-            raise _bad(
+            raise spec_error(
                 where,
                 "measure",
                 m,
@@ -502,7 +515,7 @@ class ResponseSpec:
             )
         _string(where, "unit", self.unit)
         if self.target is not None:
-            object.__setattr__(self, "target", _number(where, "target", self.target))
+            object.__setattr__(self, "target", spec_number(where, "target", self.target))
 
 
 @dataclass(frozen=True)
@@ -520,7 +533,7 @@ class AnalysisSpec:
         m = self.model
         if isinstance(m, str):
             if m.lower() not in ("linear", "2fi", "quadratic", "none"):
-                raise _bad(
+                raise spec_error(
                     w,
                     "model",
                     m,
@@ -530,11 +543,13 @@ class AnalysisSpec:
             object.__setattr__(self, "model", m.lower())
         elif m is not None:
             if not isinstance(m, (list, tuple)) or not m or not all(isinstance(t, str) for t in m):
-                raise _bad(w, "model", m, 'linear, 2fi, quadratic, none or a list of terms such as ["A", "A*B", "A^2"]')
+                raise spec_error(
+                    w, "model", m, 'linear, 2fi, quadratic, none or a list of terms such as ["A", "A*B", "A^2"]'
+                )
             object.__setattr__(self, "model", tuple(m))
-        a = _number(w, "alpha", self.alpha)
+        a = spec_number(w, "alpha", self.alpha)
         if not 0 < a < 1:
-            raise _bad(w, "alpha", self.alpha, "a significance level in (0, 1)")
+            raise spec_error(w, "alpha", self.alpha, "a significance level in (0, 1)")
         object.__setattr__(self, "alpha", a)
         object.__setattr__(self, "eliminate", _boolean(w, "eliminate", self.eliminate))
 
@@ -546,7 +561,7 @@ class VerificationSpec:
     replicates: int = 0
 
     def __post_init__(self):
-        object.__setattr__(self, "replicates", _integer("[verification]", "replicates", self.replicates, 0))
+        object.__setattr__(self, "replicates", spec_integer("[verification]", "replicates", self.replicates, 0))
 
 
 _DEFAULT_MODEL = {
@@ -560,12 +575,12 @@ _DEFAULT_MODEL = {
 }
 
 
-def _check_header(spec, w: str, doc: str) -> None:
+def check_header(spec, w: str, doc: str) -> None:
     """Check (and normalise, in place) the scene fields that a study and a diagnosis share in their first table
     ``w``: name, title, rig or scene (relative to the ``doc``, e.g. "study file"), smoke, path, seed and batch."""
     set_ = lambda k, v: object.__setattr__(spec, k, v)  # noqa: E731
     if not isinstance(spec.name, str) or not _NAME_RE.match(spec.name):
-        raise _bad(w, "name", spec.name, "an identifier of lower-case letters, digits and _")
+        raise spec_error(w, "name", spec.name, "an identifier of lower-case letters, digits and _")
     _string(w, "title", spec.title)
     rigs = _rigs()
     if (spec.rig is None) == (spec.scene is None):
@@ -574,7 +589,7 @@ def _check_header(spec, w: str, doc: str) -> None:
             f"({', '.join(rigs.RIGS)}) and scene (a stage path relative to the {doc})"
         )
     if spec.rig is not None and spec.rig not in rigs.RIGS:
-        raise _bad(w, "rig", spec.rig, f"one of {', '.join(rigs.RIGS)}{did_you_mean(spec.rig, rigs.RIGS)}")
+        raise spec_error(w, "rig", spec.rig, f"one of {', '.join(rigs.RIGS)}{did_you_mean(spec.rig, rigs.RIGS)}")
     set_("smoke", _boolean(w, "smoke", spec.smoke))
     if spec.path is not None:
         set_("path", Path(spec.path))
@@ -590,22 +605,22 @@ def _check_header(spec, w: str, doc: str) -> None:
                 f"{w}: scene = {spec.scene!r} is not allowed: {spec.scene_path} does not exist; "
                 f"expected a stage path relative to the {doc}"
             )
-    set_("seed", _integer(w, "seed", spec.seed, 0))
-    set_("batch", _integer(w, "batch", spec.batch, 0))
+    set_("seed", spec_integer(w, "seed", spec.seed, 0))
+    set_("batch", spec_integer(w, "batch", spec.batch, 0))
 
 
-def _check_fixed(fixed, rig: str | None) -> FrozenMap:
-    """``[fixed]``: override keys of ``rig`` (see :func:`_grammar`), each a string, a boolean or a finite number."""
+def check_fixed(fixed, rig: str | None) -> FrozenMap:
+    """``[fixed]``: override keys of ``rig`` (see :func:`override_grammar`), each a string, a boolean or a finite number."""
     if not isinstance(fixed, Mapping):
-        raise _bad("[fixed]", "fixed", fixed, "a table of overrides")
+        raise spec_error("[fixed]", "fixed", fixed, "a table of overrides")
     for k, v in fixed.items():
-        _grammar(rig, False).parse(k, "[fixed]", error=StudyError)
+        override_grammar(rig, False).parse(k, "[fixed]", error=StudyError)
         if not isinstance(v, (str, bool, int, float)) or (is_number(v) and not math.isfinite(v)):
-            raise _bad("[fixed]", k, v, "a string, a boolean or a finite number")
+            raise spec_error("[fixed]", k, v, "a string, a boolean or a finite number")
     return FrozenMap(fixed)
 
 
-def _check_factors(factors, rig: str | None, fixed: Mapping, kind: type[FactorSpec], noun: str) -> tuple:
+def check_factors(factors, rig: str | None, fixed: Mapping, kind: type[FactorSpec], noun: str) -> tuple:
     """The factors (``kind`` instances, at least one) as a tuple, refused when two share a name or a parameter,
     a parameter is not a numeric override key of ``rig`` or ``fixed`` sets it too; ``noun`` is what a message
     calls one ("factor")."""
@@ -627,7 +642,7 @@ def _check_factors(factors, rig: str | None, fixed: Mapping, kind: type[FactorSp
                 f"{table} {f.name!r}: parameter = {f.parameter!r} is not allowed; {noun} "
                 f"{other!r} already sets it, expected one {noun} per parameter"
             )
-        _grammar(rig, True).parse(f.parameter, f"{table} {f.name!r}", "parameter", error=StudyError)
+        override_grammar(rig, True).parse(f.parameter, f"{table} {f.name!r}", "parameter", error=StudyError)
         if f.parameter in fixed:
             raise StudyError(
                 f"{table} {f.name!r}: parameter = {f.parameter!r} is not allowed; [fixed] sets "
@@ -659,10 +674,10 @@ class StudySpec:
 
     def __post_init__(self):
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
-        _check_header(self, "[study]", "study file")
+        check_header(self, "[study]", "study file")
         _string("[study]", "source", self.source)
-        set_("fixed", _check_fixed(self.fixed, self.rig))
-        set_("factors", _check_factors(self.factors, self.rig, self.fixed, FactorSpec, "factor"))
+        set_("fixed", check_fixed(self.fixed, self.rig))
+        set_("factors", check_factors(self.factors, self.rig, self.fixed, FactorSpec, "factor"))
 
         # responses, analysis, verification
         responses = tuple(self.responses)
@@ -674,7 +689,7 @@ class StudySpec:
             raise StudyError(f"[[responses]] {dup!r}: name = {dup!r} is not allowed; expected unique response names")
         set_("responses", responses)
         if not isinstance(self.design, DesignSpec):
-            raise _bad("[design]", "design", self.design, "a [design] table")
+            raise spec_error("[design]", "design", self.design, "a [design] table")
         if self.analysis.model is None:
             set_("analysis", dataclasses.replace(self.analysis, model=_DEFAULT_MODEL[self.design.kind]))
         self._check_design()
@@ -685,7 +700,7 @@ class StudySpec:
         d, names, w = self.design, self.factor_names, "[design]"
         k = len(names)
         if d.kind == "plackett_burman" and d.runs is not None and k > d.runs - 1:
-            raise _bad(
+            raise spec_error(
                 w,
                 "runs",
                 d.runs,
@@ -705,11 +720,13 @@ class StudySpec:
                 _mapping(w, "start", d.start, names, need_all=True)
             if d.base is not None:
                 if d.base not in names:
-                    raise _bad(w, "base", d.base, f"a factor name: {', '.join(names)}{did_you_mean(d.base, names)}")
+                    raise spec_error(
+                        w, "base", d.base, f"a factor name: {', '.join(names)}{did_you_mean(d.base, names)}"
+                    )
                 if d.coefficients[d.base] == 0:
-                    raise _bad(w, f"coefficients.{d.base}", 0.0, "a non-zero coefficient for the base factor")
+                    raise spec_error(w, f"coefficients.{d.base}", 0.0, "a non-zero coefficient for the base factor")
             if d.step is not None and all(v == 0 for v in d.step.values()):
-                raise _bad(w, "step", dict(d.step), "at least one non-zero step")
+                raise spec_error(w, "step", dict(d.step), "at least one non-zero step")
         if d.kind == "explicit":
             for i, p in enumerate(d.points):
                 _mapping(w, f"points[{i}]", p, names, need_all=True)
@@ -727,7 +744,7 @@ class StudySpec:
         try:
             terms = model_terms(m if isinstance(m, str) else list(m), self.factor_names)
         except ValueError as e:
-            raise _bad(
+            raise spec_error(
                 "[analysis]",
                 "model",
                 m if isinstance(m, str) else list(m),
@@ -740,7 +757,7 @@ class StudySpec:
         X = np.column_stack(cols)
         rank = np.linalg.matrix_rank(X)
         if rank < X.shape[1]:
-            raise _bad(
+            raise spec_error(
                 "[analysis]",
                 "model",
                 m if isinstance(m, str) else list(m),
@@ -803,7 +820,7 @@ _REQUIRED = {
 }
 
 
-def _check_keys(table: str, data, label: str, tables=None, required=None, arrays=("factors", "responses")) -> dict:
+def check_table_keys(table: str, data, label: str, tables=None, required=None, arrays=("factors", "responses")) -> dict:
     """``data`` (TOML table ``table``, called ``label`` in messages) as a dict, refused unless it is a table whose
     keys are all allowed (``tables``, default a study's) and that holds every required key (``required``);
     ``arrays`` are the tables written [[name]]."""
@@ -824,13 +841,13 @@ def _check_keys(table: str, data, label: str, tables=None, required=None, arrays
     return dict(data)
 
 
-def _flatten(d: Mapping, prefix: str = "") -> dict:
+def flatten_keys(d: Mapping, prefix: str = "") -> dict:
     """A bare dotted TOML key (interaction.grain.grain.restitution = 0.37) is a nested table: flatten it."""
     out = {}
     for k, v in d.items():
         key = f"{prefix}{k}"
         if isinstance(v, Mapping):
-            out.update(_flatten(v, key + "."))
+            out.update(flatten_keys(v, key + "."))
         else:
             out[key] = v
     return out
@@ -848,25 +865,25 @@ def _from_dict(data: Mapping, path) -> StudySpec:
     for t in ("study", "factors", "design", "responses"):
         if t not in data:
             raise StudyError(f"table [{t}] is missing; a study needs [study], [[factors]], [design] and [[responses]]")
-    study = _check_keys("study", data["study"], "[study]")
+    study = check_table_keys("study", data["study"], "[study]")
     fixed = data.get("fixed", {})
     if not isinstance(fixed, Mapping):
         raise StudyError(f"[fixed]: expected a table of overrides, got {fixed!r}")
-    fixed = _flatten(fixed)
+    fixed = flatten_keys(fixed)
     for t in ("factors", "responses"):
         if not isinstance(data[t], list):
             raise StudyError(f"[{t}]: expected an array of tables, written [[{t}]] (one per {t[:-1]})")
     factors = []
     for i, f in enumerate(data["factors"]):
         label = f"[[factors]] #{i + 1}" + (f" {f['name']!r}" if isinstance(f, Mapping) and "name" in f else "")
-        factors.append(FactorSpec(**_check_keys("factors", f, label)))
+        factors.append(FactorSpec(**check_table_keys("factors", f, label)))
     responses = []
     for i, r in enumerate(data["responses"]):
         label = f"[[responses]] #{i + 1}" + (f" {r['name']!r}" if isinstance(r, Mapping) and "name" in r else "")
-        responses.append(ResponseSpec(**_check_keys("responses", r, label)))
-    design = DesignSpec(**_check_keys("design", data["design"], "[design]"))
-    analysis = AnalysisSpec(**_check_keys("analysis", data.get("analysis", {}), "[analysis]"))
-    verification = VerificationSpec(**_check_keys("verification", data.get("verification", {}), "[verification]"))
+        responses.append(ResponseSpec(**check_table_keys("responses", r, label)))
+    design = DesignSpec(**check_table_keys("design", data["design"], "[design]"))
+    analysis = AnalysisSpec(**check_table_keys("analysis", data.get("analysis", {}), "[analysis]"))
+    verification = VerificationSpec(**check_table_keys("verification", data.get("verification", {}), "[verification]"))
     return StudySpec(
         factors=tuple(factors),
         design=design,
@@ -1083,7 +1100,7 @@ def rig_value(spec: StudySpec, key: str, v: float):
     rig = spec.rig
     if rig is None:
         return v
-    d = _rig_fields(rig)[key].default
+    d = rig_fields(rig)[key].default
     if isinstance(d, int) and not isinstance(d, bool) and float(v) == int(v):
         return int(v)
     return v
