@@ -39,6 +39,17 @@ def test_budget_is_the_larger_scatter_over_n_plus_the_model_side():
     np.testing.assert_allclose(prob.budget(k), expect)
 
 
+def test_roughness_does_not_average_over_seeds():
+    """A response rough in the parameters but deaf to the seed (a press fill): k equal confirming runs leave the
+    roughness whole, only the seed part shrinks with k."""
+    prob = _problem()
+    prob.seed_var = {"angle": 0.0, "density": 25.0}
+    prob.rough_var = {"angle": 1.0, "density": 0.0}
+    k = np.array([2.0, 2.0, 4.0, 4.0])
+    expect = np.array([1.0 / 3 + 1.0, 100.0 / 3 + 25.0 / 2, 1.0 / 2 + 1.0, 100.0 / 2 + 25.0 / 4])
+    np.testing.assert_allclose(prob.budget(k), expect)
+
+
 def test_residuals_of_a_fold_with_two_responses():
     """A fold holds one condition's two responses: each residual gets its own response's budget with the number of
     simulations that measured it (a failed one drops out)."""

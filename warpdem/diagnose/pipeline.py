@@ -9,8 +9,10 @@ Stages (every simulated world is stored as it finishes, ``OUT/runs/<id>.json``, 
    model's design runs about its surrogates (their white-noise term: a response that is not smooth in the
    parameters scatters over them as it does over seeds). A measured mean of n replicates is compared
    with the model through the variance max(s_meas^2, s_sim^2) / n (a measurement cannot be known better than
-   the pile-to-pile scatter the model itself shows) plus the model side's own variance: s_sim^2 / k for the
-   mean of k confirming simulations, or the surrogate's variance.
+   the pile-to-pile scatter the model itself shows) plus the model side's own variance: s_seed^2 / k for the
+   mean of k confirming simulations (or the surrogate's variance) plus the roughness max(s_nugget^2 - s_seed^2,
+   0), which k world seeds at one parameter point do not average away (a press whose fill ignores the seed
+   gives k equal runs).
 2. **Calibration.** A space-filling design (:func:`inference.space_filling`) over the free parameters, at every
    condition (training and test), each condition's worlds batched in one launch where the scene allows; a
    Gaussian-process surrogate per (condition, response) (:class:`inference.Surrogate`: smooth, interpolating,
@@ -243,13 +245,17 @@ class Model:
 class Problem:
     """The data of one diagnosis, arranged for the stages: ``obs`` (one row per measured mean: experiment id,
     response, condition index, mean, replicates n, variance of one measurement, split), the distinct
-    ``conditions`` (override dicts) and the training condition indices."""
+    ``conditions`` (override dicts) and the training condition indices; per response the simulation's variances:
+    ``seed_var`` (over world seeds), ``rough_var`` (the design runs' scatter about the surrogates beyond it) and
+    ``sim_var`` (one simulated pile's: the larger of the two sources' total)."""
 
     spec: DiagnosisSpec
     experiments: Experiments
     obs: pd.DataFrame
     conditions: list[dict]
     sim_var: dict = field(default_factory=dict)
+    seed_var: dict = field(default_factory=dict)
+    rough_var: dict = field(default_factory=dict)
 
     @property
     def trend_conditions(self) -> list[str]:
@@ -274,10 +280,14 @@ class Problem:
 
     def budget(self, k_model) -> np.ndarray:
         """Variance (per observation) of measured mean minus model mean: max(s_meas^2, s_sim^2) / n plus
-        s_sim^2 / k_model (k_model: the simulations averaged, an array or a number; inf for a surrogate)."""
-        s_sim = self.obs["response"].map(self.sim_var).to_numpy(dtype=float)
+        s_seed^2 / k_model plus s_rough^2 (k_model: the simulations averaged, an array or a number; inf for a
+        surrogate). Without seed_var the simulation's variance is taken as all seed scatter."""
+        resp = self.obs["response"]
+        s_sim = resp.map(self.sim_var).to_numpy(dtype=float)
+        s_seed = resp.map(self.seed_var).to_numpy(dtype=float) if self.seed_var else s_sim
+        s_rough = resp.map(self.rough_var).fillna(0.0).to_numpy(dtype=float) if self.rough_var else 0.0
         one = np.maximum(self.obs["var_one"].to_numpy(dtype=float), s_sim)
-        return one / self.obs["n"].to_numpy(dtype=float) + s_sim / np.asarray(k_model, dtype=float)
+        return one / self.obs["n"].to_numpy(dtype=float) + s_seed / np.asarray(k_model, dtype=float) + s_rough
 
 
 def _problem(spec: DiagnosisSpec, ex: Experiments) -> Problem:
@@ -445,10 +455,14 @@ class Evaluator:
         if model.candidate is None:
             # the world seeds measure the scatter a factory's placement gives; a model whose response is not
             # smooth in its parameters (contact networks rearrange) scatters over them too, which the surrogates'
-            # white-noise term measures: the budget takes the larger, per response
+            # white-noise term measures. One pile scatters by the larger; the excess over the seeds' is fixed at
+            # a parameter point, so averaging seeds there does not shrink it
             for r in self.responses:
+                seed = prob.seed_var[r]
                 nug = float(np.nanmean([gps[(c, r)].noise_sd ** 2 for c in range(len(prob.conditions))]))
-                prob.sim_var[r] = max(prob.sim_var[r], nug) if np.isfinite(nug) else prob.sim_var[r]
+                nug = nug if np.isfinite(nug) else 0.0
+                prob.sim_var[r] = max(seed, nug)
+                prob.rough_var[r] = max(nug - seed, 0.0)
         cal = self.calibrate(model, gps, train, "all")
         u_map = np.asarray(cal["map"], dtype=float)
         conf = self.confirm(model, u_map, range(len(prob.conditions)), f"{model.name}: confirm")
@@ -790,7 +804,8 @@ def diagnose(
     base = Model("base", [Dim(p.name, p.parameter, p.low, p.high, p.unit) for p in spec.parameters])
     result: dict = {"name": spec.name, "out": str(out), "stopped": None}
     try:
-        prob.sim_var = _sim_scatter(ev, base)
+        prob.seed_var = _sim_scatter(ev, base)
+        prob.sim_var = dict(prob.seed_var)
         base_eval = ev.evaluate(base)
         evals = {"base": base_eval}
         screens, skipped, results, decision = [], {}, [], None

@@ -164,6 +164,8 @@ def write(out: Path, prob, evals: dict, decision: dict, screens, skipped, separa
         "separating_measurement": separating[0]["measurement"] if separating else None,
         "noise": {
             "simulation_sd": {r: math.sqrt(v) for r, v in prob.sim_var.items()},
+            "seed_sd": {r: math.sqrt(v) for r, v in prob.seed_var.items()},
+            "roughness_sd": {r: math.sqrt(v) for r, v in prob.rough_var.items()},
             "measurement_sd": {
                 r: float(np.sqrt(prob.obs.loc[prob.obs["response"] == r, "var_one"].mean()))
                 for r in prob.experiments.responses
@@ -219,9 +221,18 @@ def _markdown(prob, evals, decision, diag, screens, skipped, separating, gains) 
         f"({int(prob.train.sum())} training); responses: {', '.join(prob.experiments.responses)}; conditions: "
         f"{', '.join(prob.experiments.conditions) or 'none'}."
     )
-    L += ["", "| response | measurement SD (one) | simulation SD (world seeds) |", "|---|---|---|"]
+    L += [
+        "",
+        "| response | measurement SD (one) | simulation SD: over world seeds | roughness in the parameters, beyond "
+        "(design runs about their surrogates) |",
+        "|---|---|---|---|",
+    ]
+    nz = diag["noise"]
     for r in prob.experiments.responses:
-        L.append(f"| {r} | {_f(diag['noise']['measurement_sd'][r])} | {_f(diag['noise']['simulation_sd'][r])} |")
+        L.append(
+            f"| {r} | {_f(nz['measurement_sd'][r])} | {_f(nz['seed_sd'].get(r, math.nan))} | "
+            f"{_f(nz['roughness_sd'].get(r, math.nan))} |"
+        )
     L += ["", "## Base model: calibrated parameters", ""]
     L += _params_table(base)
     L += ["", _surrogate_line(base), ""]
