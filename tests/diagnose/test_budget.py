@@ -28,7 +28,7 @@ def _problem() -> Problem:
     )
     spec = SimpleNamespace(path="case.toml", confirm_seeds=2)
     prob = Problem(spec, SimpleNamespace(responses=["angle", "density"]), obs, [{}, {}])
-    prob.sim_var = {"angle": 1.0, "density": 25.0}
+    prob.seed_var = {"angle": 1.0, "density": 25.0}
     return prob
 
 

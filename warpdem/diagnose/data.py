@@ -797,27 +797,10 @@ def _check_parameters(spec: DiagnosisSpec, scene, where: str) -> None:
 def _first_scene(spec: DiagnosisSpec, exps: Experiments, path: Path):
     """The rig's scene with ``[fixed]`` and the first experiment's rig-parameter conditions (a scene may need
     one to be built at all, as a sphere needs its radius)."""
-    from warpdem.scene.stage import apply_overrides
-
     first = {k: v for k, v in exps.overrides(exps.ids[0]).items() if is_rig_key(k)}
-    if not first:
-        with _as_diagnose(f"{path}: "):
-            return fixed_scene(spec)
-    fixed_rig = {k: v for k, v in spec.fixed.items() if is_rig_key(k)}
-    try:
-        scene = build_scene(spec, {**fixed_rig, **first})
-    except _SCENE_ERRORS as e:
-        keys = ", ".join(f"{k} = {v!r}" for k, v in {**fixed_rig, **first}.items())
-        raise DiagnoseError(
-            f"{exps.source}: experiment {exps.ids[0]!r}: the scene cannot be built from {keys}: {e}"
-        ) from None
-    for k, v in spec.fixed.items():
-        if not is_rig_key(k):
-            try:
-                apply_overrides(scene, {k: v})
-            except _SCENE_ERRORS as e:
-                raise DiagnoseError(f"{path}: [fixed]: {k} = {v!r} is not allowed: {e}") from None
-    return scene
+    where = f"{exps.source}: experiment {exps.ids[0]!r}: " if first else f"{path}: "
+    with _as_diagnose(where):
+        return fixed_scene(spec, first)
 
 
 def _check_scene(spec: DiagnosisSpec, exps: Experiments, base) -> None:

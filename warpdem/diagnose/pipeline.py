@@ -246,16 +246,20 @@ class Problem:
     """The data of one diagnosis, arranged for the stages: ``obs`` (one row per measured mean: experiment id,
     response, condition index, mean, replicates n, variance of one measurement, split), the distinct
     ``conditions`` (override dicts) and the training condition indices; per response the simulation's variances:
-    ``seed_var`` (over world seeds), ``rough_var`` (the design runs' scatter about the surrogates beyond it) and
-    ``sim_var`` (one simulated pile's: the larger of the two sources' total)."""
+    ``seed_var`` (over world seeds) and ``rough_var`` (the design runs' scatter about the surrogates beyond it);
+    :attr:`sim_var` is one simulated pile's, their sum."""
 
     spec: DiagnosisSpec
     experiments: Experiments
     obs: pd.DataFrame
     conditions: list[dict]
-    sim_var: dict = field(default_factory=dict)
     seed_var: dict = field(default_factory=dict)
     rough_var: dict = field(default_factory=dict)
+
+    @property
+    def sim_var(self) -> dict:
+        """Variance of one simulated pile per response: the seed scatter plus the roughness beyond it."""
+        return {r: v + self.rough_var.get(r, 0.0) for r, v in self.seed_var.items()}
 
     @property
     def trend_conditions(self) -> list[str]:
@@ -281,11 +285,11 @@ class Problem:
     def budget(self, k_model) -> np.ndarray:
         """Variance (per observation) of measured mean minus model mean: max(s_meas^2, s_sim^2) / n plus
         s_seed^2 / k_model plus s_rough^2 (k_model: the simulations averaged, an array or a number; inf for a
-        surrogate). Without seed_var the simulation's variance is taken as all seed scatter."""
+        surrogate)."""
         resp = self.obs["response"]
-        s_sim = resp.map(self.sim_var).to_numpy(dtype=float)
-        s_seed = resp.map(self.seed_var).to_numpy(dtype=float) if self.seed_var else s_sim
-        s_rough = resp.map(self.rough_var).fillna(0.0).to_numpy(dtype=float) if self.rough_var else 0.0
+        s_seed = resp.map(self.seed_var).to_numpy(dtype=float)
+        s_rough = resp.map(self.rough_var).fillna(0.0).to_numpy(dtype=float)
+        s_sim = s_seed + s_rough
         one = np.maximum(self.obs["var_one"].to_numpy(dtype=float), s_sim)
         return one / self.obs["n"].to_numpy(dtype=float) + s_seed / np.asarray(k_model, dtype=float) + s_rough
 
@@ -343,6 +347,11 @@ class Evaluator:
         self.prob, self.sims, self.log = prob, sims, log
         self.spec = prob.spec
         self.responses = list(prob.experiments.responses)
+
+    @property
+    def confirm_seeds(self) -> list[int]:
+        """World seeds of every confirming simulation (the screen and the held-out folds use them too)."""
+        return [CONFIRM_SEEDS + k for k in range(self.spec.confirm_seeds)]
 
     def _request(self, model: Model, u, cond: int, seed: int) -> tuple[dict, int]:
         ov = {**self.spec.fixed, **self.prob.conditions[cond], **model.overrides(u)}
@@ -418,7 +427,7 @@ class Evaluator:
     def confirm(self, model: Model, u, conds, stage: str) -> dict:
         """Real simulations of ``model`` at ``u`` at conditions ``conds``: {condition: (seeds, responses) values,
         and the full metrics}."""
-        seeds = [CONFIRM_SEEDS + k for k in range(self.spec.confirm_seeds)]
+        seeds = self.confirm_seeds
         reqs = [self._request(model, u, c, s) for c in conds for s in seeds]
         mets = self.sims.run(reqs, stage)
         out = {}
@@ -461,7 +470,6 @@ class Evaluator:
                 seed = prob.seed_var[r]
                 nug = float(np.nanmean([gps[(c, r)].noise_sd ** 2 for c in range(len(prob.conditions))]))
                 nug = nug if np.isfinite(nug) else 0.0
-                prob.sim_var[r] = max(seed, nug)
                 prob.rough_var[r] = max(nug - seed, 0.0)
         cal = self.calibrate(model, gps, train, "all")
         u_map = np.asarray(cal["map"], dtype=float)
@@ -525,8 +533,12 @@ class Evaluator:
             None if c is None else np.asarray(self.calibrate(model, gps, fit, f"fold{c}", sample=False)["map"], float)
             for fit, _, c in folds
         ]
-        seeds = [CONFIRM_SEEDS + k for k in range(self.spec.confirm_seeds)]
-        reqs = [self._request(model, u, c, s) for (_, _, c), u in zip(folds, us) if c is not None for s in seeds]
+        reqs = [
+            self._request(model, u, c, s)
+            for (_, _, c), u in zip(folds, us)
+            if c is not None
+            for s in self.confirm_seeds
+        ]
         self.sims.run(reqs, f"{model.name}: held-out")
         parts = []
         for (_, test, c), u in zip(folds, us):
@@ -595,8 +607,7 @@ def screen(ev: Evaluator, base_eval: dict, gps: dict, lib: list[cands.Candidate]
         test = dict(cand.shared)
         test[cand.key] = cand.test_value
         moved.append(Model(cand.name, list(base_eval["model"].dims), test))
-    seeds = [CONFIRM_SEEDS + k for k in range(ev.spec.confirm_seeds)]
-    ev.sims.run([ev._request(m, u, c, s) for m in moved for c in conds for s in seeds], "screen")
+    ev.sims.run([ev._request(m, u, c, s) for m in moved for c in conds for s in ev.confirm_seeds], "screen")
     sim_b, _ = ev._sim_means(base_eval["confirm"], train)
     J = ev.jacobian(gps, train, u)
     r, var = base_eval["residual"], base_eval["variance"]
@@ -728,6 +739,20 @@ def separating_measurement(prob: Problem, results: dict, names: list[str]) -> li
     return sorted(scores, key=lambda s: -s["z"])
 
 
+def _rms(base_sq: np.ndarray, ext_sq: np.ndarray, seed: int) -> dict:
+    """Root mean square of the base's and the extended model's squared held-out errors, with bootstrap intervals
+    (paired over the held-out rows), and the extended model's reduction."""
+    boot = _boot({"base": base_sq, "extended": ext_sq}, seed)
+    rb, re_ = math.sqrt(base_sq.mean()), math.sqrt(ext_sq.mean())
+    return {
+        "base": rb,
+        "extended": re_,
+        "base_interval": tuple(math.sqrt(max(x, 0.0)) for x in boot["interval"]["base"]),
+        "extended_interval": tuple(math.sqrt(max(x, 0.0)) for x in boot["interval"]["extended"]),
+        "reduction": 1.0 - re_ / rb if rb > 0 else math.nan,
+    }
+
+
 def gain(prob: Problem, base: dict, ext: dict, seed: int) -> dict:
     """Held-out RMSE (per response, in its units), RMS standardised error (``z_rms``, over every response; each
     error over its noise-budget SD) and NLL of the base and the extended model, with bootstrap intervals over the
@@ -736,27 +761,11 @@ def gain(prob: Problem, base: dict, ext: dict, seed: int) -> dict:
     out = {"rmse": {}, "z_rms": None, "nll": None, "shift": {}}
     if hb is not None and he is not None:
         # one held-out error over every response: the root mean square of the standardised errors
-        boot = _boot({"base": hb["sq"].to_numpy(), "extended": he["sq"].to_numpy()}, seed)
-        zb, ze = math.sqrt(hb["sq"].mean()), math.sqrt(he["sq"].mean())
-        out["z_rms"] = {
-            "base": zb,
-            "extended": ze,
-            "base_interval": tuple(math.sqrt(max(x, 0.0)) for x in boot["interval"]["base"]),
-            "extended_interval": tuple(math.sqrt(max(x, 0.0)) for x in boot["interval"]["extended"]),
-            "reduction": 1.0 - ze / zb if zb > 0 else math.nan,
-        }
+        out["z_rms"] = _rms(hb["sq"].to_numpy(), he["sq"].to_numpy(), seed)
         for r in sorted(set(hb["response"])):
             a = hb.loc[hb["response"] == r, "residual"].to_numpy() ** 2
             b = he.loc[he["response"] == r, "residual"].to_numpy() ** 2
-            boot = _boot({"base": a, "extended": b}, seed)
-            rb, re_ = math.sqrt(a.mean()), math.sqrt(b.mean())
-            out["rmse"][r] = {
-                "base": rb,
-                "extended": re_,
-                "base_interval": tuple(math.sqrt(max(x, 0.0)) for x in boot["interval"]["base"]),
-                "extended_interval": tuple(math.sqrt(max(x, 0.0)) for x in boot["interval"]["extended"]),
-                "reduction": 1.0 - re_ / rb if rb > 0 else math.nan,
-            }
+            out["rmse"][r] = _rms(a, b, seed)
         boot = _boot({"base": hb["nll"].to_numpy(), "extended": he["nll"].to_numpy()}, seed)
         out["nll"] = {
             "base": boot["mean"]["base"],
@@ -805,7 +814,6 @@ def diagnose(
     result: dict = {"name": spec.name, "out": str(out), "stopped": None}
     try:
         prob.seed_var = _sim_scatter(ev, base)
-        prob.sim_var = dict(prob.seed_var)
         base_eval = ev.evaluate(base)
         evals = {"base": base_eval}
         screens, skipped, results, decision = [], {}, [], None

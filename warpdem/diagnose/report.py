@@ -286,16 +286,12 @@ def _markdown(prob, evals, decision, diag, screens, skipped, separating, gains) 
         L += ["", "## Gain on held-out data", ""]
         if gains["rmse"]:
             L += ["| response | RMSE base [95 %] | RMSE extended [95 %] | reduction |", "|---|---|---|---|"]
-            for r, g in gains["rmse"].items():
+            rows = [*gains["rmse"].items(), ("all (standardised: error / noise-budget SD)", gains["z_rms"])]
+            for r, g in rows:
                 L.append(
                     f"| {r} | {_f(g['base'])} {_interval(g['base_interval'])} | {_f(g['extended'])} "
                     f"{_interval(g['extended_interval'])} | {100 * g['reduction']:.0f} % |"
                 )
-            z = gains["z_rms"]
-            L.append(
-                f"| all (standardised: error / noise-budget SD) | {_f(z['base'])} {_interval(z['base_interval'])} | "
-                f"{_f(z['extended'])} {_interval(z['extended_interval'])} | {100 * z['reduction']:.0f} % |"
-            )
             n = gains["nll"]
             L += [
                 "",

@@ -935,12 +935,13 @@ def build_scene(spec, rig_values: Mapping | None = None):
     return rigs.load(spec.scene_path, dict(rig_values or {}))
 
 
-def fixed_scene(spec):
-    """The scene of ``spec`` (see :func:`build_scene`) with its ``fixed`` overrides applied; raise
-    :class:`StudyError` naming the ``[fixed]`` key and value the scene or the contact law refuses."""
+def fixed_scene(spec, rig_values: Mapping | None = None):
+    """The scene of ``spec`` (see :func:`build_scene`) with its ``fixed`` overrides applied, and the rig
+    parameters ``rig_values`` over them (a diagnosis's conditions, which a scene may need to be built at all);
+    raise :class:`StudyError` naming the ``[fixed]`` key and value the scene or the contact law refuses."""
     from warpdem.scene.stage import StageError, apply_overrides
 
-    rig_vals = {k: v for k, v in spec.fixed.items() if is_rig_key(k)}
+    rig_vals = {**{k: v for k, v in spec.fixed.items() if is_rig_key(k)}, **(rig_values or {})}
     try:
         base = build_scene(spec, rig_vals)
     except (StageError, ValueError, KeyError) as e:
