@@ -347,3 +347,35 @@ def test_domain_is_validated():
         b.set_domain((0, 0, 1), (1, 1, 1))
     with pytest.raises(ValueError, match="set_domain: high = .* is not allowed; expected three finite numbers"):
         b.set_domain((0, 0, 0), (1, 1, float("nan")))
+
+
+def test_contact_law_varies_per_world():
+    """The pair's law is a per-world value: one sphere rests on the floor in three worlds, Hertz-Mindlin (the
+    scene's law, world 0 keeps it with None), JKR with gamma = 1 J/m^2 and Hertz-Mindlin set by name. Each sinks
+    to its own law's equilibrium overlap: Hertz (3 m g / (4 E* sqrt R))^(2/3); JKR where F_JKR(delta) = m g
+    (float64 closed form, R* = R on a plane)."""
+    from scipy.optimize import brentq
+
+    from warpdem.engine import analytic as an
+
+    rho, e_mod, nu, r, gamma, g = 2500.0, 1e7, 0.3, 0.005, 1.0, 9.81
+    b = wd.ModelBuilder(gravity=(0, 0, -g))
+    b.add_material(wd.Material("a", density=rho, youngs_modulus=e_mod, poisson_ratio=nu))
+    b.set_interaction("a", "a", restitution=0.2, static_friction=0.5)
+    b.add_plane((0, 0, 0), (0, 0, 1), "a")
+    b.add_sphere((0, 0, r), r, "a")
+    b.replicate(3)
+    b.vary("interaction.a.a.law", [None, "jkr", wd.ContactLaw.HERTZ_MINDLIN])
+    b.vary("interaction.a.a.surface_energy", [None, gamma, None])
+    m = b.finalize("cpu")
+    s = wd.Solver(m)
+    st = s.run(m.state(), s.contacts(), int(0.3 / s.dt))
+    overlap = r - st.sphere_x.numpy()[:, 2]
+    weight = rho * 4.0 / 3.0 * math.pi * r**3 * g
+    e_star = e_mod / (2.0 * (1.0 - nu**2))
+    hertz = (3.0 * weight / (4.0 * e_star * math.sqrt(r))) ** (2.0 / 3.0)
+    jkr = brentq(lambda d: an.jkr_force(d, r, e_star, gamma) - weight, 0.0, 100 * hertz)
+    assert float(np.abs(st.sphere_v.numpy()).max()) < 1e-4, "the spheres did not come to rest"
+    # float32 positions of ~5 mm resolve overlaps to ~1e-9 m: 1 % of a ~1e-5 m overlap is far above it
+    np.testing.assert_allclose(overlap, [hertz, jkr, hertz], rtol=0.01)
+    assert jkr > 1.5 * hertz  # the check separates the laws

@@ -78,6 +78,10 @@ def test_builder_errors():
         b.vary("interaction.a.a.restitution", [0.5, 0.6, 1.5])
         b.add_sphere((0, 0, 0), 0.01, "a")
         b.finalize("cpu")
+    with pytest.raises(ValueError, match=r"vary 'interaction.a.a.law': value = 'jrk' .*one of .*JKR"):
+        b.vary("interaction.a.a.law", [None, "jkr", "jrk"])
+    with pytest.raises(ValueError, match=r"vary 'interaction.a.a.static_friction': value = 'x'"):
+        b.vary("interaction.a.a.static_friction", [0.5, "x", None])
 
 
 def test_solver_options_checked():

@@ -55,7 +55,7 @@ INVALID = [
     (SCENE, "mesure.base_height", ["one of material.NAME.FIELD", "a rig parameter", "did you mean 'measure'"]),
     (SCENE, "partcle_radius", ["a rig parameter", "did you mean 'particle_radius'", "or one of material.NAME"]),
     (SCENE, "gravity", ["a rig parameter: count, particle_radius"]),
-    (VARY, "interaction.grain.grain.law", ["a numeric interaction field", "restitution"]),
+    (VARY, "interaction.grain.grain.lw", ["an interaction field", "restitution", "did you mean 'law'"]),
     (VARY, "run.duration", ["one of material.NAME.FIELD, interaction.A.B.FIELD or gravity"]),
     (VARY, "gravty", ["did you mean 'gravity'"]),
     (PER_WORLD, "gravity", ["one of material.NAME.FIELD or interaction.A.B.FIELD"]),
@@ -84,10 +84,12 @@ def test_names_unchecked_without_defined():
     assert SCENE.parse("interaction.a.b.law", "test") == OverrideKey("interaction", ("a", "b"), "law")
 
 
-def test_per_world_scalars():
-    """Material fields and numeric interaction fields vary per world; an enum field, a run setting or a rig
-    parameter does not."""
+def test_per_world_fields():
+    """Material fields and every interaction field (the law and rolling model too) vary per world; a run
+    setting, a rig parameter or gravity (a builder variation, not an override) does not."""
     assert PER_WORLD.accepts("material.grain.youngs_modulus")
     assert PER_WORLD.accepts("interaction.a.b.tangential_stiffness_multiplier")
-    for text in ("interaction.a.b.rolling_model", "run.duration", "count", "gravity"):
+    assert PER_WORLD.accepts("interaction.a.b.law")
+    assert PER_WORLD.accepts("interaction.a.b.rolling_model")
+    for text in ("run.duration", "count", "gravity"):
         assert not PER_WORLD.accepts(text), text

@@ -250,11 +250,12 @@ def test_replicates_get_new_world_seeds(tmp_path):
 
 
 def test_batch_key_groups_runs(studies, tables, tmp_path):
-    """Interaction and material scalars vary per world, so each seed study is one batch; a factor on a rig
-    parameter (the funnel's integer placement seed) makes one batch per level."""
+    """Interaction fields and material scalars vary per world, so each seed study is one batch; a factor on a
+    rig parameter (the funnel's integer placement seed) makes one batch per level."""
     assert varies_per_world("interaction.grain.grain.static_friction")
     assert varies_per_world("material.grain.density")
-    assert not varies_per_world("interaction.grain.grain.law") and not varies_per_world("count")
+    assert varies_per_world("interaction.grain.grain.law")
+    assert not varies_per_world("count") and not varies_per_world("run.duration")
     for name, spec in studies.items():
         keys = {batch_key(spec, run_overrides(spec, r)) for _, r in tables[name].iterrows()}
         assert len(keys) == 1, name

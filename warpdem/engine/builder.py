@@ -13,7 +13,7 @@ from warpdem.kernels.params import PairParams
 from . import analytic
 from .checks import vec3
 from .keys import VARY, OverrideKey
-from .materials import Interaction, InteractionTable, Material, pair_table
+from .materials import INTERACTION_ENUMS, Interaction, InteractionTable, Material, pair_table
 from .motion import WallMotion
 from .types import ContactLaw, Model
 
@@ -468,14 +468,17 @@ class ModelBuilder:
     def vary(self, target: str, values) -> None:
         """Give a scalar parameter one value per world.
 
-        ``target`` is ``material.NAME.FIELD`` (any of ``MATERIAL_SCALARS``), ``interaction.A.B.FIELD`` (any of
-        ``INTERACTION_SCALARS``) or ``gravity`` (values shape (world_count, 3)); see
-        :mod:`warpdem.engine.keys`. Call after :meth:`replicate`.
+        ``target`` is ``material.NAME.FIELD`` (any of ``MATERIAL_SCALARS``), ``interaction.A.B.FIELD`` (any
+        Interaction field: a number, or for ``law`` and ``rolling_model`` a member or its name) or ``gravity``
+        (values shape (world_count, 3)); see :mod:`warpdem.engine.keys`. A value None keeps that world's value
+        as the scene sets it. Call after :meth:`replicate`.
         """
         vals = list(values)
         if len(vals) != self.world_count:
             raise ValueError(f"vary {target!r}: {len(vals)} values given; expected world_count = {self.world_count}")
         key = VARY.parse(target, "vary", "target", defined={"material": [m.name for m in self.materials]})
+        if key != _GRAVITY:
+            vals = [_world_value(key, target, v) for v in vals]
         self._variations[key] = vals
 
     def seed_worlds(self, seeds) -> None:
@@ -499,7 +502,9 @@ class ModelBuilder:
             mats = list(self.materials)
             table = InteractionTable(self.interactions.default, dict(self.interactions.pairs))
             for key in varied:
-                value = float(self._variations[key][w])
+                value = self._variations[key][w]
+                if value is None:
+                    continue
                 if key.kind == "material":
                     k = self.material_index(key.names[0])
                     mats[k] = mats[k].with_value(key.field, value)
@@ -655,6 +660,19 @@ class ModelBuilder:
                 clump_w=tiled(self._cw, 3),
             )
         return model
+
+
+def _world_value(key: OverrideKey, target: str, value):
+    """One world's ``value`` of a :meth:`ModelBuilder.vary` ``target`` (parsed as ``key``): None (the scene's
+    value), a float, or for an enum Interaction field its member (read by Interaction, which knows the names)."""
+    if value is None:
+        return None
+    try:
+        if key.kind == "interaction" and key.field in INTERACTION_ENUMS:
+            return getattr(Interaction(**{key.field: value}), key.field)
+        return float(value)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"vary {target!r}: value = {value!r} is not allowed: {e}") from None
 
 
 def contact_reach(params: np.ndarray, radius_max: float) -> float:

@@ -24,7 +24,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from .checks import did_you_mean, fail
-from .materials import INTERACTION_SCALARS, MATERIAL_SCALARS
+from .materials import INTERACTION_FIELDS, MATERIAL_SCALARS
 
 
 @dataclass(frozen=True)
@@ -155,12 +155,10 @@ def is_rig_key(key: str) -> bool:
     return "." not in key
 
 
-PER_WORLD = KeyGrammar(
-    {"material": MATERIAL_SCALARS, "interaction": INTERACTION_SCALARS},
-    {"interaction": "a numeric interaction field"},
-)
-"""The keys whose values can differ between the worlds of one model: material and numeric interaction
-fields."""
+PER_WORLD = KeyGrammar({"material": MATERIAL_SCALARS, "interaction": INTERACTION_FIELDS})
+"""The keys whose values can differ between the worlds of one model: numeric material fields and every
+interaction field, the pair's law and rolling model included (each world has its own pair table, and the
+kernels dispatch on a pair's law per contact)."""
 
 VARY = KeyGrammar({**PER_WORLD.fields, "gravity": ()}, PER_WORLD.labels)
 """The keys of :meth:`warpdem.engine.builder.ModelBuilder.vary`: :data:`PER_WORLD` and gravity."""

@@ -160,7 +160,8 @@ def run_batch(
 
     scene = _scene(study, rows[0]["overrides"])
     varying = sorted({k for r in rows for k in r["overrides"] if sp.varies_per_world(k)})
-    variations = {k: [float(r["overrides"][k]) for r in rows] for k in varying}
+    # a world whose run does not set a varied key keeps the scene's value (None)
+    variations = {k: [r["overrides"].get(k) for r in rows] for k in varying}
     seeds = [int(r["world_seed"]) for r in rows]
     res = run_scene(
         scene,

@@ -74,8 +74,8 @@ Override keys (``[fixed]`` keys and factor parameters) are read by the one gramm
 ``interaction.A.B.FIELD`` (any :class:`~warpdem.engine.materials.Interaction` field; a factor only the numeric
 ones of ``materials.INTERACTION_SCALARS``), ``run.FIELD``, ``measure.FIELD`` and ``factory.NAME.FIELD``
 (``[fixed]`` only), and any other key is a rig parameter (with ``rig``, checked against the rig's
-parameters; a factor must name a numeric one). Only ``material.*`` and ``interaction.*`` scalars can
-differ between the batched worlds of one launch (:meth:`warpdem.engine.builder.ModelBuilder.vary`); a factor on
+parameters; a factor must name a numeric one). Only ``material.*`` numbers and ``interaction.*`` fields (the
+pair's law included) can differ between the batched worlds of one launch (:meth:`warpdem.engine.builder.ModelBuilder.vary`); a factor on
 anything else makes each of its levels a launch of its own (:func:`batch_key`).
 
 :func:`load_study` also builds the scene once (the rig from its parameters, or the stage) and applies
@@ -300,8 +300,8 @@ def override_grammar(rig: str | None, factor: bool) -> KeyGrammar:
 
 
 def varies_per_world(key: str) -> bool:
-    """True when override ``key`` can differ between the batched worlds of one launch: a
-    ``material.NAME.FIELD`` or ``interaction.A.B.FIELD`` scalar (:meth:`ModelBuilder.vary`)."""
+    """True when override ``key`` can differ between the batched worlds of one launch: a numeric
+    ``material.NAME.FIELD`` or any ``interaction.A.B.FIELD`` (:meth:`ModelBuilder.vary`)."""
     return PER_WORLD.accepts(key)
 
 
@@ -1128,7 +1128,7 @@ def _hashable(v):
 
 
 def batch_key(spec: StudySpec, overrides: Mapping) -> tuple:
-    """The overrides that cannot differ between batched worlds (all but ``material.*`` / ``interaction.*``
-    scalars, see :func:`varies_per_world`), as a sorted tuple of (key, value): runs with equal keys can
+    """The overrides that cannot differ between batched worlds (all but ``material.*`` numbers and
+    ``interaction.*`` fields, see :func:`varies_per_world`), as a sorted tuple of (key, value): runs with equal keys can
     share one launch."""
     return tuple(sorted((k, _hashable(v)) for k, v in overrides.items() if not varies_per_world(k)))
