@@ -455,11 +455,11 @@ class Evaluator:
         k_all[mask] = np.maximum(k, 1)
         return r, self.prob.budget(k_all)[mask]
 
-    def evaluate(self, model: Model) -> dict:
-        """Everything about one model: surrogates and their accuracy, posterior, confirmation at every
-        condition, adequacy on the training data, held-out errors, the likelihood of the training data."""
+    def fit(self, model: Model) -> dict:
+        """The first half of :meth:`evaluate`, which needs only the design simulations: surrogates and their
+        accuracy, the calibration on the training data and on each held-out fold's, and the ``requests`` of
+        every confirming simulation those calibrations need (run them together, then :meth:`finish`)."""
         prob = self.prob
-        train = prob.train
         gps, acc = self.surrogates(model, f"{model.name}: design")
         if model.candidate is None:
             # the world seeds measure the scatter a factory's placement gives; a model whose response is not
@@ -471,8 +471,38 @@ class Evaluator:
                 nug = float(np.nanmean([gps[(c, r)].noise_sd ** 2 for c in range(len(prob.conditions))]))
                 nug = nug if np.isfinite(nug) else 0.0
                 prob.rough_var[r] = max(nug - seed, 0.0)
-        cal = self.calibrate(model, gps, train, "all")
+        cal = self.calibrate(model, gps, prob.train, "all")
         u_map = np.asarray(cal["map"], dtype=float)
+        folds = self.folds()
+        fold_maps = [
+            None if c is None else np.asarray(self.calibrate(model, gps, fit, f"fold{c}", sample=False)["map"], float)
+            for fit, _, c in folds
+        ]
+        C = range(len(prob.conditions))
+        requests = [self._request(model, u_map, c, s) for c in C for s in self.confirm_seeds]
+        requests += [
+            self._request(model, u, c, s)
+            for (_, _, c), u in zip(folds, fold_maps)
+            if c is not None
+            for s in self.confirm_seeds
+        ]
+        return {
+            "model": model,
+            "gps": gps,
+            "surrogate_accuracy": acc,
+            "calibration": cal,
+            "u_map": u_map,
+            "folds": folds,
+            "fold_maps": fold_maps,
+            "requests": requests,
+        }
+
+    def finish(self, fitted: dict) -> dict:
+        """The rest of :meth:`evaluate` once the confirming simulations of :meth:`fit` have run: confirmation at
+        every condition, adequacy on the training data, held-out errors, the likelihood of the training data."""
+        prob = self.prob
+        train = prob.train
+        model, cal, u_map = fitted["model"], fitted["calibration"], fitted["u_map"]
         conf = self.confirm(model, u_map, range(len(prob.conditions)), f"{model.name}: confirm")
         r, var = self.residuals(conf, train)
         obs_t = prob.obs[train]
@@ -488,25 +518,28 @@ class Evaluator:
             )
         adequacy = inf.adequacy(r, var, len(model.dims), cond_df, labels, self.spec.alpha)
         loglik = float(-np.sum(inf.gaussian_nll(r[ok], var[ok])))
-        held = self.held_out(model, gps, u_map, conf)
-        return {
-            "model": model,
-            "gps": gps,
-            "surrogate_accuracy": acc,
-            "calibration": cal,
-            "u_map": u_map,
-            "theta": {d.name: d.value(x) for d, x in zip(model.dims, u_map)},
-            "interval": {
+        out = {k: fitted[k] for k in ("model", "gps", "surrogate_accuracy", "calibration", "u_map")}
+        out.update(
+            theta={d.name: d.value(x) for d, x in zip(model.dims, u_map)},
+            interval={
                 d.name: (d.value(lo), d.value(hi)) for d, (lo, hi) in zip(model.dims, np.asarray(cal["interval"]))
             },
-            "confirm": conf,
-            "residual": r,
-            "variance": var,
-            "adequacy": adequacy,
-            "loglik": loglik,
-            "n_train": int(ok.sum()),
-            "held_out": held,
-        }
+            confirm=conf,
+            residual=r,
+            variance=var,
+            adequacy=adequacy,
+            loglik=loglik,
+            n_train=int(ok.sum()),
+            held_out=self.held_out(model, fitted["folds"], fitted["fold_maps"], conf),
+        )
+        return out
+
+    def evaluate(self, models: list[Model], stage: str) -> list[dict]:
+        """Everything about each of ``models`` (:meth:`fit`, then :meth:`finish`); their confirming simulations
+        go in one request, so that models that can share launches do."""
+        fitted = [self.fit(m) for m in models]
+        self.sims.run([q for f in fitted for q in f["requests"]], stage)
+        return [self.finish(f) for f in fitted]
 
     def folds(self) -> list[tuple[np.ndarray, np.ndarray, int | None]]:
         """(fit mask, held-out mask, held-out condition or None) per fold: the data's split, or each training
@@ -524,24 +557,13 @@ class Evaluator:
             (train & (obs["condition"] != c).to_numpy(), train & (obs["condition"] == c).to_numpy(), c) for c in conds
         ]
 
-    def held_out(self, model: Model, gps: dict, u_map, conf: dict) -> pd.DataFrame | None:
-        folds = self.folds()
+    def held_out(self, model: Model, folds: list, fold_maps: list, conf: dict) -> pd.DataFrame | None:
+        """Standardised errors of each fold's held-out experiments, simulated at the fold's calibration
+        (``fold_maps``; None: the training calibration, whose confirmation ``conf`` is)."""
         if not folds:
             return None
-        # every fold's calibration first, so that their confirming simulations share launches
-        us = [
-            None if c is None else np.asarray(self.calibrate(model, gps, fit, f"fold{c}", sample=False)["map"], float)
-            for fit, _, c in folds
-        ]
-        reqs = [
-            self._request(model, u, c, s)
-            for (_, _, c), u in zip(folds, us)
-            if c is not None
-            for s in self.confirm_seeds
-        ]
-        self.sims.run(reqs, f"{model.name}: held-out")
         parts = []
-        for (_, test, c), u in zip(folds, us):
+        for (_, test, c), u in zip(folds, fold_maps):
             fconf = conf if c is None else self.confirm(model, u, [c], f"{model.name}: held-out")
             r, var = self.residuals(fconf, test)
             part = self.prob.obs[test][["id", "response", "condition"]].copy()
@@ -552,11 +574,10 @@ class Evaluator:
         out["nll"] = inf.gaussian_nll(out["residual"].to_numpy(), out["variance"].to_numpy())
         return out
 
-    def prefetch(self, models: list[Model], stage: str) -> None:
-        """Run the design simulations of ``models`` in one request, so that models that can share launches do."""
+    def design_requests(self, models: list[Model]) -> list[tuple[dict, int]]:
+        """The design simulations of ``models`` at every condition."""
         C = len(self.prob.conditions)
-        reqs = [self._request(m, u, c, DESIGN_SEED) for m in models for c in range(C) for u in self.design(m)]
-        self.sims.run(reqs, stage)
+        return [self._request(m, u, c, DESIGN_SEED) for m in models for c in range(C) for u in self.design(m)]
 
     def jacobian(self, gps: dict, mask: np.ndarray, u_map, h: float = 0.05) -> np.ndarray:
         """d(prediction)/d(u) of the surrogates at ``u_map`` by central differences, (n_obs, d)."""
@@ -575,18 +596,24 @@ class Evaluator:
 # --------------------------------------------------------------------------------------------------
 
 
+def _scatter_requests(ev: Evaluator, base: Model) -> list[tuple[dict, int]]:
+    """The simulations of :func:`_sim_scatter`: the centre of the ranges at every training condition, over
+    ``sim_seeds`` world seeds (condition-major)."""
+    prob = ev.prob
+    conds = sorted(set(prob.obs.loc[prob.train, "condition"]))
+    centre = np.full(len(base.dims), 0.5)
+    return [ev._request(base, centre, c, CENTRE_SEEDS + k) for c in conds for k in range(ev.spec.sim_seeds)]
+
+
 def _sim_scatter(ev: Evaluator, base: Model) -> dict:
     """Pooled SD of the responses over world seeds at the centre of the ranges, at every training condition:
     {response: variance}."""
-    prob = ev.prob
-    conds = sorted(set(prob.obs.loc[prob.train, "condition"]))
-    seeds = [CENTRE_SEEDS + k for k in range(ev.spec.sim_seeds)]
-    centre = np.full(len(base.dims), 0.5)
-    reqs = [ev._request(base, centre, c, s) for c in conds for s in seeds]
-    vals = ev._values(ev.sims.run(reqs, "noise: simulation scatter")).reshape(len(conds), len(seeds), -1)
+    reqs = _scatter_requests(ev, base)
+    vals = ev._values(ev.sims.run(reqs, "noise: simulation scatter")).reshape(-1, ev.spec.sim_seeds, len(ev.responses))
+    conds = range(vals.shape[0])
     out = {}
     for j, r in enumerate(ev.responses):
-        out[r] = inf.pooled_variance(vals[c, :, j] for c in range(len(conds)))[0]
+        out[r] = inf.pooled_variance(vals[c, :, j] for c in conds)[0]
         if not np.isfinite(out[r]):
             raise DiagnoseError(
                 f"{ev.spec.path}: the simulations could not measure {r!r} at the centre of the parameter ranges "
@@ -813,8 +840,10 @@ def diagnose(
     base = Model("base", [Dim(p.name, p.parameter, p.low, p.high, p.unit) for p in spec.parameters])
     result: dict = {"name": spec.name, "out": str(out), "stopped": None}
     try:
+        # the scatter and the base design need nothing else: one request, so that they share launches
+        sims.run(_scatter_requests(ev, base) + ev.design_requests([base]), "base: scatter and design")
         prob.seed_var = _sim_scatter(ev, base)
-        base_eval = ev.evaluate(base)
+        (base_eval,) = ev.evaluate([base], "base: confirm")
         evals = {"base": base_eval}
         screens, skipped, results, decision = [], {}, [], None
         if base_eval["adequacy"]["adequate"]:
@@ -828,10 +857,9 @@ def diagnose(
                 c = next(c for c in lib if c.name == s["candidate"])
                 models.append(Model(c.name, [*base.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c))
             if models:
-                ev.prefetch(models, "candidates: design")
-            for model in models:
-                evals[model.name] = ev.evaluate(model)
-                results.append(evals[model.name])
+                sims.run(ev.design_requests(models), "candidates: design")
+                results = ev.evaluate(models, "candidates: confirm")
+                evals.update({r["model"].name: r for r in results})
             decision = verdict(base_eval, results, spec.alpha, _seed(spec, "bootstrap"))
         separating = []
         if decision["verdict"] == "ambiguous":
