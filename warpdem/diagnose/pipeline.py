@@ -13,8 +13,9 @@ Stages (every simulated world is stored as it finishes, ``OUT/runs/<id>.json``, 
    mean of k confirming simulations (or the surrogate's variance) plus the roughness max(s_nugget^2 - s_seed^2,
    0), which k world seeds at one parameter point do not average away (a press whose fill ignores the seed
    gives k equal runs).
-2. **Calibration.** A space-filling design (:func:`inference.space_filling`) over the free parameters, at every
-   condition (training and test), each condition's worlds batched in one launch where the scene allows; a
+2. **Calibration.** A space-filling design (:func:`design_points`) over the free parameters, at every
+   condition (training and test), each condition's worlds batched in one launch where the scene allows (a rig
+   parameter, which cannot vary per world, takes :data:`LAUNCH_LEVELS` values, one launch each); a
    Gaussian-process surrogate per (condition, response) (:class:`inference.Surrogate`: smooth, interpolating,
    with its own predictive variance, which the likelihood takes in); the posterior on a flat prior over the
    ranges by MCMC on the surrogates (:func:`inference.calibrate`); the maximum a posteriori point confirmed by
@@ -67,6 +68,11 @@ from .data import DiagnoseError, DiagnosisSpec, Experiments, load_diagnosis
 
 SURVIVORS = 3
 """Most candidates recalibrated after the screen (the largest screen statistics among those that pass)."""
+
+LAUNCH_LEVELS = 3
+"""Values a design takes along a parameter that cannot vary per world (0, 1/2 and 1 of its range): each value is
+a launch of its own (about 12 s of a GPU however few its worlds), and three levels resolve the curvature a
+surrogate of a smooth response needs."""
 
 DESIGN_SEED = 0
 """World seed of the space-filling design's simulations (the factories' own placement)."""
@@ -241,6 +247,19 @@ class Model:
         return out
 
 
+def design_points(dims: list[Dim], n: int, seed: int) -> np.ndarray:
+    """``n`` design points over ``dims`` in the unit cube, shape (n, len(dims)): a space-filling Latin
+    hypercube (:func:`inference.space_filling`) whose coordinates along a parameter that cannot vary between
+    the worlds of a launch (a rig parameter such as shape's aspect ratio) are rounded to
+    :data:`LAUNCH_LEVELS` values, so that the design costs that many launches per condition instead of n."""
+    U = inf.space_filling(n, len(dims), seed)
+    step = 1.0 / (LAUNCH_LEVELS - 1)
+    for j, dim in enumerate(dims):
+        if not sp.varies_per_world(dim.key):
+            U[:, j] = np.round(U[:, j] / step) * step
+    return U
+
+
 @dataclass
 class Problem:
     """The data of one diagnosis, arranged for the stages: ``obs`` (one row per measured mean: experiment id,
@@ -364,7 +383,7 @@ class Evaluator:
     def design(self, model: Model) -> np.ndarray:
         d = len(model.dims)
         n = self.spec.points or 4 + 4 * d
-        return inf.space_filling(n, d, _seed(self.spec, f"design:{model.name}"))
+        return design_points(model.dims, n, _seed(self.spec, f"design:{model.name}"))
 
     def surrogates(self, model: Model, stage: str) -> tuple[dict, pd.DataFrame]:
         """Design simulations at every condition and one surrogate per (condition, response)."""
