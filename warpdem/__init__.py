@@ -1,7 +1,11 @@
 """warpdem: Discrete Element Method on NVIDIA Warp.
 
-The public API, listed once in ``__all__``.
+The public API, listed once in ``__all__``. The study and diagnosis layers (designs of experiments, their
+analysis, the diagnosis of a calibrated model) need pandas, SciPy and statsmodels, so their names load on first
+use (:data:`_LAZY`): ``import warpdem`` stays an engine import.
 """
+
+import importlib
 
 from .engine import geometry
 from .engine.builder import ModelBuilder
@@ -28,6 +32,31 @@ from .scene.runner import RunResult, RunStopped, run_scene
 from .scene.stage import SceneSpec, StageError, read_stage, write_stage
 
 __version__ = "0.1.0"
+
+_LAZY = {
+    "StudyError": "warpdem.study.spec",
+    "StudySpec": "warpdem.study.spec",
+    "load_study": "warpdem.study.spec",
+    "run_study": "warpdem.study.execute",
+    "analyze_study": "warpdem.study.execute:analyze",
+    "load_results": "warpdem.study.execute",
+    "DiagnoseError": "warpdem.diagnose.data",
+    "DiagnosisSpec": "warpdem.diagnose.data",
+    "load_diagnosis": "warpdem.diagnose.data",
+    "run_diagnosis": "warpdem.diagnose.pipeline:diagnose",
+}
+"""Public names of the study and diagnosis layers -> "module" or "module:attribute" they load from (the
+diagnosis is ``run_diagnosis``: ``warpdem.diagnose`` is its subpackage)."""
+
+
+def __getattr__(name: str):
+    if name not in _LAZY:
+        raise AttributeError(f"module 'warpdem' has no attribute {name!r}")
+    module, _, attr = _LAZY[name].partition(":")
+    value = getattr(importlib.import_module(module), attr or name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "geometry",
@@ -76,4 +105,5 @@ __all__ = [
     "SolverOptions",
     "State",
     "effective_moduli",
+    *_LAZY,
 ]
