@@ -1,0 +1,170 @@
+"""The confounded case on a GPU: hidden particle shape in funnel piles, diagnosed from the angle alone, then from
+the angle and the bulk density.
+
+Elongated grains and rolling resistance both steepen a pile, so from angles alone a diagnosis cannot tell them
+apart; they pack differently, so the bulk density can. The scene is the funnel rig at lab size (as
+``diagnose_gpu.py``: ISO 4324 funnel, rough plate, seed 000's pellet contacts with Hertz-Mindlin and
+constant-torque rolling friction 0.05), the gate opened at 1 s. The hidden setting: rods of aspect ratio
+:data:`ASPECT` (the same volume as the spheres the rig's radius names) at three sizes. Three replicates per size
+at world seeds 501-503, plus measurement noise. The base model is spheres with grain-grain static friction free;
+every candidate that applies is tried (cohesion, plasticity, shape, size distribution, rolling friction, wall
+friction). Two data files, one data set: ``angle`` holds the angle only, ``both`` the angle and the bulk density.
+The two diagnoses share their stored worlds.
+
+    python benchmarks/diagnose_confounded.py [--device cuda] [--out DIR] [--case angle|both|all]
+        [--stop-after S] [--smoke]
+
+Prints each diagnosis's verdict, its cause or tie, the separating measurement it names, the wall time, the
+worlds and the launches; resumes from DIR. ``--smoke`` shrinks the scenes to check the script on a CPU.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from warpdem.diagnose import synthetic as syn
+from warpdem.diagnose.pipeline import diagnose
+
+ASPECT = 2.0
+"""Hidden aspect ratio (length / width) of the grains."""
+
+MU_S = 0.55
+"""Grain-grain static friction of the data (seed 000's calibrated value); the diagnosis calibrates it."""
+
+FIXED = {
+    "particle": "sphere",
+    "material": "pellet",
+    "plate_static_friction": 0.8,
+    "plate_rolling_friction": 0.3,
+    "gate_time": 1.0,
+}
+"""Rig parameters of every run (``diagnose_gpu.FIXED``)."""
+
+SIZES = (0.0015, 0.002, 0.0025)
+"""Volume-equivalent grain radii [m] of the experiments (their condition)."""
+
+COUNT_AT_2MM = 1500
+POUR_TIME = 0.75
+"""Each size pours the solid volume of 1,500 grains of 2 mm in this time [s]."""
+
+NOISE_SD = {"angle_fit_deg": 0.5, "bulk_density_kg_m3": 5.0}
+"""Measurement noise SD added to each simulated response."""
+
+TOML = """
+[diagnose]
+name = "{name}"
+title = "Hidden grain shape in funnel piles ({what})"
+rig = "funnel"
+smoke = {smoke}
+seed = 1
+
+[fixed]
+{fixed}
+
+[[parameters]]
+name = "mu_s"
+label = "particle-particle static friction"
+parameter = "interaction.grain.grain.static_friction"
+low = 0.3
+high = 0.9
+
+[experiments]
+file = "{csv}"
+
+[noise]
+sim_seeds = 3
+
+[calibration]
+confirm_seeds = 3
+mcmc_steps = {mcmc}
+"""
+
+
+def experiments(smoke: bool) -> list[dict]:
+    base = COUNT_AT_2MM if not smoke else 150
+    out = []
+    for k, r in enumerate(SIZES):
+        count = int(round(base * (0.002 / r) ** 3))
+        out.append({"id": f"R{k}", "particle_radius": r, "count": count, "rate": round(count / POUR_TIME, 1)})
+    return out
+
+
+def make_data(out: Path, device: str, smoke: bool) -> dict[str, Path]:
+    """The two data files (``angle``, ``both``) of one simulated data set; made once, then reused."""
+    paths = {case: out / f"shape_{case}.toml" for case in ("angle", "both")}
+    if all(p.exists() for p in paths.values()):
+        return paths
+    exps, values = experiments(smoke), []
+    for e in exps:
+        rig = {**FIXED, "aspect_ratio": ASPECT, **{k: e[k] for k in ("particle_radius", "count", "rate")}}
+        t0 = time.perf_counter()
+        values.append(
+            syn.run_worlds(
+                "funnel", smoke, rig, {"interaction.grain.grain.static_friction": MU_S}, syn.DATA_SEEDS, device
+            )
+        )
+        seen = {r: [round(m.get(r, np.nan), 4) for m in values[-1]] for r in NOISE_SD}
+        print(f"data {e['id']}: {seen} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    rows = syn.noisy_rows(exps, values, NOISE_SD, np.random.default_rng(2027))
+    fixed = "\n".join(f"{k} = {json.dumps(v)}" for k, v in FIXED.items())
+    toml = TOML.replace("{smoke}", "true" if smoke else "false").replace("{mcmc}", "300" if smoke else "2000")
+    toml = toml.replace("{fixed}", fixed)
+    angle_rows = [{k: v for k, v in r.items() if k != "bulk_density_kg_m3"} for r in rows]
+    syn.write_case(out, "shape_angle", toml.replace("{what}", "angle only"), angle_rows)
+    syn.write_case(out, "shape_both", toml.replace("{what}", "angle and bulk density"), rows)
+    return paths
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--device", default="cuda")
+    ap.add_argument("--out", default="runs/diagnose_confounded")
+    ap.add_argument("--case", choices=("data", "angle", "both", "all"), default="all")
+    ap.add_argument("--smoke", action="store_true", help="tiny scenes, to check the script on a CPU")
+    ap.add_argument("--stop-after", type=float, default=0.0, help="wall seconds after which a diagnosis stops")
+    a = ap.parse_args()
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = make_data(out, a.device, a.smoke)
+    cases = {"data": [], "all": ["angle", "both"]}.get(a.case, [a.case])
+    runs = out / "runs"
+    runs.mkdir(exist_ok=True)
+    t0 = time.perf_counter()
+    for case in cases:
+        target = out / case
+        target.mkdir(exist_ok=True)
+        if not (target / "runs").exists():
+            # one store of worlds: the second diagnosis reuses the first's design, scatter and screens
+            (target / "runs").symlink_to(runs.resolve(), target_is_directory=True)
+        left = a.stop_after - (time.perf_counter() - t0) if a.stop_after else 0.0
+        if a.stop_after and left <= 0:
+            print(f"{case}: not started, the wall-time limit is spent")
+            return
+        res = diagnose(str(paths[case]), target, device=a.device, progress=False, stop_after=left)
+        if res.get("stopped"):
+            print(f"{case}: stopped after {res['wall_s']:.0f} s: {res['stopped']}")
+            return
+        summary = {
+            "case": case,
+            "verdict": res["verdict"],
+            "cause": res["cause"],
+            "tied": res["tied"],
+            "separating": res.get("separating_measurement"),
+            "wall_s": round(res["wall_s"], 1),
+            "worlds": res["worlds"],
+            "launches": res["launches"],
+            "candidates": [
+                {k: c[k] for k in ("candidate", "estimate", "interval", "adequate", "held_out_evidence")}
+                for c in res["candidates"]
+            ],
+        }
+        print(json.dumps(summary, indent=1, default=str), flush=True)
+
+
+if __name__ == "__main__":
+    main()
