@@ -25,8 +25,6 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
-
 from warpdem.diagnose import synthetic as syn
 from warpdem.diagnose.pipeline import diagnose
 
@@ -36,62 +34,14 @@ ASPECT = 2.0
 MU_S = 0.55
 """Grain-grain static friction of the data (seed 000's calibrated value); the diagnosis calibrates it."""
 
-FIXED = {
-    "particle": "sphere",
-    "material": "pellet",
-    "plate_static_friction": 0.8,
-    "plate_rolling_friction": 0.3,
-    "gate_time": 1.0,
+PARAMETER = {
+    "name": "mu_s",
+    "label": "particle-particle static friction",
+    "parameter": "interaction.grain.grain.static_friction",
+    "low": 0.3,
+    "high": 0.9,
 }
-"""Rig parameters of every run (``diagnose_gpu.FIXED``)."""
-
-SIZES = (0.0015, 0.002, 0.0025)
-"""Volume-equivalent grain radii [m] of the experiments (their condition)."""
-
-COUNT_AT_2MM = 1500
-POUR_TIME = 0.75
-"""Each size pours the solid volume of 1,500 grains of 2 mm in this time [s]."""
-
-NOISE_SD = {"angle_fit_deg": 0.5, "bulk_density_kg_m3": 5.0}
-"""Measurement noise SD added to each simulated response."""
-
-TOML = """
-[diagnose]
-name = "{name}"
-title = "Hidden grain shape in funnel piles ({what})"
-rig = "funnel"
-smoke = {smoke}
-seed = 1
-
-[fixed]
-{fixed}
-
-[[parameters]]
-name = "mu_s"
-label = "particle-particle static friction"
-parameter = "interaction.grain.grain.static_friction"
-low = 0.3
-high = 0.9
-
-[experiments]
-file = "{csv}"
-
-[noise]
-sim_seeds = 3
-
-[calibration]
-confirm_seeds = 3
-mcmc_steps = {mcmc}
-"""
-
-
-def experiments(smoke: bool) -> list[dict]:
-    base = COUNT_AT_2MM if not smoke else 150
-    out = []
-    for k, r in enumerate(SIZES):
-        count = int(round(base * (0.002 / r) ** 3))
-        out.append({"id": f"R{k}", "particle_radius": r, "count": count, "rate": round(count / POUR_TIME, 1)})
-    return out
+"""The base model's free parameter."""
 
 
 def make_data(out: Path, device: str, smoke: bool) -> dict[str, Path]:
@@ -99,24 +49,15 @@ def make_data(out: Path, device: str, smoke: bool) -> dict[str, Path]:
     paths = {case: out / f"shape_{case}.toml" for case in ("angle", "both")}
     if all(p.exists() for p in paths.values()):
         return paths
-    exps, values = experiments(smoke), []
-    for e in exps:
-        rig = {**FIXED, "aspect_ratio": ASPECT, **{k: e[k] for k in ("particle_radius", "count", "rate")}}
-        t0 = time.perf_counter()
-        values.append(
-            syn.run_worlds(
-                "funnel", smoke, rig, {"interaction.grain.grain.static_friction": MU_S}, syn.DATA_SEEDS, device
-            )
-        )
-        seen = {r: [round(m.get(r, np.nan), 4) for m in values[-1]] for r in NOISE_SD}
-        print(f"data {e['id']}: {seen} ({time.perf_counter() - t0:.0f} s)", flush=True)
-    rows = syn.noisy_rows(exps, values, NOISE_SD, np.random.default_rng(2027))
-    fixed = "\n".join(f"{k} = {json.dumps(v)}" for k, v in FIXED.items())
-    toml = TOML.replace("{smoke}", "true" if smoke else "false").replace("{mcmc}", "300" if smoke else "2000")
-    toml = toml.replace("{fixed}", fixed)
+    hidden = {"interaction.grain.grain.static_friction": MU_S}
+    rows = syn.funnel_data(syn.funnel_experiments(smoke), {"aspect_ratio": ASPECT}, hidden, device, smoke, seed=2027)
     angle_rows = [{k: v for k, v in r.items() if k != "bulk_density_kg_m3"} for r in rows]
-    syn.write_case(out, "shape_angle", toml.replace("{what}", "angle only"), angle_rows)
-    syn.write_case(out, "shape_both", toml.replace("{what}", "angle and bulk density"), rows)
+    for name, what, case_rows in (
+        ("shape_angle", "angle only", angle_rows),
+        ("shape_both", "angle and bulk density", rows),
+    ):
+        toml = syn.funnel_toml(f"Hidden grain shape in funnel piles ({what})", PARAMETER, smoke)
+        syn.write_case(out, name, toml, case_rows)
     return paths
 
 

@@ -19,10 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from pathlib import Path
-
-import numpy as np
 
 from warpdem.diagnose import synthetic as syn
 from warpdem.diagnose.pipeline import diagnose
@@ -37,66 +34,17 @@ MU_R = 0.25
 """Grain-grain rolling friction of the data (spheres need far more than the pellets' 0.05 to build a pile, as
 angular grains do); the diagnosis calibrates it."""
 
-FIXED = {
-    "particle": "sphere",
-    "material": "pellet",
-    "plate_static_friction": 0.8,
-    "plate_rolling_friction": 0.3,
-    "gate_time": 1.0,
+# measurement noise: synthetic.FUNNEL_NOISE_SD on the angle and the bulk density, not on the discharge rate: at
+# these sizes a gated funnel of cohesive spheres sometimes arches (0.015 kg/s against 0.1 in its replicates)
+
+PARAMETER = {
+    "name": "mu_r",
+    "label": "particle-particle rolling friction",
+    "parameter": "interaction.grain.grain.rolling_friction",
+    "low": 0.05,
+    "high": 0.5,
 }
-"""Rig parameters of every run: spheres with the pellet contacts, on a rough plate (a pile of spheres on the
-polished one spreads into a layer a few grains thick); the gated funnel fills and settles for 1 s (its bulk
-density is measured then), then discharges (its rate) onto the plate (the pile's angle)."""
-
-SIZES = (0.0015, 0.002, 0.0025)
-"""Particle radii [m] of the experiments (their condition)."""
-
-COUNT_AT_2MM = 1500
-POUR_TIME = 0.75
-"""Each size pours the solid volume of 1,500 spheres of 2 mm radius in this time [s]."""
-
-NOISE_SD = {"angle_fit_deg": 0.5, "bulk_density_kg_m3": 5.0}
-"""Measurement noise added to each simulated response: 0.5 deg, 5 kg/m^3. (Not the discharge rate: at these
-sizes a gated funnel of cohesive spheres sometimes arches, 0.015 kg/s against 0.1 in its replicates.)"""
-
-TOML = """
-[diagnose]
-name = "{name}"
-title = "Hidden cohesion in lab-size funnel piles of three particle sizes"
-rig = "funnel"
-smoke = {smoke}
-seed = 1
-
-[fixed]
-{fixed}
-
-[[parameters]]
-name = "mu_r"
-label = "particle-particle rolling friction"
-parameter = "interaction.grain.grain.rolling_friction"
-low = 0.05
-high = 0.5
-
-[experiments]
-file = "{csv}"
-
-[noise]
-sim_seeds = 3
-
-[calibration]
-confirm_seeds = 3
-mcmc_steps = {mcmc}
-"""
-
-
-def experiments(smoke: bool) -> list[dict]:
-    sizes = SIZES if not smoke else (0.0015, 0.002, 0.0025)
-    base = COUNT_AT_2MM if not smoke else 300
-    out = []
-    for k, r in enumerate(sizes):
-        count = int(round(base * (0.002 / r) ** 3))
-        out.append({"id": f"R{k}", "particle_radius": r, "count": count, "rate": round(count / POUR_TIME, 1)})
-    return out
+"""The base model's free parameter."""
 
 
 def make_data(out: Path, device: str, smoke: bool) -> Path:
@@ -108,17 +56,8 @@ def make_data(out: Path, device: str, smoke: bool) -> Path:
         "interaction.grain.grain.surface_energy": GAMMA,
         "interaction.grain.grain.rolling_friction": MU_R,
     }
-    exps, values = experiments(smoke), []
-    for e in exps:
-        rig = {**FIXED, **{k: e[k] for k in ("particle_radius", "count", "rate")}}
-        t0 = time.perf_counter()
-        values.append(syn.run_worlds("funnel", smoke, rig, hidden, syn.DATA_SEEDS, device))
-        seen = {r: [round(m.get(r, np.nan), 4) for m in values[-1]] for r in NOISE_SD}
-        print(f"data {e['id']}: {seen} ({time.perf_counter() - t0:.0f} s)", flush=True)
-    rows = syn.noisy_rows(exps, values, NOISE_SD, np.random.default_rng(2026))
-    fixed = "\n".join(f"{k} = {json.dumps(v)}" for k, v in FIXED.items())
-    toml = TOML.replace("{smoke}", "true" if smoke else "false").replace("{mcmc}", "300" if smoke else "2000")
-    toml = toml.replace("{fixed}", fixed)
+    rows = syn.funnel_data(syn.funnel_experiments(smoke), {}, hidden, device, smoke, seed=2026)
+    toml = syn.funnel_toml("Hidden cohesion in lab-size funnel piles of three particle sizes", PARAMETER, smoke)
     return syn.write_case(out, "funnel_cohesion", toml, rows)
 
 

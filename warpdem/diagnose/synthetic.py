@@ -61,6 +61,72 @@ def write_case(directory, name: str, toml: str, rows: list[dict]) -> Path:
 
 
 # --------------------------------------------------------------------------------------------------
+# the lab-size funnel cases (benchmarks/diagnose_gpu.py, benchmarks/diagnose_confounded.py)
+# --------------------------------------------------------------------------------------------------
+
+FUNNEL_FIXED = {
+    "particle": "sphere",
+    "material": "pellet",
+    "plate_static_friction": 0.8,
+    "plate_rolling_friction": 0.3,
+    "gate_time": 1.0,
+}
+"""Rig parameters of every run of the funnel cases: spheres with the pellet contacts, on a rough plate (a pile of
+spheres on the polished one spreads into a layer a few grains thick); the gated funnel fills and settles for 1 s
+(its bulk density is measured then), then discharges (its rate) onto the plate (the pile's angle)."""
+
+FUNNEL_SIZES = (0.0015, 0.002, 0.0025)
+"""Grain radii [m] of the funnel cases' experiments (their condition): 3, 4 and 5 mm grains."""
+
+FUNNEL_NOISE_SD = {"angle_fit_deg": 0.5, "bulk_density_kg_m3": 5.0}
+"""Measurement noise SD of the funnel cases: 0.5 deg, 5 kg/m^3."""
+
+
+def funnel_experiments(smoke: bool, count_at_2mm: int = 1500, pour_time: float = 0.75) -> list[dict]:
+    """The funnel cases' experiments: at each of :data:`FUNNEL_SIZES` the solid volume of ``count_at_2mm`` grains
+    of 2 mm radius (150 with ``smoke``), poured in ``pour_time`` [s]: dicts of id, particle_radius, count, rate."""
+    base = count_at_2mm if not smoke else 150
+    out = []
+    for k, r in enumerate(FUNNEL_SIZES):
+        count = int(round(base * (0.002 / r) ** 3))
+        out.append({"id": f"R{k}", "particle_radius": r, "count": count, "rate": round(count / pour_time, 1)})
+    return out
+
+
+def funnel_data(exps: list[dict], rig: dict, overrides: dict, device: str, smoke: bool, seed: int) -> list[dict]:
+    """Rows of the funnel case: the worlds of each experiment of ``exps`` with the rig parameters ``rig`` (the
+    hidden setting among them or among ``overrides``) at :data:`DATA_SEEDS`, plus :data:`FUNNEL_NOISE_SD` noise
+    drawn from ``seed``; prints each experiment's simulated values."""
+    import time
+
+    values = []
+    for e in exps:
+        t0 = time.perf_counter()
+        rig_e = {**FUNNEL_FIXED, **rig, **{k: e[k] for k in ("particle_radius", "count", "rate")}}
+        values.append(run_worlds("funnel", smoke, rig_e, overrides, DATA_SEEDS, device))
+        seen = {r: [round(m.get(r, np.nan), 4) for m in values[-1]] for r in FUNNEL_NOISE_SD}
+        print(f"data {e['id']}: {seen} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    return noisy_rows(exps, values, FUNNEL_NOISE_SD, np.random.default_rng(seed))
+
+
+def funnel_toml(title: str, parameter: dict, smoke: bool) -> str:
+    """A funnel case's data file (a :func:`write_case` template): ``title``, :data:`FUNNEL_FIXED`, the one free
+    ``parameter`` (name, label, parameter, low, high), three simulation and confirming seeds, and 2,000 MCMC steps
+    (300 with ``smoke``)."""
+    import json
+
+    def lines(d: dict) -> str:
+        return "\n".join(f"{k} = {json.dumps(v)}" for k, v in d.items())
+
+    head = {"name": "{name}", "title": title, "rig": "funnel", "smoke": smoke, "seed": 1}
+    return (
+        f"[diagnose]\n{lines(head)}\n\n[fixed]\n{lines(FUNNEL_FIXED)}\n\n[[parameters]]\n{lines(parameter)}\n\n"
+        '[experiments]\nfile = "{csv}"\n\n[noise]\nsim_seeds = 3\n\n'
+        f"[calibration]\nconfirm_seeds = 3\nmcmc_steps = {300 if smoke else 2000}\n"
+    )
+
+
+# --------------------------------------------------------------------------------------------------
 # the die press case: residual set after pressing to three force limits
 # --------------------------------------------------------------------------------------------------
 
