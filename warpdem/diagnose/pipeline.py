@@ -912,13 +912,15 @@ def _library(spec: DiagnosisSpec, ex: Experiments, study, conditions: list[dict]
     bound then holds for every grain of the data (the widest gave the smallest grains of a size series Bond
     numbers of 25, piles that stand as columns and cannot be measured)."""
     from warpdem.scene import rigs
+    from warpdem.scene.stage import apply_overrides
 
     taken = {p.parameter for p in spec.parameters} | set(ex.conditions) | set(spec.fixed)
     merged: dict[str, cands.Candidate] = {}
     skipped: dict[str, str] = {}
     for cond in conditions:
         ov = {**spec.fixed, **cond}
-        scene = execute._scene(study, ov)
+        # the keys a launch varies per world are not in its shared scene; the library reads their values too
+        scene = apply_overrides(execute._scene(study, ov), {k: v for k, v in ov.items() if sp.varies_per_world(k)})
         rig_params = None
         if spec.rig is not None:
             base = dict(rigs.SMOKE[spec.rig]) if spec.smoke else {}
