@@ -545,3 +545,14 @@ def test_cli_reports_a_bad_data_file_without_a_traceback(tmp_path, capsys):
     assert main(["diagnose", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "bad.toml" in err and "[parameters]" in err and "Traceback" not in err
+
+
+def test_repository_data_files():
+    """The data files under studies/diagnose load as written (the worked example) or are refused as they must be:
+    seed 000 has one measured angle, which cannot test a model with a free parameter."""
+    spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "press_plasticity.toml")
+    assert spec.rig == "die_press" and list(ex.responses) == ["residual_set_ratio"]
+    with pytest.raises(DiagnoseError) as err:
+        load_diagnosis(ROOT / "studies" / "diagnose" / "seed000_pellets.toml")
+    msg = str(err.value)
+    assert "seed000_pellets.csv: fewer experiments than free parameters" in msg and "1 measured value(s)" in msg
