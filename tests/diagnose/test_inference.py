@@ -477,3 +477,28 @@ def test_pooled_variance_is_the_one_way_anova_residual_mean_square():
     assert dof == int(fit.df_resid) == 10
     assert var == pytest.approx(fit.scale, rel=1e-12)
     assert inf.pooled_variance([np.array([1.0])]) == (pytest.approx(float("nan"), nan_ok=True), 0)
+
+
+def test_trend_scale_is_never_below_the_budget():
+    """Three residuals on a line well inside the noise budget (a null press's -0.57, -0.52, -0.41 SD at 0.5, 1 and
+    2 N) show no trend: the slope is tested against the budget's scale (statsmodels' fixed-scale z-test), not
+    against their near-zero scatter about the line. Residuals scattered beyond the budget keep the t-test on
+    their own scale, and a real trend (-13, -8, -6 SD) is found either way."""
+    import pandas as pd
+
+    force = pd.DataFrame({"force": [0.5, 1.0, 2.0]}, index=["F0", "F1", "F2"])
+    labels = np.array(["set"] * 3)
+    var = np.full(3, 0.01**2)
+    out = inf.adequacy(np.array([-0.571, -0.518, -0.406]) * 0.01, var, 1, force, labels)
+    row = out["tests"].query("kind == 'trend'").iloc[0]
+    x = np.column_stack([np.ones(3), force["force"]])
+    ref = sm.WLS(np.array([-0.571, -0.518, -0.406]) * 0.01, x, weights=1 / var).fit(
+        cov_type="fixed scale", cov_kwds={"scale": 1.0}
+    )
+    assert row["p"] == pytest.approx(ref.pvalues[1]) and row["p"] > 0.5
+    assert out["adequate"]
+    wide = np.array([-2.0, 2.5, -1.0]) * 0.01
+    row = inf.adequacy(wide, var, 1, force, labels)["tests"].query("kind == 'trend'").iloc[0]
+    assert row["p"] == pytest.approx(sm.WLS(wide, x, weights=1 / var).fit().pvalues[1])
+    strong = inf.adequacy(np.array([-13.0, -8.0, -6.0]) * 0.01, var, 1, force, labels)
+    assert not strong["adequate"]

@@ -363,8 +363,11 @@ def adequacy(
     * ``point``: per row, two-sided normal test of z;
     * ``trend``: per response and numeric condition column with >= 3 distinct values among its rows, the
       slope of the weighted least-squares line residual ~ 1 + condition (statsmodels WLS, weights
-      1 / variance) and its t-test, with the scale estimated from the scatter about the line so that a
-      misstated noise budget (the chi-square's business) does not masquerade as a trend.
+      1 / variance), tested against the larger of two scales: the noise budget's (a z-test, the scale fixed
+      at 1) and the scatter about the line (a t-test), so that an understated budget (the chi-square's
+      business) does not masquerade as a trend, and three residuals that happen to lie on a line, well
+      inside the budget, do not either (with one degree of freedom the scatter can be near zero: a press's
+      residuals of -0.57, -0.52 and -0.41 SD gave t = 102).
 
     Returns ``z`` (DataFrame: experiment, response, the conditions, residual, variance, z), ``tests``
     (DataFrame: kind, response, experiment, condition, statistic (chi-square, z or t), df, p, p_holm,
@@ -409,7 +412,10 @@ def adequacy(
             x = conditions[col].to_numpy(dtype=float)[m]
             if np.unique(x).size < 3:
                 continue
-            fit = sm.WLS(r[m], np.column_stack([np.ones(x.size), x]), weights=1.0 / v[m]).fit()
+            model = sm.WLS(r[m], np.column_stack([np.ones(x.size), x]), weights=1.0 / v[m])
+            fit = model.fit()
+            if fit.scale < 1.0:
+                fit = model.fit(cov_type="fixed scale", cov_kwds={"scale": 1.0})
             lo, hi = fit.conf_int(0.05)[1]
             rows.append(
                 {
