@@ -405,7 +405,9 @@ def run_scene(
                 state.reset_impacts()
         if m.kind == "drum" and t >= m.average_from - eps:
             series.setdefault("drum", []).append([_drum_frame(model, state, h, w, m, t) for w in range(W)])
-        if packing_time is not None and abs(t - packing_time) <= eps and "packing" not in series:
+        # the tick that ends at the packing time lands within half a step of it (advance rounds to whole steps),
+        # which a tolerance of exactly half a step can miss by rounding: take the first tick at or past it
+        if packing_time is not None and t >= packing_time - eps and "packing" not in series:
             series["packing"] = [_packing_metrics(model, state, h, w, m) for w in range(W)]
         if writer is not None:
             _frame(writer, model, state, h, spec, t)
