@@ -12,10 +12,10 @@ friction). Two data files, one data set: ``angle`` holds the angle only, ``both`
 The two diagnoses share their stored worlds.
 
     python benchmarks/diagnose_confounded.py [--device cuda] [--out DIR] [--case angle|both|all]
-        [--stop-after S] [--smoke]
+        [--stop-after S]
 
 Prints each diagnosis's verdict, its cause or tie, the separating measurement it names, the wall time, the
-worlds and the launches; resumes from DIR. ``--smoke`` shrinks the scenes to check the script on a CPU.
+worlds and the launches; resumes from DIR.
 """
 
 from __future__ import annotations
@@ -44,19 +44,19 @@ PARAMETER = {
 """The base model's free parameter."""
 
 
-def make_data(out: Path, device: str, smoke: bool) -> dict[str, Path]:
+def make_data(out: Path, device: str) -> dict[str, Path]:
     """The two data files (``angle``, ``both``) of one simulated data set; made once, then reused."""
     paths = {case: out / f"shape_{case}.toml" for case in ("angle", "both")}
     if all(p.exists() for p in paths.values()):
         return paths
     hidden = {"interaction.grain.grain.static_friction": MU_S}
-    rows = syn.funnel_data(syn.funnel_experiments(smoke), {"aspect_ratio": ASPECT}, hidden, device, smoke, seed=2027)
+    rows = syn.funnel_data(syn.funnel_experiments(), {"aspect_ratio": ASPECT}, hidden, device, seed=2027)
     angle_rows = [{k: v for k, v in r.items() if k != "bulk_density_kg_m3"} for r in rows]
     for name, what, case_rows in (
         ("shape_angle", "angle only", angle_rows),
         ("shape_both", "angle and bulk density", rows),
     ):
-        toml = syn.funnel_toml(f"Hidden grain shape in funnel piles ({what})", PARAMETER, smoke)
+        toml = syn.funnel_toml(f"Hidden grain shape in funnel piles ({what})", PARAMETER)
         syn.write_case(out, name, toml, case_rows)
     return paths
 
@@ -66,12 +66,11 @@ def main() -> None:
     ap.add_argument("--device", default="cuda")
     ap.add_argument("--out", default="runs/diagnose_confounded")
     ap.add_argument("--case", choices=("data", "angle", "both", "all"), default="all")
-    ap.add_argument("--smoke", action="store_true", help="tiny scenes, to check the script on a CPU")
     ap.add_argument("--stop-after", type=float, default=0.0, help="wall seconds after which a diagnosis stops")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    paths = make_data(out, a.device, a.smoke)
+    paths = make_data(out, a.device)
     cases = {"data": [], "all": ["angle", "both"]}.get(a.case, [a.case])
     runs = out / "runs"
     runs.mkdir(exist_ok=True)

@@ -11,8 +11,7 @@ candidate that applies (cohesion, plasticity, shape, size distribution, wall fri
     python benchmarks/diagnose_gpu.py [--device cuda] [--out DIR] [--stage data|diagnose|all]
 
 ``data`` makes the data (3 launches), ``diagnose`` runs the diagnosis and prints its wall time, the simulated
-worlds and launches, the verdict and the gain; both resume from DIR. ``--smoke`` shrinks everything (the
-funnel's smoke size, 2 sizes of few spheres, short MCMC) to check the script on a CPU.
+worlds and launches, the verdict and the gain; both resume from DIR.
 """
 
 from __future__ import annotations
@@ -47,7 +46,7 @@ PARAMETER = {
 """The base model's free parameter."""
 
 
-def make_data(out: Path, device: str, smoke: bool) -> Path:
+def make_data(out: Path, device: str) -> Path:
     path = out / "funnel_cohesion.toml"
     if path.exists():
         return path
@@ -56,8 +55,8 @@ def make_data(out: Path, device: str, smoke: bool) -> Path:
         "interaction.grain.grain.surface_energy": GAMMA,
         "interaction.grain.grain.rolling_friction": MU_R,
     }
-    rows = syn.funnel_data(syn.funnel_experiments(smoke), {}, hidden, device, smoke, seed=2026)
-    toml = syn.funnel_toml("Hidden cohesion in lab-size funnel piles of three particle sizes", PARAMETER, smoke)
+    rows = syn.funnel_data(syn.funnel_experiments(), {}, hidden, device, seed=2026)
+    toml = syn.funnel_toml("Hidden cohesion in lab-size funnel piles of three particle sizes", PARAMETER)
     return syn.write_case(out, "funnel_cohesion", toml, rows)
 
 
@@ -66,12 +65,11 @@ def main() -> None:
     ap.add_argument("--device", default="cuda")
     ap.add_argument("--out", default="runs/diagnose_gpu")
     ap.add_argument("--stage", choices=("data", "diagnose", "all"), default="all")
-    ap.add_argument("--smoke", action="store_true", help="tiny scenes, to check the script on a CPU")
     ap.add_argument("--stop-after", type=float, default=0.0, help="wall seconds after which the diagnosis stops")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    path = make_data(out, a.device, a.smoke)
+    path = make_data(out, a.device)
     if a.stage == "data":
         return
     res = diagnose(str(path), out / "diagnosis", device=a.device, progress=False, stop_after=a.stop_after)

@@ -82,10 +82,11 @@ FUNNEL_NOISE_SD = {"angle_fit_deg": 0.5, "bulk_density_kg_m3": 5.0}
 """Measurement noise SD of the funnel cases: 0.5 deg, 5 kg/m^3."""
 
 
-def funnel_experiments(smoke: bool, count_at_2mm: int = 1500, pour_time: float = 0.75) -> list[dict]:
+def funnel_experiments(count_at_2mm: int = 1500, pour_time: float = 0.75) -> list[dict]:
     """The funnel cases' experiments: at each of :data:`FUNNEL_SIZES` the solid volume of ``count_at_2mm`` grains
-    of 2 mm radius (150 with ``smoke``), poured in ``pour_time`` [s]: dicts of id, particle_radius, count, rate."""
-    base = count_at_2mm if not smoke else 150
+    of 2 mm radius, poured in ``pour_time`` [s]: dicts of id, particle_radius, count, rate. Full size only: the
+    smoke funnel's 20 mm outlet leaves no core for the bulk density of these grains."""
+    base = count_at_2mm
     out = []
     for k, r in enumerate(FUNNEL_SIZES):
         count = int(round(base * (0.002 / r) ** 3))
@@ -93,7 +94,7 @@ def funnel_experiments(smoke: bool, count_at_2mm: int = 1500, pour_time: float =
     return out
 
 
-def funnel_data(exps: list[dict], rig: dict, overrides: dict, device: str, smoke: bool, seed: int) -> list[dict]:
+def funnel_data(exps: list[dict], rig: dict, overrides: dict, device: str, seed: int) -> list[dict]:
     """Rows of the funnel case: the worlds of each experiment of ``exps`` with the rig parameters ``rig`` (the
     hidden setting among them or among ``overrides``) at :data:`DATA_SEEDS`, plus :data:`FUNNEL_NOISE_SD` noise
     drawn from ``seed``; prints each experiment's simulated values."""
@@ -103,26 +104,26 @@ def funnel_data(exps: list[dict], rig: dict, overrides: dict, device: str, smoke
     for e in exps:
         t0 = time.perf_counter()
         rig_e = {**FUNNEL_FIXED, **rig, **{k: e[k] for k in ("particle_radius", "count", "rate")}}
-        values.append(run_worlds("funnel", smoke, rig_e, overrides, DATA_SEEDS, device))
+        values.append(run_worlds("funnel", False, rig_e, overrides, DATA_SEEDS, device))
         seen = {r: [round(m.get(r, np.nan), 4) for m in values[-1]] for r in FUNNEL_NOISE_SD}
         print(f"data {e['id']}: {seen} ({time.perf_counter() - t0:.0f} s)", flush=True)
     return noisy_rows(exps, values, FUNNEL_NOISE_SD, np.random.default_rng(seed))
 
 
-def funnel_toml(title: str, parameter: dict, smoke: bool) -> str:
+def funnel_toml(title: str, parameter: dict) -> str:
     """A funnel case's data file (a :func:`write_case` template): ``title``, :data:`FUNNEL_FIXED`, the one free
     ``parameter`` (name, label, parameter, low, high), three simulation and confirming seeds, and 2,000 MCMC steps
-    (300 with ``smoke``)."""
+    """
     import json
 
     def lines(d: dict) -> str:
         return "\n".join(f"{k} = {json.dumps(v)}" for k, v in d.items())
 
-    head = {"name": "{name}", "title": title, "rig": "funnel", "smoke": smoke, "seed": 1}
+    head = {"name": "{name}", "title": title, "rig": "funnel", "smoke": False, "seed": 1}
     return (
         f"[diagnose]\n{lines(head)}\n\n[fixed]\n{lines(FUNNEL_FIXED)}\n\n[[parameters]]\n{lines(parameter)}\n\n"
         '[experiments]\nfile = "{csv}"\n\n[noise]\nsim_seeds = 3\n\n'
-        f"[calibration]\nconfirm_seeds = 3\nmcmc_steps = {300 if smoke else 2000}\n"
+        f"[calibration]\nconfirm_seeds = 3\nmcmc_steps = 2000\n"
     )
 
 
