@@ -92,7 +92,7 @@ def _diagnosis_library(tmp_path: Path, fixed: str):
     path.write_text(TOML.replace("{fixed}", fixed))
     spec, ex = load_diagnosis(path)
     prob = _problem(spec, ex)
-    return _library(spec, ex, spec.study(list(ex.responses)), prob.conditions)
+    return _library(spec, ex, prob.conditions)
 
 
 def test_library_reads_the_data_files_values(tmp_path):

@@ -307,8 +307,8 @@ class Problem:
         surrogate)."""
         resp = self.obs["response"]
         s_seed = resp.map(self.seed_var).to_numpy(dtype=float)
-        s_rough = resp.map(self.rough_var).fillna(0.0).to_numpy(dtype=float)
-        s_sim = s_seed + s_rough
+        s_sim = resp.map(self.sim_var).to_numpy(dtype=float)
+        s_rough = s_sim - s_seed
         one = np.maximum(self.obs["var_one"].to_numpy(dtype=float), s_sim)
         return one / self.obs["n"].to_numpy(dtype=float) + s_seed / np.asarray(k_model, dtype=float) + s_rough
 
@@ -443,12 +443,16 @@ class Evaluator:
             steps=self.spec.mcmc_steps if sample else FOLD_STEPS,
         )
 
+    def confirm_requests(self, model: Model, u, conds) -> list[tuple[dict, int]]:
+        """The simulations of :meth:`confirm`: ``model`` at ``u`` at each of ``conds`` over the confirming seeds
+        (condition-major)."""
+        return [self._request(model, u, c, s) for c in conds for s in self.confirm_seeds]
+
     def confirm(self, model: Model, u, conds, stage: str) -> dict:
         """Real simulations of ``model`` at ``u`` at conditions ``conds``: {condition: (seeds, responses) values,
         and the full metrics}."""
         seeds = self.confirm_seeds
-        reqs = [self._request(model, u, c, s) for c in conds for s in seeds]
-        mets = self.sims.run(reqs, stage)
+        mets = self.sims.run(self.confirm_requests(model, u, conds), stage)
         out = {}
         for i, c in enumerate(conds):
             m = mets[i * len(seeds) : (i + 1) * len(seeds)]
@@ -497,14 +501,10 @@ class Evaluator:
             None if c is None else np.asarray(self.calibrate(model, gps, fit, f"fold{c}", sample=False)["map"], float)
             for fit, _, c in folds
         ]
-        C = range(len(prob.conditions))
-        requests = [self._request(model, u_map, c, s) for c in C for s in self.confirm_seeds]
-        requests += [
-            self._request(model, u, c, s)
-            for (_, _, c), u in zip(folds, fold_maps)
-            if c is not None
-            for s in self.confirm_seeds
-        ]
+        requests = self.confirm_requests(model, u_map, range(len(prob.conditions)))
+        for (_, _, c), u in zip(folds, fold_maps):
+            if c is not None:
+                requests += self.confirm_requests(model, u, [c])
         return {
             "model": model,
             "gps": gps,
@@ -653,7 +653,7 @@ def screen(ev: Evaluator, base_eval: dict, gps: dict, lib: list[cands.Candidate]
         test = dict(cand.shared)
         test[cand.key] = cand.test_value
         moved.append(Model(cand.name, list(base_eval["model"].dims), test))
-    ev.sims.run([ev._request(m, u, c, s) for m in moved for c in conds for s in ev.confirm_seeds], "screen")
+    ev.sims.run([q for m in moved for q in ev.confirm_requests(m, u, conds)], "screen")
     sim_b, _ = ev._sim_means(base_eval["confirm"], train)
     J = ev.jacobian(gps, train, u)
     r, var = base_eval["residual"], base_eval["variance"]
@@ -868,7 +868,7 @@ def diagnose(
         if base_eval["adequacy"]["adequate"]:
             decision = {"verdict": "adequate", "cause": None, "tied": [], "table": []}
         else:
-            lib, skipped = _library(spec, ex, study, prob.conditions)
+            lib, skipped = _library(spec, ex, prob.conditions)
             screens = screen(ev, base_eval, base_eval["gps"], lib) if lib else []
             passed = sorted([s for s in screens if s["p"] < spec.alpha], key=lambda s: -s["delta_chi2"])[:SURVIVORS]
             models = []
@@ -906,7 +906,7 @@ def diagnose(
     return result
 
 
-def _library(spec: DiagnosisSpec, ex: Experiments, study, conditions: list[dict]) -> tuple[list, dict]:
+def _library(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tuple[list, dict]:
     """The candidates that apply (the data file's ``use`` list, ranges replaced as it says). A range that
     depends on the scene (cohesion's, through the grain's weight) is the narrowest over the conditions: its
     bound then holds for every grain of the data (the widest gave the smallest grains of a size series Bond
@@ -919,8 +919,9 @@ def _library(spec: DiagnosisSpec, ex: Experiments, study, conditions: list[dict]
     skipped: dict[str, str] = {}
     for cond in conditions:
         ov = {**spec.fixed, **cond}
-        # the keys a launch varies per world are not in its shared scene; the library reads their values too
-        scene = apply_overrides(execute._scene(study, ov), {k: v for k, v in ov.items() if sp.varies_per_world(k)})
+        # every value the condition's runs have, per-world keys included (a launch's shared scene lacks those)
+        rig_cond = {k: v for k, v in cond.items() if sp.is_rig_key(k)}
+        scene = apply_overrides(sp.fixed_scene(spec, rig_cond), {k: v for k, v in cond.items() if k not in rig_cond})
         rig_params = None
         if spec.rig is not None:
             base = dict(rigs.SMOKE[spec.rig]) if spec.smoke else {}
