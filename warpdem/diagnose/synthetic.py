@@ -86,10 +86,9 @@ def funnel_experiments(count_at_2mm: int = 1500, pour_time: float = 0.75) -> lis
     """The funnel cases' experiments: at each of :data:`FUNNEL_SIZES` the solid volume of ``count_at_2mm`` grains
     of 2 mm radius, poured in ``pour_time`` [s]: dicts of id, particle_radius, count, rate. Full size only: the
     smoke funnel's 20 mm outlet leaves no core for the bulk density of these grains."""
-    base = count_at_2mm
     out = []
     for k, r in enumerate(FUNNEL_SIZES):
-        count = int(round(base * (0.002 / r) ** 3))
+        count = int(round(count_at_2mm * (0.002 / r) ** 3))
         out.append({"id": f"R{k}", "particle_radius": r, "count": count, "rate": round(count / pour_time, 1)})
     return out
 
@@ -112,8 +111,8 @@ def funnel_data(exps: list[dict], rig: dict, overrides: dict, device: str, seed:
 
 def funnel_toml(title: str, parameter: dict) -> str:
     """A funnel case's data file (a :func:`write_case` template): ``title``, :data:`FUNNEL_FIXED`, the one free
-    ``parameter`` (name, label, parameter, low, high), three simulation and confirming seeds, and 2,000 MCMC steps
-    """
+    ``parameter`` (name, label, parameter, low, high), three simulation and confirming seeds, and 2,000 MCMC
+    steps."""
     import json
 
     def lines(d: dict) -> str:
@@ -123,7 +122,7 @@ def funnel_toml(title: str, parameter: dict) -> str:
     return (
         f"[diagnose]\n{lines(head)}\n\n[fixed]\n{lines(FUNNEL_FIXED)}\n\n[[parameters]]\n{lines(parameter)}\n\n"
         '[experiments]\nfile = "{csv}"\n\n[noise]\nsim_seeds = 3\n\n'
-        f"[calibration]\nconfirm_seeds = 3\nmcmc_steps = 2000\n"
+        "[calibration]\nconfirm_seeds = 3\nmcmc_steps = 2000\n"
     )
 
 
