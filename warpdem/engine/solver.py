@@ -133,6 +133,16 @@ def check_row_bytes(sphere_count: int, dtype) -> None:
         )
 
 
+def drive(gen):
+    """Run the generator ``gen`` (:meth:`Solver.run_iter`, :meth:`Solver.advance_iter`,
+    ``runner.run_scene_iter``) to its end; returns its return value."""
+    while True:
+        try:
+            next(gen)
+        except StopIteration as stop:
+            return stop.value
+
+
 class Solver:
     """Hertz-Mindlin DEM on spheres, planes and static triangle meshes (see kernels/step.py).
 
@@ -375,6 +385,24 @@ class Solver:
         flag between steps. Blow-ups and overflows are checked once at the end and raise
         :class:`SimulationError`.
         """
+        state = self._enqueue(state, contacts, steps, control, use_graph)
+        self.check(contacts)
+        return state
+
+    def run_iter(self, state: State, contacts: Contacts, steps: int, control: Control | None = None):
+        """:meth:`run` as a generator: it yields once, when the steps are queued on the device's current stream
+        and before the host waits for them (the check), so a caller can queue other launches' work on other
+        streams meanwhile (:func:`drive` runs it to the end). Returns the final state."""
+        state = self._enqueue(state, contacts, steps, control, None)
+        yield
+        self.check(contacts)
+        return state
+
+    def _enqueue(
+        self, state: State, contacts: Contacts, steps: int, control: Control | None, use_graph: bool | None
+    ) -> State:
+        """Queue ``steps`` steps (see :meth:`run`) without waiting for them, except where the host must read the
+        rebuild flag (the fallback without conditional graph nodes); the caller checks."""
         self._check_contacts(contacts)
         steps = int(steps)
         if steps <= 0:
@@ -469,7 +497,6 @@ class Solver:
             done += 1
         self._spare = b
         a.released = state.released
-        self.check(contacts)
         return a
 
     def _alternate(self, a: State, b: State, steps: int, control: Control | None, contacts: Contacts) -> None:
@@ -520,6 +547,11 @@ class Solver:
         whole is partly deferred by one interval. ``state.released[f]["count"]`` counts the particles factory f
         has released so far.
         """
+        return drive(self.advance_iter(state, contacts, duration, control))
+
+    def advance_iter(self, state: State, contacts: Contacts, duration: float, control: Control | None = None):
+        """:meth:`advance` as a generator that yields whenever steps are queued and the host is about to wait
+        for them (see :meth:`run_iter`); returns the final state."""
         end = state.time + float(duration)
         while True:
             self._adapt_dt()
@@ -531,11 +563,13 @@ class Solver:
             }
             if not due:
                 steps = int(round((end - state.time) / self.dt))
-                return self.run(state, contacts, steps, control) if steps > 0 else state
+                if steps > 0:
+                    state = yield from self.run_iter(state, contacts, steps, control)
+                return state
             t_next = min(due.values())
             steps = int(round((t_next - state.time) / self.dt))
             if steps > 0:
-                state = self.run(state, contacts, steps, control)
+                state = yield from self.run_iter(state, contacts, steps, control)
             for f, t in due.items():
                 if t <= state.time + eps:
                     self._release_factory(state, contacts, f)
