@@ -1179,13 +1179,13 @@ def test_stop_after_stops_before_the_tick_that_would_overrun(tmp_path, monkeypat
     spec = rigs.spec("funnel", {"count": 60, "duration": 0.2}, smoke=True)
     tick, clock = 10.0, [0.0]
     monkeypatch.setattr(runner, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
-    advance = Solver.advance
+    advance = Solver.advance_iter
 
     def slow_advance(self, *args, **kwargs):
         clock[0] += tick
-        return advance(self, *args, **kwargs)
+        return (yield from advance(self, *args, **kwargs))
 
-    monkeypatch.setattr(Solver, "advance", slow_advance)
+    monkeypatch.setattr(Solver, "advance_iter", slow_advance)
     with pytest.raises(runner.RunStopped) as e:
         runner.run_scene(spec, out_dir=tmp_path, frames=False, stop_after=2.5 * tick)
     # ticks end on whole steps: within a step of 2 intervals, far from 1 or 3
@@ -1281,3 +1281,44 @@ def test_set_value_refused_as_stage_error_naming_the_key(key, raw, says):
     with pytest.raises(StageError) as err:
         apply_overrides(spec, {key: raw})
     assert f"--set {key} = {raw!r}" in str(err.value) and says in str(err.value)
+
+
+def test_launches_run_together_as_they_run_alone(tmp_path):
+    """run_together takes turns between launches (as on a GPU, where each queues on its own stream): two
+    funnels of different counts, interleaved tick by tick on the CPU, end bit-identical to each run alone, so
+    no launch reads another's state. A launch that fails ends alone, its error returned, and admit() = False
+    starts no further launch."""
+    specs = [rigs.spec("funnel", {"count": n, "duration": 0.1}, smoke=True) for n in (60, 45)]
+    alone = [runner.run_scene(s, out_dir=tmp_path / f"alone{k}", frames=False) for k, s in enumerate(specs)]
+    turns, ended = [], []
+
+    def start(k):
+        run = runner.run_scene_iter(specs[k], "cpu", tmp_path / f"together{k}", frames=False)
+        while True:
+            try:
+                value = next(run)
+            except StopIteration as stop:
+                return stop.value
+            turns.append(k)
+            yield value
+
+    def bad():
+        return runner.run_scene_iter(specs[0], "cpu", tmp_path / "bad", frames=False, stop_after=-1)
+
+    out = runner.run_together(
+        [lambda: start(0), bad, lambda: start(1), lambda: start(0)],
+        "cpu",
+        load_limit=10**6,
+        admit=lambda i: i < 3,
+        on_end=lambda i, o: ended.append(i),
+    )
+    assert isinstance(out[1], ValueError) and "stop_after = -1" in str(out[1])
+    assert out[3] is None and sorted(ended) == [0, 1, 2]
+    # interleaved: the second funnel took turns before the first had finished
+    assert turns.index(1) < len(turns) - 1 - turns[::-1].index(0)
+    for k, a in zip((0, 2), alone):
+        assert out[k].metrics == a.metrics
+    for k in (0, 1):
+        xa = np.load(tmp_path / f"alone{k}" / "final.npz")["sphere_x"]
+        xt = np.load(tmp_path / f"together{k}" / "final.npz")["sphere_x"]
+        assert np.array_equal(xa, xt)

@@ -114,7 +114,7 @@ def test_crash_loses_nothing_finished(tmp_path, monkeypatch):
     launch's 2 results on disk (whole files, no temporaries), and the rerun runs only the other 4."""
     study = _study(tmp_path, batch=2)
     out = tmp_path / "out"
-    real = execute.run_batch
+    real = execute.run_batch_iter
     calls = []
 
     def crashing(*a, **kw):
@@ -123,12 +123,12 @@ def test_crash_loses_nothing_finished(tmp_path, monkeypatch):
             raise KeyboardInterrupt("killed")
         return real(*a, **kw)
 
-    monkeypatch.setattr(execute, "run_batch", crashing)
+    monkeypatch.setattr(execute, "run_batch_iter", crashing)
     with pytest.raises(KeyboardInterrupt):
         _run(study, out, analyze_after=False)
     assert len(list((out / "runs").glob("*.json"))) == 2
     assert not list((out / "runs").glob("*.tmp"))
-    monkeypatch.setattr(execute, "run_batch", real)
+    monkeypatch.setattr(execute, "run_batch_iter", real)
     res = _run(study, out, analyze_after=False)
     assert res["skipped"] == 2 and res["ran"] == 4 and res["batches"] == 2
     assert len(list((out / "runs").glob("*.json"))) == 6
@@ -192,7 +192,7 @@ def test_crash_inside_a_launch_resumes_from_its_checkpoint(tmp_path, monkeypatch
     from warpdem.scene import runner
 
     study = _study(tmp_path)
-    real = runner.run_scene
+    real = runner.run_scene_iter
 
     class Crash(Exception):
         pass
@@ -204,11 +204,11 @@ def test_crash_inside_a_launch_resumes_from_its_checkpoint(tmp_path, monkeypatch
 
         return real(*a, **(kw | {"progress": kill, "checkpoint_every": 1e-9}))
 
-    monkeypatch.setattr(runner, "run_scene", killed)
+    monkeypatch.setattr(runner, "run_scene_iter", killed)
     with pytest.raises(Crash):
         _run(study, tmp_path / "out", analyze_after=False)
     assert list((tmp_path / "out" / "launches").glob("*/checkpoint.npz"))
-    monkeypatch.setattr(runner, "run_scene", lambda *a, **kw: real(*a, **(kw | {"checkpoint_every": 1e-9})))
+    monkeypatch.setattr(runner, "run_scene_iter", lambda *a, **kw: real(*a, **(kw | {"checkpoint_every": 1e-9})))
     _run(study, tmp_path / "out", analyze_after=False)
     _assert_resumed_like_uninterrupted(study, tmp_path)
 

@@ -116,7 +116,7 @@ VERDICTS = ("adequate", "cause", "ambiguous", "unexplained")
 
 
 class Stopped(RuntimeError):
-    """The wall-time limit stopped the launches of several devices (each saved its checkpoint)."""
+    """The wall-time limit stopped the launches (each saved its checkpoint)."""
 
 
 class Simulations:
@@ -137,8 +137,7 @@ class Simulations:
 
     def run(self, requests: list[tuple[dict, int]], stage: str) -> list[dict]:
         """The metrics of each (overrides, world seed) in ``requests``, running those not yet stored (batched
-        by what they share); raises ``runner.RunStopped`` (one device) or :class:`Stopped` (several) when the
-        wall-time limit stops a launch."""
+        by what they share); raises :class:`Stopped` when the wall-time limit stops a launch."""
         rows, seen = [], set()
         for ov, seed in requests:
             pid = self.key(ov, seed)
@@ -165,36 +164,17 @@ class Simulations:
                         self.log,
                         on_done=lambda *a: None,
                     )
-                    if stopped:
-                        raise Stopped(stopped)
                 else:
-                    self._serial(batches, bar)
+                    stopped = execute._run_on_device(
+                        self.study, self.out, batches, self.devices[0], bar, self.t0, 60.0, self.stop_after
+                    )
+                if stopped:
+                    raise Stopped(stopped)
             finally:
                 if bar is not None:
                     bar.close()
             self.launched += len(batches)
         return [self.metrics(self.key(ov, seed)) for ov, seed in requests]
-
-    def _serial(self, batches, bar) -> None:
-        import functools
-
-        for k, batch in enumerate(batches):
-            base = bar.n if bar is not None else 0
-            tick = functools.partial(execute._batch_tick, bar, base, len(batch), f"launch {k + 1}/{len(batches)}")
-            tb = time.perf_counter()
-            records = execute.run_batch(
-                self.study,
-                batch,
-                self.devices[0],
-                progress=tick,
-                out_dir=self.out / "launches" / execute._launch_id(batch),
-                checkpoint_every=60.0,
-                stop_after=execute._time_left(self.stop_after, self.t0),
-            )
-            execute._save_batch(self.study, self.runs, batch, records, time.perf_counter() - tb, self.devices[0])
-            if bar is not None:
-                bar.n = base + len(batch)
-                bar.refresh()
 
     def metrics(self, pid: str) -> dict:
         if pid not in self._cache:

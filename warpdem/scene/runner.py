@@ -253,7 +253,64 @@ def measured_metrics(measure) -> tuple[str, ...]:
     return tuple(k for k in own if metric_needs_met(measure, k)) + COMMON_METRICS
 
 
-def run_scene(
+def run_together(starts, device: str, load_limit: int, admit=None, on_end=None) -> list:
+    """Run launches side by side on one device: each of ``starts`` is a callable returning a generator like
+    :func:`run_scene_iter` (its first yield the launch's load in spheres, its return value the result), and
+    each launch queues its steps on a CUDA stream of its own, so the small launches of a diagnosis or a study
+    share the GPU instead of leaving it idle between their small kernels. One thread runs them all, in turns:
+    a launch's turn queues its next steps and returns before waiting for them.
+
+    Launches start in order while the running ones hold fewer than ``load_limit`` spheres (one at a time
+    with 0, as on the CPU, where nothing runs asynchronously; the first always starts); ``admit(i)``, if given,
+    is asked before launch i starts, and False starts no further launch. ``on_end(i, outcome)`` is called as
+    launch i ends. Returns each launch's outcome: its result, the exception it raised (a failing launch does
+    not stop the others), or None where it did not start.
+    """
+    import warp as wp
+
+    dev = wp.get_device(device)
+    outcomes: list = [None] * len(starts)
+    pending, live = list(range(len(starts))), {}
+
+    def turn(i) -> None:
+        gen, stream, _ = live[i]
+        try:
+            # a stream of its own: what the launch queues waits only for its own work
+            with wp.ScopedStream(stream, sync_enter=False):
+                load = next(gen)
+            if isinstance(load, int):
+                live[i] = (gen, stream, load)
+            return
+        except StopIteration as stop:
+            outcomes[i] = stop.value
+        except Exception as e:  # kept: the other launches go on
+            outcomes[i] = e
+        del live[i]
+        if on_end is not None:
+            on_end(i, outcomes[i])
+
+    while pending or live:
+        while pending and (not live or sum(x[2] for x in live.values()) < load_limit):
+            i = pending.pop(0)
+            if admit is not None and not admit(i):
+                pending.clear()
+                break
+            live[i] = (starts[i](), wp.Stream(dev) if dev.is_cuda else None, 0)
+            turn(i)
+        for i in list(live):
+            turn(i)
+    return outcomes
+
+
+def run_scene(spec: SceneSpec, device: str = "cpu", out_dir=None, **kw) -> RunResult:
+    """Run ``spec`` on ``device``; with ``out_dir`` write metrics.json, result.usdc (+ VTK series), pile.png.
+    The arguments are :func:`run_scene_iter`'s; this runs it to the end."""
+    from warpdem.engine.solver import drive
+
+    return drive(run_scene_iter(spec, device, out_dir, **kw))
+
+
+def run_scene_iter(
     spec: SceneSpec,
     device: str = "cpu",
     out_dir=None,
@@ -266,7 +323,12 @@ def run_scene(
     checkpoint_every: float = 0.0,
     stop_after: float = 0.0,
 ) -> RunResult:
-    """Run ``spec`` on ``device``; with ``out_dir`` write metrics.json, result.usdc (+ VTK series), pile.png.
+    """Run ``spec`` on ``device`` as a generator (:func:`run_scene` runs it to the end); with ``out_dir`` write
+    metrics.json, result.usdc (+ VTK series), pile.png.
+
+    The generator yields the model's sphere count once it is built (the launch's load on the device), then None
+    each time the launch's steps are queued on the device's current stream and the host is about to wait for
+    them: :func:`run_together` queues other launches on other streams of one GPU meanwhile.
 
     Args:
         world_count: batched worlds; ``variations`` maps ``material.NAME.FIELD`` / ``interaction.A.B.FIELD``
@@ -296,6 +358,7 @@ def run_scene(
     t_wall0 = time.perf_counter()
     builder = build(spec, world_count, variations, world_seeds)
     model = builder.finalize(device)
+    yield model.sphere_count
     run = spec.run
     solver = scene_solver(model, run)
     state, contacts = model.state(), solver.contacts()
@@ -372,7 +435,7 @@ def run_scene(
             if state.time + eps < te < t_next - eps:
                 t_next = te
         step0 = state.step
-        state = solver.advance(state, contacts, t_next - state.time)
+        state = yield from solver.advance_iter(state, contacts, t_next - state.time)
         t = state.time
         rebuilds, rebuilds_total = solver.rebuild_count - rebuilds_total, solver.rebuild_count
         series["tick_wall_s"].append(time.perf_counter() - t_tick)

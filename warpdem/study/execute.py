@@ -143,6 +143,12 @@ def _launch_id(rows: list[dict]) -> str:
     return hashlib.sha1(",".join(r["point_id"] for r in rows).encode()).hexdigest()[:12]
 
 
+SIDE_BY_SIDE_SPHERES = 1_000_000
+"""Spheres that the launches running side by side on one GPU may hold together (:func:`runner.run_together`):
+about where one launch alone fills an H100 (``warpdem bench``), so a full-size launch runs alone and the small
+launches of a diagnosis or of a study's rig-parameter groups share the GPU."""
+
+
 def run_batch(
     study: sp.StudySpec,
     rows: list[dict],
@@ -156,14 +162,29 @@ def run_batch(
     record per row: responses, the world's metrics, run info. With ``out_dir`` the launch checkpoints every
     ``checkpoint_every`` wall seconds there and resumes from its checkpoint (see ``run_scene``); with
     ``stop_after`` it saves a checkpoint and raises ``runner.RunStopped`` after that many wall seconds."""
-    from warpdem.scene.runner import run_scene
+    from warpdem.engine.solver import drive
+
+    return drive(run_batch_iter(study, rows, device, progress, out_dir, checkpoint_every, stop_after))
+
+
+def run_batch_iter(
+    study: sp.StudySpec,
+    rows: list[dict],
+    device: str,
+    progress=None,
+    out_dir=None,
+    checkpoint_every: float = 0.0,
+    stop_after: float = 0.0,
+):
+    """:func:`run_batch` as a generator that yields as :func:`runner.run_scene_iter` does."""
+    from warpdem.scene.runner import run_scene_iter
 
     scene = _scene(study, rows[0]["overrides"])
     varying = sorted({k for r in rows for k in r["overrides"] if sp.varies_per_world(k)})
     # a world whose run does not set a varied key keeps the scene's value (None)
     variations = {k: [r["overrides"].get(k) for r in rows] for k in varying}
     seeds = [int(r["world_seed"]) for r in rows]
-    res = run_scene(
+    res = yield from run_scene_iter(
         scene,
         device=device,
         out_dir=out_dir,
@@ -290,6 +311,77 @@ def _device_worker(
         ran += len(batch)
         queue.put((slot, k, 1.0, "done"))
     return {"ran": ran, "walls": walls, "stopped": None}
+
+
+def _run_on_device(
+    study,
+    out: Path,
+    batches: list[list[dict]],
+    device: str,
+    bar,
+    t0: float,
+    checkpoint_every: float,
+    stop_after: float,
+    on_saved=None,
+) -> str | None:
+    """Run ``batches`` on one device: side by side on a GPU (:func:`runner.run_together`, up to
+    :data:`SIDE_BY_SIDE_SPHERES`), one after another on the CPU; each launch is saved (``OUT/runs``) the moment
+    it ends, then ``on_saved()`` is called. With ``stop_after`` (wall seconds since ``t0``) a launch saves its
+    checkpoint and stops, and no launch starts past the limit but the first. A failing launch lets the running
+    ones end, starts no other, and its error is raised. Returns the stop message(s), or None."""
+    import warp as wp
+
+    from warpdem.scene.runner import RunStopped, run_together
+
+    runs_dir = out / "runs"
+    base = bar.n if bar is not None else 0
+    done = [0.0] * len(batches)
+    started: dict[int, float] = {}
+    stops, errors = [], []
+
+    def show(k: int, frac: float, msg: str) -> None:
+        done[k] = frac * len(batches[k])
+        if bar is not None:
+            bar.n = base + sum(done)
+            bar.set_postfix_str(f"launch {k + 1}/{len(batches)}: {len(batches[k])} worlds, {msg}", refresh=False)
+            bar.refresh()
+
+    def start(k: int):
+        started[k] = time.perf_counter()
+        return run_batch_iter(
+            study,
+            batches[k],
+            device,
+            progress=functools.partial(show, k),
+            out_dir=out / "launches" / _launch_id(batches[k]),
+            checkpoint_every=checkpoint_every,
+            stop_after=_time_left(stop_after, t0),
+        )
+
+    def admit(k: int) -> bool:
+        # the first launch of a call always starts (and saves a checkpoint at least), so every call advances
+        late = stop_after > 0 and k > 0 and time.perf_counter() - t0 >= stop_after
+        return not (late or stops or errors)
+
+    def end(k: int, outcome) -> None:
+        if isinstance(outcome, RunStopped):
+            stops.append(f"launch {k + 1} of {len(batches)}: {outcome}")
+        elif isinstance(outcome, BaseException):
+            errors.append(outcome)
+        else:
+            _save_batch(study, runs_dir, batches[k], outcome, time.perf_counter() - started[k], device)
+            show(k, 1.0, "done")
+            if on_saved is not None:
+                on_saved()
+
+    limit = SIDE_BY_SIDE_SPHERES if wp.get_device(device).is_cuda else 0
+    outcomes = run_together([functools.partial(start, k) for k in range(len(batches))], device, limit, admit, end)
+    if errors:
+        raise errors[0]
+    left = sum(o is None for o in outcomes)
+    if left and not stops:
+        stops.append(f"the wall-time limit ({stop_after:.0f} s) came before {left} of {len(batches)} launch(es)")
+    return "; ".join(stops) or None
 
 
 def _run_parallel(
@@ -424,33 +516,10 @@ def run_study(
     stopped = None
     if len(devices) > 1 and batches:
         stopped = _run_parallel(study, out, batches, devices, bar, t0, checkpoint_every, stop_after, log)
-    for k, batch in enumerate(batches if len(devices) == 1 else []):
-        base = bar.n if bar is not None else 0
-        tick = functools.partial(_batch_tick, bar, base, len(batch), f"batch {k + 1}/{len(batches)}")
-        tb = time.perf_counter()
-        launch = out / "launches" / _launch_id(batch)
-        # the first launch of a call always starts (and saves a checkpoint at least), so every call advances
-        if stop_after > 0 and k > 0 and tb - t0 >= stop_after:
-            stopped = f"the wall-time limit ({stop_after:.0f} s) came before launch {k + 1} of {len(batches)}"
-            break
-        try:
-            records = run_batch(
-                study,
-                batch,
-                devices[0],
-                progress=tick,
-                out_dir=launch,
-                checkpoint_every=checkpoint_every,
-                stop_after=_time_left(stop_after, t0),
-            )
-        except RunStopped as e:
-            stopped = f"launch {k + 1} of {len(batches)}: {e}"
-            break
-        _save_batch(study, runs_dir, batch, records, time.perf_counter() - tb, devices[0])
-        if bar is not None:
-            bar.n = base + len(batch)
-            bar.refresh()
-        _results_csv(study, out)
+    if len(devices) == 1 and batches:
+        stopped = _run_on_device(
+            study, out, batches, devices[0], bar, t0, checkpoint_every, stop_after, lambda: _results_csv(study, out)
+        )
     if bar is not None:
         bar.close()
     wall = time.perf_counter() - t0
