@@ -13,7 +13,7 @@ from warpdem.kernels import neighbors as _nb
 from warpdem.kernels import step as _st
 from warpdem.kernels.features import StepFeatures
 
-from .types import ContactLaw, Contacts, Control, Model, Overflow, State
+from .types import ContactLaw, Contacts, Control, Model, Overflow, State, host
 
 
 class SimulationError(RuntimeError):
@@ -158,7 +158,7 @@ class Solver:
         self.model = model
         self.options = options or SolverOptions()
         # EEPA unloads along k2 = k1 / (1 - lambda_p): the stiffest branch sets the stable step
-        pairs = model.pair_params.numpy()
+        pairs = host(model.pair_params)
         lam = float(np.max(pairs["lambda_p"] * (pairs["law"] == int(ContactLaw.EEPA))))
         auto = self.options.dt_fraction * model.rayleigh_time * math.sqrt(1.0 - lam)
         if self.options.dt is None:
@@ -469,7 +469,7 @@ class Solver:
             while done < steps:
                 wp.copy(self._flag_host, contacts.rebuild)
                 wp.synchronize_stream()
-                if self._flag_host.numpy()[0]:
+                if host(self._flag_host)[0]:
                     self.rebuild(a if parity == 0 else b, contacts)
                 wp.capture_launch(graphs[parity])
                 parity ^= 1
@@ -478,10 +478,10 @@ class Solver:
                 a, b = b, a
             a.time, a.step, a.half_step = t0 + steps * self.dt, step0 + steps, True
         elif use_graph and not self._is_cuda and steps - done >= 2:
-            before = int(self._buffers.clock.numpy()[0])
+            before = int(host(self._buffers.clock)[0])
             (graph,) = self._graphs(a, b, contacts, control, 2, lambda: self._alternate(a, b, 2, control, contacts))
             # Warp's CPU capture also executes what it records: count those two steps
-            if int(self._buffers.clock.numpy()[0]) != before:
+            if int(host(self._buffers.clock)[0]) != before:
                 a.time += 2 * self.dt
                 a.step += 2
                 done += 2
@@ -536,7 +536,7 @@ class Solver:
     @property
     def rebuild_count(self) -> int:
         """Neighbour-list rebuilds this solver has made (a host read: synchronises)."""
-        return int(self._buffers.rebuild_count.numpy()[0])
+        return int(host(self._buffers.rebuild_count)[0])
 
     def advance(self, state: State, contacts: Contacts, duration: float, control: Control | None = None) -> State:
         """Run for ``duration`` [s], releasing the model's dynamic factories on their schedules.
@@ -639,10 +639,10 @@ class Solver:
         want = max(target - done, 0)
         if want == 0:
             return
-        x_all = state.sphere_x.numpy()
-        active = state.sphere_active.numpy().astype(bool)
-        radius = m.sphere_radius.numpy()
-        world_of = m.sphere_world.numpy()
+        x_all = host(state.sphere_x)
+        active = host(state.sphere_active).astype(bool)
+        radius = host(m.sphere_radius)
+        world_of = host(m.sphere_world)
         per_world = m.sphere_count // m.world_count
         clumps_per_world = max(m.clump_count // m.world_count, 0)
         placed = None
@@ -686,10 +686,10 @@ class Solver:
         An overflow drops contacts, so spheres may pass into each other and blow up; a sphere that blew up
         may also crowd into others and overflow their lists: when both are flagged the message gives both.
         """
-        blow = self._buffers.blowup.numpy()
-        self.step_margin = 0.5 * self.dt * math.sqrt(max(float(self._buffers.stiffness_max.numpy()[0]), 0.0))
+        blow = host(self._buffers.blowup)
+        self.step_margin = 0.5 * self.dt * math.sqrt(max(float(host(self._buffers.stiffness_max)[0]), 0.0))
         self.step_margin_max = max(self.step_margin_max, self.step_margin)
-        flags = int(contacts.overflow.numpy()[0])
+        flags = int(host(contacts.overflow)[0])
         dropped = ""
         if flags:
             what = []
@@ -700,7 +700,7 @@ class Solver:
             dropped = f"contact capacity exceeded ({', '.join(what)}): contacts were dropped; raise it in SolverOptions"
         if blow[1] != _st.BLOWUP_NONE:
             i = int(blow[0])
-            world = int(self.model.sphere_world.numpy()[i])
+            world = int(host(self.model.sphere_world)[i])
             cause = f"; also {dropped}" if dropped else ""
             raise SimulationError(
                 f"blow-up at step {int(blow[1])}: sphere {i} (world {world}) has a non-finite state or a speed "

@@ -16,7 +16,20 @@ import warp as wp
 
 from warpdem.kernels.enums import ContactLaw, Overflow, RollingModel
 
-__all__ = ["ContactLaw", "Contacts", "Control", "Model", "Overflow", "RollingModel", "State"]
+__all__ = ["ContactLaw", "Contacts", "Control", "Model", "Overflow", "RollingModel", "State", "host"]
+
+
+def host(a: wp.array) -> np.ndarray:
+    """``a`` on the host as a NumPy array (on the CPU a view, on CUDA a copy). On CUDA the copy runs on the
+    device's current stream and waits for that stream only: Warp's ``array.numpy()`` copies on the legacy
+    default stream, which waits for every stream of the device, and would make the launches that
+    ``runner.run_together`` runs side by side wait for one another at each read."""
+    if not a.device.is_cuda:
+        return a.numpy()
+    out = wp.empty(a.shape, dtype=a.dtype, device="cpu")
+    wp.copy(out, a)
+    wp.synchronize_stream(a.device.stream)
+    return out.numpy()
 
 
 @dataclass

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from warpdem.engine.types import host
+
 from . import measure as ms
 from .stage import SceneSpec, StageError, build, unload_keyframes
 
@@ -33,37 +35,37 @@ class RunResult:
 def _host(model):
     """Host copies of the static arrays the recorder needs."""
     h = {
-        "radius": model.sphere_radius.numpy().astype(np.float64),
-        "world": model.sphere_world.numpy(),
-        "clump": model.sphere_clump.numpy(),
-        "glued": model.sphere_wall.numpy(),
-        "material": model.sphere_material.numpy(),
+        "radius": host(model.sphere_radius).astype(np.float64),
+        "world": host(model.sphere_world),
+        "clump": host(model.sphere_clump),
+        "glued": host(model.sphere_wall),
+        "material": host(model.sphere_material),
     }
-    dens = model.material_density.numpy()
+    dens = host(model.material_density)
     w_of = h["world"] % dens.shape[0]
     h["density"] = dens[w_of, h["material"]]
-    h["mass"] = h["density"] * model.sphere_body_volume.numpy()
+    h["mass"] = h["density"] * host(model.sphere_body_volume)
     h["free"] = (h["clump"] < 0) & (h["glued"] < 0)
     if model.clump_count:
-        cd = dens[model.clump_world.numpy() % dens.shape[0], model.clump_material.numpy()]
-        h["clump_mass"] = cd * model.clump_volume.numpy()
-        h["clump_world"] = model.clump_world.numpy()
+        cd = dens[host(model.clump_world) % dens.shape[0], host(model.clump_material)]
+        h["clump_mass"] = cd * host(model.clump_volume)
+        h["clump_world"] = host(model.clump_world)
     return h
 
 
 def _kinetic_energy(model, state, h) -> np.ndarray:
     """Mean translational kinetic energy per active particle [J] in each world, shape (world_count,)."""
     W = model.world_count
-    act = state.sphere_active.numpy().astype(bool)
-    v = state.sphere_v.numpy()
+    act = host(state.sphere_active).astype(bool)
+    v = host(state.sphere_v)
     sel = act & h["free"]
     e = np.zeros(W)
     n = np.zeros(W)
     np.add.at(e, h["world"][sel], 0.5 * h["mass"][sel] * np.sum(v[sel] ** 2, axis=1))
     np.add.at(n, h["world"][sel], 1)
     if model.clump_count:
-        cv = state.clump_v.numpy()
-        first = model.clump_sphere_start.numpy()
+        cv = host(state.clump_v)
+        first = host(model.clump_sphere_start)
         cact = act[first]
         np.add.at(e, h["clump_world"][cact], 0.5 * h["clump_mass"][cact] * np.sum(cv[cact] ** 2, axis=1))
         np.add.at(n, h["clump_world"][cact], 1)
@@ -72,7 +74,7 @@ def _kinetic_energy(model, state, h) -> np.ndarray:
 
 def _particle_mask(state, h, world: int) -> np.ndarray:
     """Mask of the active particle spheres (glued ones excluded) of ``world``, shape (sphere_count,)."""
-    return state.sphere_active.numpy().astype(bool) & (h["glued"] < 0) & (h["world"] == world)
+    return host(state.sphere_active).astype(bool) & (h["glued"] < 0) & (h["world"] == world)
 
 
 def _mean_diameter(h, world: int) -> float:
@@ -83,32 +85,32 @@ def _mean_diameter(h, world: int) -> float:
 def _particles(model, state, h, world: int):
     """Centres (n, 3) and radii (n,) of the active particle spheres (glued ones excluded) of ``world``."""
     sel = _particle_mask(state, h, world)
-    return state.sphere_x.numpy()[sel].astype(np.float64), h["radius"][sel]
+    return host(state.sphere_x)[sel].astype(np.float64), h["radius"][sel]
 
 
 def _frame(writer, model, state, h, spec, t):
     """Hand world 0 of ``state`` to the results writer."""
-    act = state.sphere_active.numpy().astype(bool)
-    x, v = state.sphere_x.numpy(), state.sphere_v.numpy()
+    act = host(state.sphere_active).astype(bool)
+    x, v = host(state.sphere_x), host(state.sphere_v)
     loose = act & (h["clump"] < 0) & (h["world"] == 0)
     kw = dict(sphere_x=x[loose], sphere_r=h["radius"][loose], sphere_id=np.flatnonzero(loose), sphere_v=v[loose])
     if model.clump_count:
-        first = model.clump_sphere_start.numpy()
+        first = host(model.clump_sphere_start)
         sel = act[first] & (h["clump_world"] == 0)
         ids = np.flatnonzero(sel)
         kw.update(
-            clump_x=state.clump_x.numpy()[sel],
-            clump_q=state.clump_q.numpy()[sel],
+            clump_x=host(state.clump_x)[sel],
+            clump_q=host(state.clump_q)[sel],
             clump_shape=np.asarray(model.clump_template)[sel],
             clump_scale=np.asarray(model.clump_scale)[sel],
             clump_id=ids,
-            clump_v=state.clump_v.numpy()[sel],
+            clump_v=host(state.clump_v)[sel],
         )
     if model.wall_count:
-        kw["wall_pose"] = state.wall_pose.numpy()[: model.wall_count]
-        counts = state.face_impact_count.numpy()[0]
-        energy = state.face_impact_energy.numpy()[0]
-        start = model.wall_face_start.numpy()
+        kw["wall_pose"] = host(state.wall_pose)[: model.wall_count]
+        counts = host(state.face_impact_count)[0]
+        energy = host(state.face_impact_energy)[0]
+        start = host(model.wall_face_start)
         kw["face_impacts"] = [counts[start[k] : start[k + 1]] for k in range(model.wall_count)]
         kw["face_energy"] = [energy[start[k] : start[k + 1]].astype(np.float32) for k in range(model.wall_count)]
     writer.add_frame(t, **kw)
@@ -119,10 +121,10 @@ def _world_walls(model, state):
     from .export import quat_to_matrix
 
     out = []
-    poses = state.wall_pose.numpy()
+    poses = host(state.wall_pose)
     for k, mesh in enumerate(model.wall_meshes):
-        v = mesh.points.numpy().astype(np.float64)
-        t = mesh.indices.numpy().reshape(-1, 3)
+        v = host(mesh.points).astype(np.float64)
+        t = host(mesh.indices).reshape(-1, 3)
         R = quat_to_matrix(poses[k, 3:7][None, :])[0]
         out.append((v @ R.T + poses[k, :3], t))
     return out
@@ -374,8 +376,7 @@ def run_scene_iter(
         from .export import ResultWriter, ShapeGeometry, WallGeometry
 
         walls = [
-            WallGeometry(n, m.points.numpy(), m.indices.numpy().reshape(-1, 3))
-            for n, m in zip(names, model.wall_meshes)
+            WallGeometry(n, host(m.points), host(m.indices).reshape(-1, 3)) for n, m in zip(names, model.wall_meshes)
         ]
         shapes = [ShapeGeometry.from_template(t) for t in model.clump_templates]
         writer = ResultWriter(out, walls, shapes, usd_name="result.usdc")
@@ -398,7 +399,7 @@ def run_scene_iter(
     }
     if piston is not None:
         series.update(piston_z=[], piston_force=[], bed_top=[])
-    impulse_prev = state.wall_impulse.numpy().copy()
+    impulse_prev = host(state.wall_impulse).copy()
     t_prev = 0.0
     stop_reason = "duration"
     # RunSpec: settled when every world stays below settle_energy for three outputs in a row
@@ -442,7 +443,7 @@ def run_scene_iter(
         series["rebuilds"].append(rebuilds)
         series["dt_s"].append(solver.dt)
         series["step_margin"].append(solver.step_margin)
-        imp = state.wall_impulse.numpy()
+        imp = host(state.wall_impulse)
         force = (imp - impulse_prev) / max(t - t_prev, 1e-300)
         impulse_prev, t_prev = imp.copy(), t
         ke = _kinetic_energy(model, state, h)
@@ -452,7 +453,7 @@ def run_scene_iter(
         series["kinetic_energy"].append(ke.tolist())
         series["wall_force"].append(force[:, 2].tolist())
         if piston is not None:
-            series["piston_z"].append(float(state.wall_pose.numpy()[piston, 2]))
+            series["piston_z"].append(float(host(state.wall_pose)[piston, 2]))
             series["piston_force"].append(float(force[planes + piston, 2]))
             xb, rb = _particles(model, state, h, 0)
             series["bed_top"].append(float(np.percentile(xb[:, 2] + rb, 99)) if len(rb) else 0.0)
@@ -460,9 +461,9 @@ def run_scene_iter(
             if abs(t - te) <= eps and len(phase_snap) < len(phase_ends):
                 phase_snap.append(
                     {
-                        "count": state.face_impact_count.numpy().copy(),
-                        "energy": state.face_impact_energy.numpy().copy(),
-                        "speed": state.face_impact_speed.numpy().copy(),
+                        "count": host(state.face_impact_count).copy(),
+                        "energy": host(state.face_impact_energy).copy(),
+                        "speed": host(state.face_impact_speed).copy(),
                     }
                 )
                 state.reset_impacts()
@@ -524,7 +525,7 @@ def run_scene_iter(
 
     # the scalar metrics each kind writes are listed in MEASURE_METRICS and METRIC_NEEDS: keep them in step
     metrics = []
-    removed = state.world_removed.numpy()
+    removed = host(state.world_removed)
     for w in range(W):
         # removed: bodies that left the scene's domain (e.g. rolled off the plate's edge)
         mw = {"world": w, "time_s": state.time, "stop": stop_reason, "removed": int(removed[w])}
@@ -657,13 +658,13 @@ def _save_checkpoint(path: Path, fingerprint: str, state, contacts, book: dict) 
     renamed (a crash while saving leaves the previous checkpoint whole). Flags a list rebuild, which a
     resumed run repeats, so both continue from identical lists."""
     contacts.rebuild.fill_(1)
-    arrays = {f"state.{k}": v.numpy() for k, v in _device_arrays(state).items()}
+    arrays = {f"state.{k}": host(v) for k, v in _device_arrays(state).items()}
     # list slots past the longest list are never read (a rebuild follows the load): keep only the used rows
-    used = {k: int(getattr(contacts, f"{k}_count").numpy().max(initial=0)) for k in ("neighbor", "mesh")}
+    used = {k: int(host(getattr(contacts, f"{k}_count")).max(initial=0)) for k in ("neighbor", "mesh")}
     for k, v in _device_arrays(contacts).items():
         group = k.split("_")[0]
         rows = used.get(group) if v.ndim == 2 and k != f"{group}_count" else None
-        arrays[f"contacts.{k}"] = v.numpy()[:rows] if rows is not None else v.numpy()
+        arrays[f"contacts.{k}"] = host(v)[:rows] if rows is not None else host(v)
     arrays["book.impulse_prev"] = np.asarray(book["impulse_prev"])
     for i, snap in enumerate(book["phase_snap"]):
         for k, v in snap.items():
@@ -732,14 +733,14 @@ def _json_default(o):
 
 def _discharged_mass(model, state, h, outlet_height: float) -> np.ndarray:
     """Mass [kg] of the bodies below ``outlet_height`` [m] (by their centres) in each world, shape (world_count,)."""
-    act = state.sphere_active.numpy().astype(bool)
-    x = state.sphere_x.numpy()
+    act = host(state.sphere_active).astype(bool)
+    x = host(state.sphere_x)
     out = np.zeros(model.world_count)
     sel = act & h["free"] & (x[:, 2] < outlet_height)
     np.add.at(out, h["world"][sel], h["mass"][sel])
     if model.clump_count:
-        cx = state.clump_x.numpy()
-        csel = act[model.clump_sphere_start.numpy()[: len(cx)]] & (cx[:, 2] < outlet_height)
+        cx = host(state.clump_x)
+        csel = act[host(model.clump_sphere_start)[: len(cx)]] & (cx[:, 2] < outlet_height)
         np.add.at(out, h["clump_world"][csel], h["clump_mass"][csel])
     return out
 
@@ -759,7 +760,7 @@ def _packing_metrics(model, state, h, w: int, m) -> dict:
     sel = _particle_mask(state, h, w)
     if not sel.any():
         return {"packing_error": "no particles in the container"}
-    x, r, rho = state.sphere_x.numpy()[sel].astype(np.float64), h["radius"][sel], h["density"][sel]
+    x, r, rho = host(state.sphere_x)[sel].astype(np.float64), h["radius"][sel], h["density"][sel]
     try:
         base = m.base_height if m.packing_base is None else m.packing_base
         core = ms.packing_core(x, r, m.center, m.packing_radius, base, m.packing_margin)
@@ -890,7 +891,7 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
 
 def _piston_radius(model, name) -> float:
     k = list(model.wall_names).index(name)
-    v = model.wall_meshes[k].points.numpy()
+    v = host(model.wall_meshes[k].points)
     return float(np.hypot(v[:, 0], v[:, 1]).max())
 
 
@@ -898,7 +899,7 @@ def _impact_metrics(model, names, m, snaps, w) -> dict:
     """Per phase and wall: impact summary from the snapshots taken at each phase end."""
     from warpdem.engine.geometry import face_areas
 
-    start = model.wall_face_start.numpy()
+    start = host(model.wall_face_start)
     out = {}
     for name, snap in zip(m.phase_names, snaps):
         phase = {}
@@ -906,7 +907,7 @@ def _impact_metrics(model, names, m, snaps, w) -> dict:
             k = names.index(wall)
             sl = slice(start[k], start[k + 1])
             mesh = model.wall_meshes[k]
-            area = face_areas(mesh.points.numpy().astype(np.float64), mesh.indices.numpy().reshape(-1, 3))
+            area = face_areas(host(mesh.points).astype(np.float64), host(mesh.indices).reshape(-1, 3))
             s = ms.impact_summary(snap["count"][w, sl], snap["energy"][w, sl], snap["speed"][w, sl], face_area=area)
             # per-face arrays live in the USD primvars and impacts.npz; metrics.json keeps the summary
             phase[wall] = {k: v for k, v in s.items() if not (isinstance(v, (list, np.ndarray)) and len(v) > 10)}
@@ -922,15 +923,15 @@ def _impact_metrics(model, names, m, snaps, w) -> dict:
 def _final_npz(out: Path, model, state, h) -> dict:
     """final.npz: world 0's particle spheres (glued ones flagged) and the walls at the end, enough to redraw
     the pile and re-measure it without rerunning."""
-    act = state.sphere_active.numpy().astype(bool)
+    act = host(state.sphere_active).astype(bool)
     sel = act & (h["world"] == 0)
     walls = _world_walls(model, state)
-    arrays = {"sphere_x": state.sphere_x.numpy()[sel], "sphere_r": h["radius"][sel], "sphere_glued": h["glued"][sel]}
+    arrays = {"sphere_x": host(state.sphere_x)[sel], "sphere_r": h["radius"][sel], "sphere_glued": h["glued"][sel]}
     for k, (v, t) in enumerate(walls):
         arrays[f"wall{k}_vertices"] = v
         arrays[f"wall{k}_triangles"] = t
     arrays["wall_names"] = np.asarray(model.wall_names)
-    arrays["wall_pose"] = state.wall_pose.numpy()
+    arrays["wall_pose"] = host(state.wall_pose)
     np.savez_compressed(out / "final.npz", **arrays)
     return {"final_npz": str(out / "final.npz")}
 
@@ -941,13 +942,13 @@ def _pictures(out: Path, spec, model, state, h, result) -> dict:
 
     files = {}
     x, r = _particles(model, state, h, 0)
-    act = state.sphere_active.numpy().astype(bool)
+    act = host(state.sphere_active).astype(bool)
     # a coating is drawn where it stayed: on a wall that moved (a lifted cylinder) it would hide the pile
-    poses = state.wall_pose.numpy()
+    poses = host(state.wall_pose)
     still = np.all(np.abs(poses[:, :6]) < 1e-9, axis=1) if model.wall_count else np.zeros(0, bool)
     glued = act & (h["glued"] >= 0) & (h["world"] == 0)
     glued &= np.isin(h["glued"], np.flatnonzero(still))
-    xs = np.concatenate([x, state.sphere_x.numpy()[glued]])
+    xs = np.concatenate([x, host(state.sphere_x)[glued]])
     rs = np.concatenate([r, h["radius"][glued]])
     walls = _world_walls(model, state)
     m0 = result.metrics[0]
