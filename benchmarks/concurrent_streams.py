@@ -45,7 +45,8 @@ for e in syn.funnel_experiments() * a.copies:
     jobs.append({"id": e["id"], "solver": solver, "state": state, "contacts": contacts, "stream": wp.Stream(dev)})
 
 for j in jobs:
-    j["graph"] = j["solver"]._graph[1][0]
+    block = j["solver"].cuda_graph_steps
+    j["graph"] = next(v[0][0] for k, v in j["solver"]._graph.items() if k[-1] == block)
     j["steps"] = a.blocks * j["solver"].cuda_graph_steps
 
 

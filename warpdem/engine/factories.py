@@ -910,7 +910,7 @@ class _SizeBinnedTrees:
             # The nearest centre alone settles most proposals (always, for equal radii in the band): it
             # clashes if closer than a + r_min and no centre can clash if it is beyond a + r_max.
             reach = float(a[rows].max()) + r_max
-            d1, _ = tree.query(p[rows], k=1, distance_upper_bound=reach, workers=-1)
+            d1, _ = tree.query(p[rows], k=1, distance_upper_bound=reach, workers=_workers(len(rows)))
             ok[rows[d1 < a[rows] + r_min]] = False
             rows = rows[(d1 >= a[rows] + r_min) & (d1 < a[rows] + r_max)]
             if len(rows) == 0:
@@ -918,7 +918,7 @@ class _SizeBinnedTrees:
             q, qa = p[rows], a[rows]
             n = len(x)
             k = min(self.k, n)
-            d, j = tree.query(q, k=k, distance_upper_bound=float(qa.max()) + r_max, workers=-1)
+            d, j = tree.query(q, k=k, distance_upper_bound=float(qa.max()) + r_max, workers=_workers(len(q)))
             d, j = d.reshape(len(q), k), j.reshape(len(q), k)
             clash = np.any(d < qa[:, None] + r_ext[j], axis=1)
             ok[rows[clash]] = False
@@ -930,6 +930,13 @@ class _SizeBinnedTrees:
                 if near and np.any(np.linalg.norm(x[near] - q[row], axis=1) < qa[row] + r_ext[near]):
                     ok[rows[row]] = False
         return ok
+
+
+def _workers(queries: int) -> int:
+    """Threads for a k-d tree query of ``queries`` points: SciPy starts its threads at every call, which for the
+    few dozen proposals of a dynamic factory's release cost more than the query (113,000 threads, a third of a
+    GPU launch's wall time, in three lab-size funnel launches); the answer is the same either way."""
+    return -1 if queries >= 16384 else 1
 
 
 def _check_existing(where: str, existing_x, existing_r) -> tuple[np.ndarray, np.ndarray]:

@@ -192,7 +192,9 @@ class Solver:
         # host copy of the rebuild flag, read between captured steps on CUDA (pinned: an async 4-byte copy)
         self._is_cuda = wp.get_device(model.device).is_cuda
         self._flag_host = wp.empty(1, dtype=int, device="cpu", pinned=self._is_cuda)
-        self._graph = None
+        # captured graphs by (twin states, contacts, control, kind), with those objects kept alive: an id is
+        # never reused while its graphs are kept; emptied at a change of step
+        self._graph: dict = {}
         self.cuda_graph_steps = CUDA_GRAPH_STEPS
         """Steps per replayed CUDA graph (even); 0 reads the rebuild flag on the host every step instead."""
 
@@ -424,7 +426,7 @@ class Solver:
         done = 0
         # the first step runs eagerly: it applies the half kick (or the kick across a change of step), which a
         # replayed step does not
-        if not a.half_step or self._kick_next is not None or (use_graph and self._graph is None):
+        if not a.half_step or self._kick_next is not None or (use_graph and not self._graph):
             self._step(a, b, control, contacts)
             a, b = b, a
             done = 1
@@ -444,13 +446,21 @@ class Solver:
                         stacklevel=2,
                     )
                     self.cuda_graph_steps = 0
-                    self._graph = graph = None
+                    self._graph, graph = {}, None
                 if graph is not None:
                     blocks = (steps - done) // block
                     for _ in range(blocks):
                         wp.capture_launch(graph)
                     done += blocks * block
-            # the remainder (fewer than a block) is stepped eagerly below, parity kept
+            if self.cuda_graph_steps and steps - done >= 2:
+                # the remainder in pairs: a run ends at an output tick or a release, so each has a remainder, and
+                # stepped eagerly it cost the host more than the blocks (15 launches a step)
+                (pair,) = self._graphs(a, b, contacts, control, 2, lambda: self._alternate(a, b, 2, control, contacts))
+                pairs = (steps - done) // 2
+                for _ in range(pairs):
+                    wp.capture_launch(pair)
+                done += 2 * pairs
+            # the last step of an odd remainder is stepped eagerly below, parity kept
             a.time = t0 + done * self.dt
             a.step = step0 + done
         if use_graph and self._is_cuda and not self.cuda_graph_steps:
@@ -506,11 +516,11 @@ class Solver:
             self._step(src, dst, control, contacts)
 
     def _graphs(self, a: State, b: State, contacts: Contacts, control: Control | None, kind, *records) -> list:
-        """The graphs last captured for these twin states, contacts, control and ``kind`` of replay, else one
+        """The graphs captured for these twin states, contacts, control and ``kind`` of replay, else one
         captured per recording function (each launches steps between ``a`` and ``b``). Recording also advances
         the states' host-side times and step counts: they are put back, since a replay does not advance them."""
         key = (id(a), id(b), id(contacts), id(control), kind)
-        if self._graph is None or self._graph[0] != key:
+        if key not in self._graph:
             a.half_step = b.half_step = True
             graphs = []
             for record in records:
@@ -521,8 +531,8 @@ class Solver:
                 finally:
                     a.time, a.step, b.time, b.step = times
                 graphs.append(cap.graph)
-            self._graph = (key, graphs)
-        return self._graph[1]
+            self._graph[key] = (graphs, (a, b, contacts, control))
+        return self._graph[key][0]
 
     def release(
         self, state: State, contacts: Contacts, sphere_index, sphere_x, sphere_v, clump_index, clump_x, clump_q, clump_v
@@ -597,7 +607,7 @@ class Solver:
         self.dt_level = int(saved["level"])
         self.dt = self.dt_base / 2.0**self.dt_level
         self.step_margin, self.step_margin_max = saved["margin"], float(saved["margin_max"])
-        self._kick_next, self._graph = None, None
+        self._kick_next, self._graph = None, {}
 
     def set_dt_level(self, level: int) -> None:
         """Step at ``dt_base / 2**level`` from the next step on; that step's kick spans half of the old step and
@@ -609,7 +619,7 @@ class Solver:
         self.dt = self.dt_base / 2.0**level
         self.step_margin = None if self.step_margin is None else self.step_margin * self.dt / dt_old
         self._kick_next = 0.5 * (dt_old + self.dt)
-        self._graph = None
+        self._graph = {}
 
     def _next_release(self, state: State, f: int) -> float | None:
         """Time of factory f's next release [s], or None once it released everything."""
