@@ -96,16 +96,42 @@ def funnel_experiments(count_at_2mm: int = 1500, pour_time: float = 0.75) -> lis
 def funnel_data(exps: list[dict], rig: dict, overrides: dict, device: str, seed: int) -> list[dict]:
     """Rows of the funnel case: the worlds of each experiment of ``exps`` with the rig parameters ``rig`` (the
     hidden setting among them or among ``overrides``) at :data:`DATA_SEEDS`, plus :data:`FUNNEL_NOISE_SD` noise
-    drawn from ``seed``; prints each experiment's simulated values."""
+    drawn from ``seed``; the experiments' launches run side by side on a GPU (``runner.run_together``). Prints
+    each experiment's simulated values."""
     import time
 
-    values = []
-    for e in exps:
-        t0 = time.perf_counter()
-        rig_e = {**FUNNEL_FIXED, **rig, **{k: e[k] for k in ("particle_radius", "count", "rate")}}
-        values.append(run_worlds("funnel", False, rig_e, overrides, DATA_SEEDS, device))
-        seen = {r: [round(m.get(r, np.nan), 4) for m in values[-1]] for r in FUNNEL_NOISE_SD}
-        print(f"data {e['id']}: {seen} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    import warp as wp
+
+    from warpdem.scene import rigs
+    from warpdem.scene.runner import run_scene_iter, run_together
+    from warpdem.scene.stage import apply_overrides
+    from warpdem.study.execute import SIDE_BY_SIDE_SPHERES
+
+    seeds = list(DATA_SEEDS)
+    scenes = [
+        apply_overrides(
+            rigs.spec("funnel", {**FUNNEL_FIXED, **rig, **{k: e[k] for k in ("particle_radius", "count", "rate")}}),
+            overrides,
+        )
+        for e in exps
+    ]
+    t0 = time.perf_counter()
+    outcomes = run_together(
+        [
+            lambda s=s: run_scene_iter(s, device, world_count=len(seeds), world_seeds=seeds, frames=False, quiet=True)
+            for s in scenes
+        ],
+        device,
+        SIDE_BY_SIDE_SPHERES if wp.get_device(device).is_cuda else 0,
+    )
+    for o in outcomes:
+        if isinstance(o, BaseException):
+            raise o
+    values = [o.metrics for o in outcomes]
+    for e, v in zip(exps, values):
+        seen = {r: [round(m.get(r, np.nan), 4) for m in v] for r in FUNNEL_NOISE_SD}
+        print(f"data {e['id']}: {seen}", flush=True)
+    print(f"data: {len(exps)} launches in {time.perf_counter() - t0:.0f} s", flush=True)
     return noisy_rows(exps, values, FUNNEL_NOISE_SD, np.random.default_rng(seed))
 
 
