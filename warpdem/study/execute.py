@@ -18,7 +18,9 @@ together; the launch checkpoints its whole state every minute (``OUT/launches/<i
 rerun resumes it from there, bit-identical to an uninterrupted launch; ``[study] batch`` caps the worlds
 per launch.
 
-Several devices (``device="cuda:0,cuda:1"``, ``"cuda:all"``, or ``"cpu,cpu"`` for two CPU processes) split
+On one CUDA device the launches run side by side, a CUDA stream each, up to :data:`SIDE_BY_SIDE_SPHERES`
+together (:func:`_run_on_device`); on the CPU one after another. Several devices (``device="cuda:0,cuda:1"``,
+``"cuda:all"``, or ``"cpu,cpu"`` for two CPU processes) split
 each group of runs into one launch per device, as even as the runs allow; each device runs its launches in
 a process of its own (spawned, so every process owns its CUDA context and Warp's CPU kernels, which run on
 one thread each, use one core each). Launch ids hash the point ids, so a resumed study must keep the
