@@ -1322,3 +1322,12 @@ def test_launches_run_together_as_they_run_alone(tmp_path):
         xa = np.load(tmp_path / f"alone{k}" / "final.npz")["sphere_x"]
         xt = np.load(tmp_path / f"together{k}" / "final.npz")["sphere_x"]
         assert np.array_equal(xa, xt)
+
+
+def test_a_pile_with_no_particles_is_an_error_in_its_metrics_not_a_crash():
+    """A funnel run that ends before its factory's first release has no particles to measure: each world's
+    metrics say so (angle_error, 0 particles) and the launch's other worlds are not lost to an exception."""
+    spec = rigs.spec("funnel", {"count": 60, "duration": 0.005}, smoke=True)
+    res = runner.run_scene(spec, frames=False, world_count=2)
+    for m in res.metrics:
+        assert m["particles"] == 0 and m["pile_height_m"] == 0.0 and "angle_error" in m

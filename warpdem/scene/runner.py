@@ -532,7 +532,7 @@ def run_scene_iter(
         if m.kind == "angle_of_repose":
             x, r = _particles(model, state, h, w)
             # what rolled off the base is not part of the pile
-            keep = x[:, 2] - r > m.base_height - 2 * r.max()
+            keep = x[:, 2] - r > m.base_height - 2 * r.max(initial=0.0)
             x, r = x[keep], r[keep]
             # nor is what sticks to a lifted wall or is still in the air
             on = ms.pile_spheres(x, r, base_z=m.base_height) if len(r) else np.zeros(0, bool)
