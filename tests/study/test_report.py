@@ -96,6 +96,8 @@ def test_bbd_report_files_anova_and_target(bbd_report):
         "contour_aor_deg_D_E.png",
         "surface_aor_deg_C_D.png",
         "optimum_aor_deg.csv",
+        "diagnostics_aor_deg.png",
+        "residuals_vs_factors_aor_deg.png",
     }
     assert set(res["files"]) == expected
     for name in expected:
@@ -151,8 +153,14 @@ def test_bbd_report_files_anova_and_target(bbd_report):
         "seed 000 Table 10",
         "Reversed coding",
         fit.equation_string("coded", 6),
+        "### Diagnostics",
+        "Cook's distance:",
+        "Box-Cox: ln(residual SS) stays inside its confidence limit",
+        "(diagnostics_aor_deg.png)",
     ):
         assert text in md, text
+    d = r["diagnostics"]
+    assert d["lines"]["cooks_line"] == pytest.approx(4 / 17) and d["lines"]["leverage_line"] == pytest.approx(20 / 17)
 
 
 def test_ccd_report_alpha_two_lack_of_fit(ccd_report):

@@ -46,10 +46,13 @@ __all__ = [
     "ModelFit",
     "TargetSolution",
     "backward_eliminate",
+    "box_cox",
     "effects_table",
     "fit_model",
+    "influence",
     "lenth_pse",
     "model_terms",
+    "outlier_limit",
     "parse_term",
     "response_range",
     "solve_target",
@@ -733,3 +736,101 @@ def solve_target(
     return TargetSolution(
         float(target), bool(reachable), chosen, chosen_actual, family, rule, b, (float(vmin), float(vmax))
     )
+
+
+# --------------------------------------------------------------------------------------------
+# Diagnostics (Design-Expert's diagnostics node)
+# --------------------------------------------------------------------------------------------
+
+BOX_COX_STANDARD = {-1.0: "inverse", -0.5: "inverse square root", 0.0: "ln", 0.5: "square root", 1.0: "none"}
+"""The power transforms Design-Expert recommends by name, by their lambda."""
+
+
+def influence(fit: ModelFit) -> pd.DataFrame:
+    """Per-run diagnostics of ``fit`` from statsmodels' OLSInfluence, one row per run used (in the fit's order):
+    ``actual``, ``predicted``, ``residual``, ``leverage``, ``studentized`` (internally), ``externally_studentized``
+    (Design-Expert's "externally studentized residual", R-Student), ``cooks_distance`` and ``dffits``."""
+    import warnings
+
+    with warnings.catch_warnings():
+        # a run of leverage 1 (a saturated corner) has no studentized residual: NaN, said by the readings
+        warnings.simplefilter("ignore")
+        inf = fit.ols.get_influence()
+        return pd.DataFrame(
+            {
+                "actual": np.asarray(fit.ols.model.endog, dtype=float),
+                "predicted": np.asarray(fit.ols.fittedvalues, dtype=float),
+                "residual": np.asarray(fit.ols.resid, dtype=float),
+                "leverage": inf.hat_matrix_diag,
+                "studentized": inf.resid_studentized_internal,
+                "externally_studentized": inf.resid_studentized_external,
+                "cooks_distance": inf.cooks_distance[0],
+                "dffits": inf.dffits[0],
+            }
+        )
+
+
+def outlier_limit(fit: ModelFit, alpha: float = 0.05) -> float:
+    """Bonferroni limit of the externally studentized residuals: t(1 - alpha / 2n, n - p - 1), as Design-Expert
+    draws it on its residual plots."""
+    n, p = int(fit.ols.nobs), int(fit.ols.df_model) + 1
+    return float(stats.t.ppf(1.0 - alpha / (2 * n), max(n - p - 1, 1)))
+
+
+def box_cox(fit: ModelFit, alpha: float = 0.05, lambdas=None) -> dict:
+    """Box-Cox plot of ``fit``'s model: the residual sum of squares of the same model fitted to the transformed
+    response y(lambda) = (y^lambda - 1) / (lambda g^(lambda-1)) (g y ln y at lambda = 0; g the geometric mean,
+    which makes the sums comparable across lambda), its minimum lambda_hat and the confidence interval
+    SS* = SS(lambda_hat) (1 + t^2(alpha/2, df) / df) (Box and Cox 1964; Montgomery, Design and Analysis of
+    Experiments, 15.1.1), df the residual degrees of freedom.
+
+    Returns ``lambdas`` (the plotted grid), ``ln_ss``, ``lambda_hat``, ``interval`` (low, high; an end is None
+    where the interval runs past the grid), ``ln_ss_limit``, ``recommended`` (the name of the standard transform
+    in the interval nearest lambda_hat, "none" when the interval holds 1, else "power") and ``lambda_recommended``;
+    or ``error`` when a response is not positive (add a constant first).
+    """
+    y = np.asarray(fit.ols.model.endog, dtype=float)
+    X = np.asarray(fit.ols.model.exog, dtype=float)
+    if np.any(y <= 0):
+        return {"error": f"the response has values <= 0 (min {y.min():.4g}): Box-Cox needs positive values"}
+    g = float(np.exp(np.mean(np.log(y))))
+    df = int(round(fit.ols.df_resid))
+
+    def ss(lam: float) -> float:
+        z = g * np.log(y) if abs(lam) < 1e-9 else (y**lam - 1.0) / (lam * g ** (lam - 1.0))
+        beta, *_ = np.linalg.lstsq(X, z, rcond=None)
+        return float(np.sum((z - X @ beta) ** 2))
+
+    grid = np.linspace(-3.0, 3.0, 121) if lambdas is None else np.asarray(lambdas, dtype=float)
+    ln_ss = np.log([ss(lam) for lam in grid])
+    k = int(np.argmin(ln_ss))
+    lo_b, hi_b = grid[max(k - 1, 0)], grid[min(k + 1, len(grid) - 1)]
+    lam_hat = float(optimize.minimize_scalar(lambda v: np.log(ss(v)), bounds=(lo_b, hi_b), method="bounded").x)
+    limit = float(np.log(ss(lam_hat)) + np.log1p(stats.t.ppf(1 - alpha / 2, df) ** 2 / df)) if df > 0 else math.inf
+
+    def edge(a: float, b: float):
+        # the lambda between a (inside) and b where ln SS crosses the limit, None if it does not within the grid
+        if np.log(ss(b)) <= limit:
+            return None
+        return float(optimize.brentq(lambda v: np.log(ss(v)) - limit, a, b))
+
+    interval = (edge(lam_hat, float(grid[0])), edge(lam_hat, float(grid[-1])))
+    low = -math.inf if interval[0] is None else interval[0]
+    high = math.inf if interval[1] is None else interval[1]
+    inside = [lam for lam in BOX_COX_STANDARD if low <= lam <= high]
+    if 1.0 in inside:
+        rec, lam_rec = "none", 1.0
+    elif inside:
+        lam_rec = min(inside, key=lambda v: abs(v - lam_hat))
+        rec = BOX_COX_STANDARD[lam_rec]
+    else:
+        rec, lam_rec = "power", lam_hat
+    return {
+        "lambdas": grid,
+        "ln_ss": ln_ss,
+        "lambda_hat": lam_hat,
+        "interval": interval,
+        "ln_ss_limit": limit,
+        "recommended": rec,
+        "lambda_recommended": lam_rec,
+    }

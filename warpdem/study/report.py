@@ -35,9 +35,12 @@ from .analysis import (
     Term,
     _columns,
     backward_eliminate,
+    box_cox,
     effects_table,
     fit_model,
+    influence,
     model_terms,
+    outlier_limit,
     solve_target,
     term_label,
 )
@@ -459,6 +462,200 @@ def _fit_response(
     return fit, fallback
 
 
+def diagnostics(fit: ModelFit, runs: Sequence, alpha: float = 0.05) -> dict:
+    """Design-Expert's diagnostics of ``fit`` (runs: the run numbers of its rows, in order): the per-run table
+    (:func:`analysis.influence`), the Box-Cox result, the runs past each line and one reading per plot.
+
+    Lines: externally studentized residuals beyond the Bonferroni limit (:func:`analysis.outlier_limit`);
+    Cook's distance above 4/n; leverage above 2p/n; |DFFITS| above 2 sqrt(p/n). Readings also test the
+    residuals' normality (Shapiro-Wilk), a trend with run order (Spearman) and an uneven spread across each
+    factor's levels (Brown-Forsythe), each at ``alpha``. ``notes`` holds what the report's notes should repeat."""
+    tab = influence(fit)
+    n, p = len(tab), int(fit.ols.df_model) + 1
+    runs = np.asarray(list(runs))
+    lim = outlier_limit(fit, alpha)
+    lines = {
+        "outlier_limit": lim,
+        "cooks_line": 4.0 / n,
+        "leverage_line": 2.0 * p / n,
+        "dffits_line": 2.0 * math.sqrt(p / n),
+    }
+    ext = tab["externally_studentized"].to_numpy()
+    flagged = {
+        "outliers": runs[np.abs(ext) > lim].tolist(),
+        "cooks": runs[tab["cooks_distance"].to_numpy() > lines["cooks_line"]].tolist(),
+        "leverage": runs[tab["leverage"].to_numpy() > lines["leverage_line"] + 1e-12].tolist(),
+        "dffits": runs[np.abs(tab["dffits"].to_numpy()) > lines["dffits_line"]].tolist(),
+    }
+
+    def runs_text(k: list) -> str:
+        return ", ".join(str(r) for r in k)
+
+    finite = np.isfinite(ext)
+    read, notes = [], []
+    if not finite.all():
+        read.append(
+            f"Run(s) {runs_text(runs[~finite].tolist())} have leverage 1 (the model passes through them): their "
+            "studentized residuals are not defined and are left out below."
+        )
+    if finite.sum() >= 3 and np.ptp(ext[finite]) > 0:
+        w = stats.shapiro(ext[finite])
+        read.append(
+            f"Normal plot: residuals {'consistent with' if w.pvalue >= alpha else 'depart from'} a normal "
+            f"distribution (Shapiro-Wilk p {format_p(w.pvalue)})."
+        )
+    else:
+        read.append("Normal plot: too few residuals (or all equal) to judge.")
+    read.append(
+        f"Residuals vs predicted: {'no run' if not flagged['outliers'] else 'run(s) ' + runs_text(flagged['outliers'])}"
+        f" beyond the +-{lim:.3g} limit of the externally studentized residuals (Bonferroni at alpha {alpha:g})."
+    )
+    if finite.sum() >= 3:
+        rho = stats.spearmanr(runs[finite], ext[finite])
+        trend = rho.pvalue < alpha
+        read.append(
+            f"Residuals vs run order: {'a trend' if trend else 'no trend'} (Spearman rho {rho.statistic:.2f}, "
+            f"p {format_p(rho.pvalue)})" + ("; look for drift in the runs." if trend else ".")
+        )
+    uneven = []
+    for f in fit.factors:
+        x = fit.data[f].to_numpy(dtype=float)
+        groups = [ext[(x == v) & finite] for v in np.unique(x)]
+        groups = [g for g in groups if len(g) >= 2]
+        if len(groups) >= 2 and all(np.ptp(g) > 0 for g in groups):
+            if stats.levene(*groups, center="median").pvalue < alpha:
+                uneven.append(f)
+    read.append(
+        "Residuals vs each factor: "
+        + (
+            f"uneven spread across the levels of {', '.join(uneven)}"
+            if uneven
+            else "even spread across every factor's levels"
+        )
+        + " (Brown-Forsythe)."
+    )
+    read.append(f"Predicted vs actual: R² {fit.stats['r2']:.4f}; points off the line are the residuals above.")
+    read.append(
+        f"Cook's distance: {'no run' if not flagged['cooks'] else 'run(s) ' + runs_text(flagged['cooks'])} above the "
+        f"4/n = {lines['cooks_line']:.3g} line."
+    )
+    read.append(
+        f"Leverage: {'no run' if not flagged['leverage'] else 'run(s) ' + runs_text(flagged['leverage'])} above "
+        f"2p/n = {lines['leverage_line']:.3g}."
+    )
+    read.append(
+        f"DFFITS: {'no run' if not flagged['dffits'] else 'run(s) ' + runs_text(flagged['dffits'])} beyond "
+        f"+-2 sqrt(p/n) = {lines['dffits_line']:.3g}."
+    )
+    bc = box_cox(fit, alpha)
+    if "error" in bc:
+        read.append(f"Box-Cox: not computed: {bc['error']}.")
+    else:
+        lo, hi = bc["interval"]
+        ci = f"[{'< -3' if lo is None else f'{lo:.2f}'}, {'> 3' if hi is None else f'{hi:.2f}'}]"
+        y = tab["actual"].to_numpy()
+        ratio = f"max/min of the response {y.max() / y.min():.3g}"
+        if lo is None and hi is None:
+            read.append(
+                f"Box-Cox: ln(residual SS) stays inside its confidence limit for every lambda in [-3, 3] ({ratio}): "
+                "no transform recommended."
+            )
+        elif bc["recommended"] == "none":
+            read.append(f"Box-Cox: lambda {bc['lambda_hat']:.2f} {ci} holds 1 ({ratio}): no transform recommended.")
+        else:
+            what = bc["recommended"] if bc["recommended"] != "power" else f"power {bc['lambda_hat']:.2f}"
+            read.append(
+                f"Box-Cox: lambda {bc['lambda_hat']:.2f} {ci} excludes 1 ({ratio}): recommended transform {what}."
+            )
+            notes.append(f"Box-Cox recommends the transform {what} (lambda {bc['lambda_hat']:.2f} {ci}).")
+    if flagged["outliers"]:
+        notes.append(
+            f"run(s) {runs_text(flagged['outliers'])} beyond the outlier limit: check them before trusting the model."
+        )
+    return {
+        "table": tab.assign(run=runs),
+        "lines": lines,
+        "flagged": flagged,
+        "box_cox": {k: v for k, v in bc.items() if k not in ("lambdas", "ln_ss")},
+        "box_cox_curve": (bc.get("lambdas"), bc.get("ln_ss")),
+        "readings": read,
+        "notes": notes,
+    }
+
+
+def _plot_diagnostics(out: Path, tag: str, fit: ModelFit, diag: dict, runs, used: pd.DataFrame, fnames, name) -> list:
+    """diagnostics_<tag>.png (normal plot, residuals vs predicted and run order, predicted vs actual, Cook's
+    distance, leverage, DFFITS, Box-Cox) and residuals_vs_factors_<tag>.png."""
+    from matplotlib.figure import Figure
+
+    tab, ln = diag["table"], diag["lines"]
+    ext = tab["externally_studentized"].to_numpy()
+    runs = np.asarray(list(runs))
+    fig = Figure(figsize=(18, 8))
+    axes = fig.subplots(2, 4)
+    ax = axes[0, 0]
+    (osm, osr), _ = stats.probplot(ext[np.isfinite(ext)], dist="norm")
+    ax.plot(osr, osm, "o")
+    ax.set(xlabel="externally studentized residual", ylabel="normal quantile", title="Normal plot of residuals")
+    for ax, x, xl, title in (
+        (axes[0, 1], tab["predicted"], "predicted", "Residuals vs predicted"),
+        (axes[0, 2], runs, "run number", "Residuals vs run"),
+    ):
+        ax.plot(x, ext, "o")
+        for v in (ln["outlier_limit"], -ln["outlier_limit"]):
+            ax.axhline(v, color="r", ls="--")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set(xlabel=xl, ylabel="externally studentized residual", title=title)
+    ax = axes[0, 3]
+    ax.plot(tab["predicted"], tab["actual"], "o")
+    lo, hi = (
+        float(min(tab["actual"].min(), tab["predicted"].min())),
+        float(max(tab["actual"].max(), tab["predicted"].max())),
+    )
+    ax.plot([lo, hi], [lo, hi], "k-", lw=0.8)
+    ax.set(xlabel="predicted", ylabel="actual", title="Predicted vs actual")
+    for ax, col, line, title in (
+        (axes[1, 0], "cooks_distance", ln["cooks_line"], "Cook's distance (4/n line)"),
+        (axes[1, 1], "leverage", ln["leverage_line"], "Leverage (2p/n line)"),
+        (axes[1, 2], "dffits", ln["dffits_line"], "DFFITS (+-2 sqrt(p/n))"),
+    ):
+        ax.vlines(runs, 0, tab[col], lw=2)
+        ax.plot(runs, tab[col], "o")
+        ax.axhline(line, color="r", ls="--")
+        if col == "dffits":
+            ax.axhline(-line, color="r", ls="--")
+        ax.set(xlabel="run number", ylabel=col.replace("_", " "), title=title)
+    ax = axes[1, 3]
+    lam, lss = diag["box_cox_curve"]
+    bc = diag["box_cox"]
+    if lam is not None:
+        ax.plot(lam, lss, "-")
+        ax.axhline(bc["ln_ss_limit"], color="r", ls="--", label="confidence limit")
+        ax.axvline(bc["lambda_hat"], color="g", label=f"best {bc['lambda_hat']:.2f}")
+        ax.axvline(1.0, color="b", ls=":", label="current (1)")
+        # the limit line stays in view; a steep curve is cut 4 above it
+        ax.set_ylim(min(lss) - 0.5, max(min(max(lss), bc["ln_ss_limit"] + 4), bc["ln_ss_limit"] + 0.3))
+        ax.legend(fontsize=8)
+    else:
+        ax.text(0.5, 0.5, bc.get("error", "not computed"), ha="center", va="center", wrap=True, transform=ax.transAxes)
+    ax.set(xlabel="lambda", ylabel="ln(residual SS)", title="Box-Cox plot for power transforms")
+    fig.suptitle(f"Diagnostics: {name}")
+    fig.tight_layout()
+    fig.savefig(out / f"diagnostics_{tag}.png", dpi=90)
+    k = len(fnames)
+    fig = Figure(figsize=(4.5 * k, 4))
+    axes = fig.subplots(1, k, squeeze=False)
+    for ax, f in zip(axes[0], fnames):
+        ax.plot(used[f].to_numpy(dtype=float), ext, "o")
+        for v in (ln["outlier_limit"], -ln["outlier_limit"]):
+            ax.axhline(v, color="r", ls="--")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set(xlabel=f"{f} (coded)", ylabel="externally studentized residual", title=f"Residuals vs {f}")
+    fig.tight_layout()
+    fig.savefig(out / f"residuals_vs_factors_{tag}.png", dpi=90)
+    return [f"diagnostics_{tag}.png", f"residuals_vs_factors_{tag}.png"]
+
+
 def write_report(
     out_dir,
     data: pd.DataFrame,
@@ -797,6 +994,16 @@ def write_report(
                 md.append("")
                 md += [f"![{p[:-4]}]({p})" for p in pics[1:]]
 
+        # ---- diagnostics
+        runs_used = [run_id[i] for i in np.flatnonzero(ok[name])]
+        diag = diagnostics(fit, runs_used, alpha)
+        files += _plot_diagnostics(out, tag, fit, diag, runs_used, used, fnames, name)
+        md += ["", "### Diagnostics", ""]
+        md += [f"- {line}" for line in diag["readings"]]
+        md += ["", f"![diagnostics of {name}](diagnostics_{tag}.png)", ""]
+        md += [f"![residuals of {name} against each factor](residuals_vs_factors_{tag}.png)"]
+        auto_notes += [f"{name}: {n}" for n in diag["notes"]]
+
         # ---- target
         entry = {
             "model": _model_name(fit),
@@ -804,6 +1011,7 @@ def write_report(
             "n_used": len(used),
             "failed_runs": failed_runs,
             "eliminated": [e["removed"] for e in fit.elimination],
+            "diagnostics": {k: v for k, v in diag.items() if k not in ("table", "box_cox_curve")},
             "chosen": None,
             "predicted": None,
             "reachable": None,

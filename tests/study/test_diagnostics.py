@@ -1,0 +1,75 @@
+"""Design-Expert's diagnostics (analysis.influence, analysis.box_cox, report.diagnostics) against statsmodels and
+SciPy on the same data, and on data with a planted outlier or a multiplicative response."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+import statsmodels.api as sm
+from scipy import stats
+
+from warpdem.study.analysis import box_cox, fit_model, influence
+from warpdem.study.report import diagnostics
+
+
+def _factorial(reps: int = 2) -> pd.DataFrame:
+    a, b = np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0])
+    return pd.DataFrame({"A": np.tile(a.ravel(), reps), "B": np.tile(b.ravel(), reps)})
+
+
+def test_influence_matches_statsmodels_on_a_design_matrix_built_by_hand():
+    """A quadratic in two factors: the per-run table equals statsmodels' OLSInfluence of the same least squares
+    with the columns written out here (1, A, B, AB, A^2, B^2), not by the fit's own term code."""
+    d = _factorial()
+    rng = np.random.default_rng(3)
+    d["y"] = 10 + 2 * d.A - d.B + 0.5 * d.A * d.B + 1.5 * d.A**2 + rng.normal(0, 0.3, len(d))
+    fit = fit_model(d, "y", ["A", "B"], "quadratic")
+    X = np.column_stack([np.ones(len(d)), d.A, d.B, d.A * d.B, d.A**2, d.B**2])
+    ref = sm.OLS(d.y.to_numpy(), X).fit().get_influence()
+    got = influence(fit)
+    np.testing.assert_allclose(got["leverage"], ref.hat_matrix_diag, rtol=1e-10)
+    np.testing.assert_allclose(got["externally_studentized"], ref.resid_studentized_external, rtol=1e-8)
+    np.testing.assert_allclose(got["cooks_distance"], ref.cooks_distance[0], rtol=1e-8)
+    np.testing.assert_allclose(got["dffits"], ref.dffits[0], rtol=1e-8)
+    np.testing.assert_allclose(got["actual"] - got["predicted"], got["residual"], atol=1e-12)
+
+
+def test_box_cox_of_the_mean_model_is_scipys_maximum_likelihood_lambda():
+    """With no terms the Box-Cox profile is SciPy's: the same lambda (the residual sum of squares of the
+    geometric-mean-scaled transform is minimal where the Box-Cox likelihood is maximal)."""
+    y = np.random.default_rng(0).lognormal(1.0, 0.4, 25)
+    fit = fit_model(pd.DataFrame({"A": np.linspace(-1, 1, 25), "y": y}), "y", ["A"], [])
+    assert box_cox(fit)["lambda_hat"] == pytest.approx(stats.boxcox(y)[1], abs=1e-4)
+
+
+def test_box_cox_recommends_ln_for_a_multiplicative_response_and_nothing_for_an_additive_one():
+    """A response whose factor effects multiply (log-linear, a 55-fold range) gets ln; the same effects added
+    (a linear response with normal noise) get no transform: its interval holds 1."""
+    d = _factorial(reps=3)
+    rng = np.random.default_rng(1)
+    mult = d.assign(y=np.exp(1.0 + 1.5 * d.A + 0.5 * d.B + rng.normal(0, 0.1, len(d))))
+    bc = box_cox(fit_model(mult, "y", ["A", "B"], "linear"))
+    lo, hi = bc["interval"]
+    assert bc["recommended"] == "ln" and lo < 0 < hi < 1
+    add = d.assign(y=20.0 + 3.0 * d.A + 1.0 * d.B + rng.normal(0, 0.3, len(d)))
+    assert box_cox(fit_model(add, "y", ["A", "B"], "linear"))["recommended"] == "none"
+    neg = d.assign(y=d.A + rng.normal(0, 0.1, len(d)))
+    assert "error" in box_cox(fit_model(neg, "y", ["A", "B"], "linear"))
+
+
+def test_a_planted_outlier_is_named_and_clean_runs_are_not():
+    """Run 7 of a replicated 3x3 factorial is shifted by 8 noise SD: it is beyond the Bonferroni limit and the
+    Cook's line, and the readings name it and put it in the notes; without the shift no run is named."""
+    d = _factorial()
+    rng = np.random.default_rng(5)
+    d["y"] = 30 + 2 * d.A + d.B + rng.normal(0, 0.5, len(d))
+    runs = list(range(1, len(d) + 1))
+    clean = diagnostics(fit_model(d, "y", ["A", "B"], "linear"), runs)
+    assert clean["flagged"]["outliers"] == [] and not clean["notes"]
+    assert any(line.startswith("Residuals vs predicted: no run") for line in clean["readings"])
+    d.loc[6, "y"] += 4.0
+    bad = diagnostics(fit_model(d, "y", ["A", "B"], "linear"), runs)
+    assert bad["flagged"]["outliers"] == [7] and 7 in bad["flagged"]["cooks"]
+    assert any("run(s) 7 beyond" in line for line in bad["readings"])
+    assert any("run(s) 7" in n for n in bad["notes"])
