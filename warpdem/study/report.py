@@ -1001,7 +1001,7 @@ def write_report(
         md += ["", "### Diagnostics", ""]
         md += [f"- {line}" for line in diag["readings"]]
         md += ["", f"![diagnostics of {name}](diagnostics_{tag}.png)", ""]
-        md += [f"![residuals of {name} against each factor](residuals_vs_factors_{tag}.png)"]
+        md += [f"![residuals of {name} against each factor](residuals_vs_factors_{tag}.png)", ""]
         auto_notes += [f"{name}: {n}" for n in diag["notes"]]
 
         # ---- target
