@@ -73,3 +73,22 @@ def test_a_planted_outlier_is_named_and_clean_runs_are_not():
     assert bad["flagged"]["outliers"] == [7] and 7 in bad["flagged"]["cooks"]
     assert any("run(s) 7 beyond" in line for line in bad["readings"])
     assert any("run(s) 7" in n for n in bad["notes"])
+
+
+def test_a_negative_prediction_of_a_positive_response_is_a_note(tmp_path):
+    """A linear model of a response that falls steeply and levels off (all runs above zero) predicts below zero
+    at a corner of the region: the report's notes say so, with the value and where; a model that stays
+    positive gets no such note."""
+    from warpdem.study.designs import Factor
+    from warpdem.study.report import write_report
+
+    d = _factorial()
+    steep = d.assign(y=np.exp(2.0 - 1.6 * d.A - 1.6 * d.B))
+    factors = [Factor("A", 0.0, 1.0), Factor("B", 0.0, 1.0)]
+    kw = dict(title="t", factors=factors, labels={}, responses=[{"name": "y", "unit": ""}], model="linear")
+    write_report(tmp_path / "steep", steep, **kw)
+    notes = (tmp_path / "steep" / "report.md").read_text().split("## Notes")[1]
+    assert "y: the model predicts -" in notes and "A +1.00, B +1.00" in notes
+    flat = d.assign(y=30.0 + d.A + 0.5 * d.B)
+    write_report(tmp_path / "flat", flat, **kw)
+    assert "the model predicts" not in (tmp_path / "flat" / "report.md").read_text()

@@ -41,6 +41,7 @@ from .analysis import (
     influence,
     model_terms,
     outlier_limit,
+    response_range,
     solve_target,
     term_label,
 )
@@ -1003,6 +1004,16 @@ def write_report(
         md += ["", f"![diagnostics of {name}](diagnostics_{tag}.png)", ""]
         md += [f"![residuals of {name} against each factor](residuals_vs_factors_{tag}.png)", ""]
         auto_notes += [f"{name}: {n}" for n in diag["notes"]]
+        y_used = used[name].to_numpy(dtype=float)
+        if fit.terms and np.all(y_used > 0):
+            (low, at), _ = response_range(fit, region)
+            if low < 0:
+                where = ", ".join(f"{f} {at[j]:+.2f}" for j, f in enumerate(fnames))
+                auto_notes.append(
+                    f"{name}: the model predicts {low:.3g} inside the design region (coded {where}) for a response "
+                    f"measured between {y_used.min():.3g} and {y_used.max():.3g}: a transform (Box-Cox, in the "
+                    "diagnostics) or another model order may fit better."
+                )
 
         # ---- target
         entry = {
