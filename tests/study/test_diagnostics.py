@@ -92,3 +92,35 @@ def test_a_negative_prediction_of_a_positive_response_is_a_note(tmp_path):
     flat = d.assign(y=30.0 + d.A + 0.5 * d.B)
     write_report(tmp_path / "flat", flat, **kw)
     assert "the model predicts" not in (tmp_path / "flat" / "report.md").read_text()
+
+
+def test_fit_summary_of_seed_000s_box_behnken_against_statsmodels():
+    """Seed 000's Box-Behnken (17 runs, 5 centre points): each sequential row is statsmodels' F test of the
+    order against the one below it (compare_f_test, on design matrices written out here); the lack of fit is
+    fit_model's; the cubic is aliased, and the suggested model is the quadratic the paper fitted."""
+    from pathlib import Path
+
+    from warpdem.study.analysis import fit_summary
+
+    runs = pd.read_csv(Path(__file__).parents[2] / "studies" / "reference" / "pellets_bbd_runs.csv")
+    c, d, e = (runs[f].to_numpy(dtype=float) for f in "CDE")
+    y = runs["aor_deg"].to_numpy(dtype=float)
+    one = np.ones(len(y))
+    mats = {
+        "Mean": np.column_stack([one]),
+        "Linear": np.column_stack([one, c, d, e]),
+        "2FI": np.column_stack([one, c, d, e, c * d, c * e, d * e]),
+        "Quadratic": np.column_stack([one, c, d, e, c * d, c * e, d * e, c * c, d * d, e * e]),
+    }
+    fits = {k: sm.OLS(y, X).fit() for k, X in mats.items()}
+    summ = fit_summary(runs, "aor_deg", ["C", "D", "E"])
+    seq = summ["sequential"]
+    for big, small in (("Linear", "Mean"), ("2FI", "Linear"), ("Quadratic", "2FI")):
+        f, p, ddf = fits[big].compare_f_test(fits[small])
+        assert seq.loc[big, "F"] == pytest.approx(f, rel=1e-9) and seq.loc[big, "p"] == pytest.approx(p, rel=1e-9)
+        assert seq.loc[big, "df"] == ddf
+        assert seq.loc[big, "sum_sq"] == pytest.approx(fits[small].ssr - fits[big].ssr, rel=1e-9)
+    quad = fit_model(runs, "aor_deg", ["C", "D", "E"], "quadratic")
+    assert summ["lack_of_fit"].loc["Quadratic", "p"] == pytest.approx(quad.anova.loc["Lack of Fit", "p"])
+    assert summ["statistics"].loc["Quadratic", "pred_r2"] == pytest.approx(quad.stats["pred_r2"])
+    assert bool(seq.loc["Cubic", "aliased"]) and summ["suggested"] == "Quadratic"

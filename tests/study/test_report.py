@@ -153,12 +153,16 @@ def test_bbd_report_files_anova_and_target(bbd_report):
         "seed 000 Table 10",
         "Reversed coding",
         fit.equation_string("coded", 6),
+        "### Fit summary",
+        "| Quadratic vs 2FI |",
+        "**Suggested:** Quadratic",
         "### Diagnostics",
         "Cook's distance:",
         "Box-Cox: ln(residual SS) stays inside its confidence limit",
         "(diagnostics_aor_deg.png)",
     ):
         assert text in md, text
+    assert r["suggested_model"] == "Quadratic"
     d = r["diagnostics"]
     assert d["lines"]["cooks_line"] == pytest.approx(4 / 17) and d["lines"]["leverage_line"] == pytest.approx(20 / 17)
 

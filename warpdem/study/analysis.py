@@ -49,6 +49,7 @@ __all__ = [
     "box_cox",
     "effects_table",
     "fit_model",
+    "fit_summary",
     "influence",
     "lenth_pse",
     "model_terms",
@@ -833,4 +834,84 @@ def box_cox(fit: ModelFit, alpha: float = 0.05, lambdas=None) -> dict:
         "ln_ss_limit": limit,
         "recommended": rec,
         "lambda_recommended": lam_rec,
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# Fit summary (which model order the data support)
+# --------------------------------------------------------------------------------------------
+
+SUMMARY_ORDERS = ("linear", "2fi", "quadratic", "cubic")
+"""The model orders of the fit summary, each containing the one before."""
+
+
+def _order_terms(order: str, factors: Sequence[str]) -> list[Term]:
+    if order != "cubic":
+        return model_terms(order, factors)
+    return model_terms("quadratic", factors) + [
+        _canonical(t, factors) for t in itertools.combinations_with_replacement(list(factors), 3)
+    ]
+
+
+def fit_summary(data: pd.DataFrame, response: str, factors: Sequence[str], alpha: float = 0.05) -> dict:
+    """Design-Expert's fit summary of the coded ``data``: for the mean and each of :data:`SUMMARY_ORDERS`,
+    whether the design can estimate it (``aliased`` when not), and
+
+    - ``sequential``: the sequential (type I) sums of squares, each order against the one before ("Linear vs
+      Mean", ...): SS, df, MS, F against that order's own residual mean square, p;
+    - ``lack_of_fit``: each order's lack-of-fit SS, df, MS, F against pure error, p (when replicates give pure
+      error);
+    - ``statistics``: each order's Std. Dev., R², adjusted and predicted R², PRESS;
+    - ``suggested``: the highest non-aliased order whose sequential p < ``alpha`` and whose lack of fit is not
+      significant (p >= ``alpha``, or untested), as Design-Expert suggests it; None when no order adds
+      significantly to the mean.
+
+    Returns a dict of those three DataFrames (index: the orders) and ``suggested``.
+    """
+    factors = list(factors)
+    df = data[factors + [response]].astype(float).reset_index(drop=True)
+    y = df[response].to_numpy()
+    n = len(y)
+    xk = df[factors].to_numpy()
+    sst = float(((y - y.mean()) ** 2).sum())
+    prev_sse, prev_p = sst, 1
+    seq, lof, st = [], [], []
+    suggested = None
+    for order in SUMMARY_ORDERS:
+        terms = _order_terms(order, factors)
+        X = _columns(xk, terms, factors)
+        p = X.shape[1]
+        aliased = np.linalg.matrix_rank(X) < p or n - p <= 0
+        name = {"linear": "Linear", "2fi": "2FI", "quadratic": "Quadratic", "cubic": "Cubic"}[order]
+        if aliased:
+            seq.append((name, math.nan, p - prev_p, math.nan, math.nan, math.nan, True))
+            lof.append((name, math.nan, math.nan, math.nan, math.nan, math.nan, True))
+            st.append((name, math.nan, math.nan, math.nan, math.nan, math.nan, True))
+            break
+        fit = fit_model(df, response, factors, terms)
+        sse = float(fit.anova.loc["Residual", "sum_sq"])
+        df_res = n - p
+        ss_add, df_add = prev_sse - sse, p - prev_p
+        f, pv = _f_p(ss_add / df_add, sse / df_res, df_add, df_res) if df_add > 0 else (math.nan, math.nan)
+        seq.append((name, ss_add, df_add, ss_add / df_add if df_add else math.nan, f, pv, False))
+        if "Lack of Fit" in fit.anova.index:
+            r = fit.anova.loc["Lack of Fit"]
+            lof.append((name, r["sum_sq"], int(r["df"]), r["mean_sq"], r["F"], r["p"], False))
+            lof_ok = not (r["p"] < alpha)
+        else:
+            lof.append((name, math.nan, math.nan, math.nan, math.nan, math.nan, False))
+            lof_ok = True
+        s = fit.stats
+        st.append((name, s["std_dev"], s["r2"], s["adj_r2"], s["pred_r2"], s["press"], False))
+        if pv < alpha and lof_ok:
+            suggested = name
+        prev_sse, prev_p = sse, p
+    cols = ["sum_sq", "df", "mean_sq", "F", "p", "aliased"]
+    return {
+        "sequential": pd.DataFrame(seq, columns=["source"] + cols).set_index("source"),
+        "lack_of_fit": pd.DataFrame(lof, columns=["source"] + cols).set_index("source"),
+        "statistics": pd.DataFrame(
+            st, columns=["source", "std_dev", "r2", "adj_r2", "pred_r2", "press", "aliased"]
+        ).set_index("source"),
+        "suggested": suggested,
     }

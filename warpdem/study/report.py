@@ -38,6 +38,7 @@ from .analysis import (
     box_cox,
     effects_table,
     fit_model,
+    fit_summary,
     influence,
     model_terms,
     outlier_limit,
@@ -463,6 +464,81 @@ def _fit_response(
     return fit, fallback
 
 
+def _fit_summary_md(summ: dict, fitted: str) -> list[str]:
+    """The fit summary's three tables as Design-Expert prints them, and its suggestion."""
+    orders = list(summ["sequential"].index)
+    prev = ["Mean"] + orders[:-1]
+    md = ["", "### Fit summary", "", "Sequential model sum of squares (type I):", ""]
+    rows = []
+    for (src, r), before in zip(summ["sequential"].iterrows(), prev):
+        label = f"{src} vs {before}"
+        if r["aliased"]:
+            rows.append([label, "", _fmt_g(r["df"]), "", "", "", "Aliased"])
+        else:
+            rows.append(
+                [
+                    label,
+                    _fmt_g(r["sum_sq"], 4),
+                    _fmt_g(r["df"]),
+                    _fmt_g(r["mean_sq"], 4),
+                    _fmt_g(r["F"], 4),
+                    format_p(r["p"]),
+                    "",
+                ]
+            )
+    md.append(_md_table(["Source", "Sum of Squares", "df", "Mean Square", "F-value", "p-value", ""], rows))
+    lof = summ["lack_of_fit"]
+    if lof.drop(columns="aliased").notna().any().any():
+        md += ["", "Lack of fit (against pure error):", ""]
+        md.append(
+            _md_table(
+                ["Source", "Sum of Squares", "df", "Mean Square", "F-value", "p-value", ""],
+                [
+                    [src, "", "", "", "", "", "Aliased"]
+                    if r["aliased"]
+                    else [
+                        src,
+                        _fmt_g(r["sum_sq"], 4),
+                        _fmt_g(r["df"]),
+                        _fmt_g(r["mean_sq"], 4),
+                        _fmt_g(r["F"], 4),
+                        format_p(r["p"]),
+                        "",
+                    ]
+                    for src, r in lof.iterrows()
+                ],
+            )
+        )
+    md += ["", "Model summary statistics:", ""]
+    md.append(
+        _md_table(
+            ["Source", "Std. Dev.", "R²", "Adjusted R²", "Predicted R²", "PRESS", ""],
+            [
+                [src, "", "", "", "", "", "Aliased"]
+                if r["aliased"]
+                else [
+                    src,
+                    _fmt_g(r["std_dev"], 4),
+                    _fmt_g(r["r2"], 4),
+                    _fmt_g(r["adj_r2"], 4),
+                    _fmt_g(r["pred_r2"], 4),
+                    _fmt_g(r["press"], 4),
+                    "",
+                ]
+                for src, r in summ["statistics"].iterrows()
+            ],
+        )
+    )
+    sug = summ["suggested"]
+    md += [
+        "",
+        f"**Suggested:** {sug or 'none (no order adds significantly to the mean)'}: the highest order that is not "
+        f"aliased, adds significantly to the order below it and shows no significant lack of fit. Fitted below: "
+        f"{fitted}.",
+    ]
+    return md
+
+
 def diagnostics(fit: ModelFit, runs: Sequence, alpha: float = 0.05) -> dict:
     """Design-Expert's diagnostics of ``fit`` (runs: the run numbers of its rows, in order): the per-run table
     (:func:`analysis.influence`), the Box-Cox result, the runs past each line and one reading per plot.
@@ -831,6 +907,10 @@ def write_report(
             auto_notes.append(f"{name}: {fallback}.")
             md += ["", f"**Model fallback:** {fallback}."]
 
+        # ---- fit summary: which order the runs support, before the chosen model's ANOVA
+        summ = fit_summary(used, name, fnames, alpha)
+        md += _fit_summary_md(summ, _model_name(fit))
+
         # ---- ANOVA
         anova = anova_frame(fit, alpha)
         anova.to_csv(out / f"anova_{tag}.csv", index=False)
@@ -1023,6 +1103,7 @@ def write_report(
             "failed_runs": failed_runs,
             "eliminated": [e["removed"] for e in fit.elimination],
             "diagnostics": {k: v for k, v in diag.items() if k not in ("table", "box_cox_curve")},
+            "suggested_model": summ["suggested"],
             "chosen": None,
             "predicted": None,
             "reachable": None,
