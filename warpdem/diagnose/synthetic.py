@@ -100,12 +100,9 @@ def funnel_data(exps: list[dict], rig: dict, overrides: dict, device: str, seed:
     each experiment's simulated values."""
     import time
 
-    import warp as wp
-
     from warpdem.scene import rigs
     from warpdem.scene.runner import run_scene_iter, run_together
     from warpdem.scene.stage import apply_overrides
-    from warpdem.study.execute import SIDE_BY_SIDE_SPHERES
 
     seeds = list(DATA_SEEDS)
     scenes = [
@@ -122,7 +119,6 @@ def funnel_data(exps: list[dict], rig: dict, overrides: dict, device: str, seed:
             for s in scenes
         ],
         device,
-        SIDE_BY_SIDE_SPHERES if wp.get_device(device).is_cuda else 0,
     )
     for o in outcomes:
         if isinstance(o, BaseException):

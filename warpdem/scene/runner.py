@@ -12,6 +12,7 @@ import json
 import math
 import time
 import warnings
+from collections.abc import Generator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,6 +51,7 @@ def _host(model):
         cd = dens[host(model.clump_world) % dens.shape[0], host(model.clump_material)]
         h["clump_mass"] = cd * host(model.clump_volume)
         h["clump_world"] = host(model.clump_world)
+        h["clump_first"] = host(model.clump_sphere_start)
     return h
 
 
@@ -65,8 +67,7 @@ def _kinetic_energy(model, state, h) -> np.ndarray:
     np.add.at(n, h["world"][sel], 1)
     if model.clump_count:
         cv = host(state.clump_v)
-        first = host(model.clump_sphere_start)
-        cact = act[first]
+        cact = act[h["clump_first"]]
         np.add.at(e, h["clump_world"][cact], 0.5 * h["clump_mass"][cact] * np.sum(cv[cact] ** 2, axis=1))
         np.add.at(n, h["clump_world"][cact], 1)
     return e / np.maximum(n, 1)
@@ -95,8 +96,7 @@ def _frame(writer, model, state, h, spec, t):
     loose = act & (h["clump"] < 0) & (h["world"] == 0)
     kw = dict(sphere_x=x[loose], sphere_r=h["radius"][loose], sphere_id=np.flatnonzero(loose), sphere_v=v[loose])
     if model.clump_count:
-        first = host(model.clump_sphere_start)
-        sel = act[first] & (h["clump_world"] == 0)
+        sel = act[h["clump_first"]] & (h["clump_world"] == 0)
         ids = np.flatnonzero(sel)
         kw.update(
             clump_x=host(state.clump_x)[sel],
@@ -255,15 +255,22 @@ def measured_metrics(measure) -> tuple[str, ...]:
     return tuple(k for k in own if metric_needs_met(measure, k)) + COMMON_METRICS
 
 
-def run_together(starts, device: str, load_limit: int, admit=None, on_end=None) -> list:
+SIDE_BY_SIDE_SPHERES = 1_000_000
+"""Spheres that the launches running side by side on one GPU may hold together (:func:`run_together`): about
+where one launch alone fills an H100 (``warpdem bench``), so a full-size launch runs alone and the small launches
+of a diagnosis or of a study's rig-parameter groups share the GPU."""
+
+
+def run_together(starts, device: str, load_limit: int | None = None, admit=None, on_end=None) -> list:
     """Run launches side by side on one device: each of ``starts`` is a callable returning a generator like
     :func:`run_scene_iter` (its first yield the launch's load in spheres, its return value the result), and
     each launch queues its steps on a CUDA stream of its own, so the small launches of a diagnosis or a study
     share the GPU instead of leaving it idle between their small kernels. One thread runs them all, in turns:
     a launch's turn queues its next steps and returns before waiting for them.
 
-    Launches start in order while the running ones hold fewer than ``load_limit`` spheres (one at a time
-    with 0, as on the CPU, where nothing runs asynchronously; the first always starts); ``admit(i)``, if given,
+    Launches start in order while the running ones hold fewer than ``load_limit`` spheres (the first always
+    starts; one at a time with 0; None: :data:`SIDE_BY_SIDE_SPHERES` on CUDA, 0 on the CPU, where nothing runs
+    asynchronously); ``admit(i)``, if given,
     is asked before launch i starts, and False starts no further launch. ``on_end(i, outcome)`` is called as
     launch i ends. Returns each launch's outcome: its result, the exception it raised (a failing launch does
     not stop the others), or None where it did not start.
@@ -271,6 +278,8 @@ def run_together(starts, device: str, load_limit: int, admit=None, on_end=None) 
     import warp as wp
 
     dev = wp.get_device(device)
+    if load_limit is None:
+        load_limit = SIDE_BY_SIDE_SPHERES if dev.is_cuda else 0
     outcomes: list = [None] * len(starts)
     pending, live = list(range(len(starts))), {}
 
@@ -324,7 +333,7 @@ def run_scene_iter(
     world_seeds=None,
     checkpoint_every: float = 0.0,
     stop_after: float = 0.0,
-) -> RunResult:
+) -> Generator[int | None, None, RunResult]:
     """Run ``spec`` on ``device`` as a generator (:func:`run_scene` runs it to the end); with ``out_dir`` write
     metrics.json, result.usdc (+ VTK series), pile.png.
 
@@ -438,7 +447,8 @@ def run_scene_iter(
         step0 = state.step
         state = yield from solver.advance_iter(state, contacts, t_next - state.time)
         t = state.time
-        rebuilds, rebuilds_total = solver.rebuild_count - rebuilds_total, solver.rebuild_count
+        count = solver.rebuild_count
+        rebuilds, rebuilds_total = count - rebuilds_total, count
         series["tick_wall_s"].append(time.perf_counter() - t_tick)
         series["rebuilds"].append(rebuilds)
         series["dt_s"].append(solver.dt)
@@ -740,7 +750,7 @@ def _discharged_mass(model, state, h, outlet_height: float) -> np.ndarray:
     np.add.at(out, h["world"][sel], h["mass"][sel])
     if model.clump_count:
         cx = host(state.clump_x)
-        csel = act[host(model.clump_sphere_start)[: len(cx)]] & (cx[:, 2] < outlet_height)
+        csel = act[h["clump_first"][: len(cx)]] & (cx[:, 2] < outlet_height)
         np.add.at(out, h["clump_world"][csel], h["clump_mass"][csel])
     return out
 

@@ -18,9 +18,9 @@ together; the launch checkpoints its whole state every minute (``OUT/launches/<i
 rerun resumes it from there, bit-identical to an uninterrupted launch; ``[study] batch`` caps the worlds
 per launch.
 
-On one CUDA device the launches run side by side, a CUDA stream each, up to :data:`SIDE_BY_SIDE_SPHERES`
-together (:func:`_run_on_device`); on the CPU one after another. Several devices (``device="cuda:0,cuda:1"``,
-``"cuda:all"``, or ``"cpu,cpu"`` for two CPU processes) split
+On one CUDA device the launches run side by side, a CUDA stream each, up to ``runner.SIDE_BY_SIDE_SPHERES``
+spheres together (:func:`_run_on_device`); on the CPU one after another. Several devices
+(``device="cuda:0,cuda:1"``, ``"cuda:all"``, or ``"cpu,cpu"`` for two CPU processes) split
 each group of runs into one launch per device, as even as the runs allow; each device runs its launches in
 a process of its own (spawned, so every process owns its CUDA context and Warp's CPU kernels, which run on
 one thread each, use one core each). Launch ids hash the point ids, so a resumed study must keep the
@@ -145,12 +145,6 @@ def _launch_id(rows: list[dict]) -> str:
     return hashlib.sha1(",".join(r["point_id"] for r in rows).encode()).hexdigest()[:12]
 
 
-SIDE_BY_SIDE_SPHERES = 1_000_000
-"""Spheres that the launches running side by side on one GPU may hold together (:func:`runner.run_together`):
-about where one launch alone fills an H100 (``warpdem bench``), so a full-size launch runs alone and the small
-launches of a diagnosis or of a study's rig-parameter groups share the GPU."""
-
-
 def run_batch(
     study: sp.StudySpec,
     rows: list[dict],
@@ -220,15 +214,6 @@ def _progress_bar(total: int, initial: int, desc: str, enabled: bool):
     except ImportError:  # tqdm is a dependency; the GPU machine may lack it
         return None
     return tqdm(total=total, initial=initial, desc=desc, unit="run", smoothing=0.0)
-
-
-def _batch_tick(bar, base: float, worlds: int, label: str, frac: float, msg: str) -> None:
-    """Progress of one launch of ``worlds`` worlds, ``frac`` done: ``bar`` (or None) stands at ``base`` runs
-    plus that fraction of the launch's."""
-    if bar is not None:
-        bar.n = base + frac * worlds
-        bar.set_postfix_str(f"{label}: {worlds} worlds, {msg}", refresh=False)
-        bar.refresh()
 
 
 def _check_folder(out: Path, study: sp.StudySpec) -> None:
@@ -327,12 +312,10 @@ def _run_on_device(
     on_saved=None,
 ) -> str | None:
     """Run ``batches`` on one device: side by side on a GPU (:func:`runner.run_together`, up to
-    :data:`SIDE_BY_SIDE_SPHERES`), one after another on the CPU; each launch is saved (``OUT/runs``) the moment
+    ``runner.SIDE_BY_SIDE_SPHERES``), one after another on the CPU; each launch is saved (``OUT/runs``) the moment
     it ends, then ``on_saved()`` is called. With ``stop_after`` (wall seconds since ``t0``) a launch saves its
     checkpoint and stops, and no launch starts past the limit but the first. A failing launch lets the running
     ones end, starts no other, and its error is raised. Returns the stop message(s), or None."""
-    import warp as wp
-
     from warpdem.scene.runner import RunStopped, run_together
 
     runs_dir = out / "runs"
@@ -376,8 +359,7 @@ def _run_on_device(
             if on_saved is not None:
                 on_saved()
 
-    limit = SIDE_BY_SIDE_SPHERES if wp.get_device(device).is_cuda else 0
-    outcomes = run_together([functools.partial(start, k) for k in range(len(batches))], device, limit, admit, end)
+    outcomes = run_together([functools.partial(start, k) for k in range(len(batches))], device, admit=admit, on_end=end)
     if errors:
         raise errors[0]
     left = sum(o is None for o in outcomes)
