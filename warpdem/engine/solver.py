@@ -387,6 +387,8 @@ class Solver:
         flag between steps. Blow-ups and overflows are checked once at the end and raise
         :class:`SimulationError`.
         """
+        if int(steps) <= 0:
+            return state
         state = self._enqueue(state, contacts, steps, control, use_graph)
         self.check(contacts)
         return state
@@ -455,7 +457,7 @@ class Solver:
             if self.cuda_graph_steps and steps - done >= 2:
                 # the remainder in pairs: a run ends at an output tick or a release, so each has a remainder, and
                 # stepped eagerly it cost the host more than the blocks (15 launches a step)
-                (pair,) = self._graphs(a, b, contacts, control, 2, lambda: self._alternate(a, b, 2, control, contacts))
+                pair = self._pair_graph(a, b, contacts, control)
                 pairs = (steps - done) // 2
                 for _ in range(pairs):
                     wp.capture_launch(pair)
@@ -489,7 +491,7 @@ class Solver:
             a.time, a.step, a.half_step = t0 + steps * self.dt, step0 + steps, True
         elif use_graph and not self._is_cuda and steps - done >= 2:
             before = int(host(self._buffers.clock)[0])
-            (graph,) = self._graphs(a, b, contacts, control, 2, lambda: self._alternate(a, b, 2, control, contacts))
+            graph = self._pair_graph(a, b, contacts, control)
             # Warp's CPU capture also executes what it records: count those two steps
             if int(host(self._buffers.clock)[0]) != before:
                 a.time += 2 * self.dt
@@ -514,6 +516,10 @@ class Solver:
         for i in range(steps):
             src, dst = (a, b) if i % 2 == 0 else (b, a)
             self._step(src, dst, control, contacts)
+
+    def _pair_graph(self, a: State, b: State, contacts: Contacts, control: Control | None):
+        """The captured graph of two steps, a -> b -> a (see :meth:`_graphs`)."""
+        return self._graphs(a, b, contacts, control, 2, lambda: self._alternate(a, b, 2, control, contacts))[0]
 
     def _graphs(self, a: State, b: State, contacts: Contacts, control: Control | None, kind, *records) -> list:
         """The graphs captured for these twin states, contacts, control and ``kind`` of replay, else one
