@@ -65,6 +65,17 @@ def test_surrogate_predicts_a_smooth_function_within_its_sd(noisy_fit):
     assert np.median(sd) < 0.7 * NOISE
 
 
+def test_surrogate_predicts_as_sklearn_does(noisy_fit):
+    """The prediction written out (the sampler's hot path) equals sklearn's GaussianProcessRegressor.predict
+    with the same fitted kernel, mean and SD, at points inside and outside the design and at a design point."""
+    X, _, s = noisy_fit
+    Xt = np.vstack([inf.space_filling(50, 2, seed=7), X[:3], [[0.0, 1.0], [1.0, 1.0]]])
+    mean, sd = s.predict(Xt)
+    ref_mean, ref_sd = s._gp.predict(Xt, return_std=True)
+    np.testing.assert_allclose(mean, s._offset + s._scale * ref_mean, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(sd, s._scale * ref_sd, rtol=1e-7, atol=1e-9)
+
+
 def test_surrogate_noise_and_cross_validation(noisy_fit):
     """The fitted white-noise SD is within a factor 1.5 of the true 0.05; K-fold cross-validated RMSE of a
     noisy observation is about the noise SD (the surrogate error adds a little); Q^2 near 1 for a function
