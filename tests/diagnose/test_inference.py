@@ -218,6 +218,40 @@ def test_calibrate_repeats_with_its_seed():
     assert np.array_equal(a["map"], c["map"]) and np.array_equal(a["samples"], c["samples"])
 
 
+def test_calibrate_runs_the_chain_to_fifty_autocorrelation_times():
+    """A posterior ridge (two parameters that trade off, correlation -0.998) mixes slowly: 200 steps leave the
+    kept half far short of 50 autocorrelation times, so the chain is doubled until it spans them (or reaches
+    the cap of 8 x steps); a well-determined posterior (tau about 30) given 4000 steps keeps them. Steps 0 gives
+    the maximum alone."""
+    A = np.array([[1.0, 1.0], [1.0, 1.02], [1.0, 0.98]])
+    b = np.zeros(3)
+    variance = np.full(3, 0.02**2)
+    measured = A @ [0.5, 0.5]
+
+    def ridge(U):
+        return U @ A.T + b, np.zeros((U.shape[0], 3))
+
+    out = inf.calibrate(ridge, measured, variance, d=2, seed=3, steps=200)
+    kept = out["steps"] - out["steps"] // 2
+    assert out["steps"] > 200
+    assert kept >= inf.TAU_SPAN * np.max(out["tau"]) or out["steps"] == inf.MAX_STEPS_FACTOR * 200
+    assert out["effective_samples"] == pytest.approx(16 * kept / np.max(out["tau"]))
+
+    A2, b2, var2, _ = _linear_problem([0.4, 0.6])
+    easy = inf.calibrate(
+        lambda U: (U @ A2.T + b2, np.zeros((U.shape[0], len(b2)))),
+        A2 @ [0.4, 0.6] + b2,
+        var2 / 1e4,
+        d=2,
+        seed=0,
+        steps=4000,
+    )
+    assert easy["steps"] == 4000 and 2000 >= inf.TAU_SPAN * np.max(easy["tau"])
+    only = inf.calibrate(ridge, measured, variance, d=2, seed=3, steps=0)
+    assert set(only) == {"map", "loglik", "at_bound"}
+    np.testing.assert_allclose(only["map"], out["map"])
+
+
 # --------------------------------------------------------------------------------------------
 # holm
 # --------------------------------------------------------------------------------------------

@@ -241,6 +241,12 @@ class Surrogate:
 # Calibration
 # --------------------------------------------------------------------------------------------
 
+TAU_SPAN = 50
+"""Autocorrelation times the kept half of a chain must span (emcee's documentation advises about 50)."""
+
+MAX_STEPS_FACTOR = 8
+"""A chain is doubled at most until it is this many times the steps asked for."""
+
 
 def calibrate(
     predict: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
@@ -264,8 +270,13 @@ def calibrate(
     max(4d, 16)) started in a small ball round the MAP, ``steps`` steps, the first half discarded as burn-in,
     thinned by half the largest autocorrelation time.
 
+    With ``steps`` = 0 only ``map``, ``loglik`` and ``at_bound`` are returned (no sampling). The chain is
+    doubled until its kept half spans :data:`TAU_SPAN` autocorrelation times of the slowest
+    parameter, or reaches :data:`MAX_STEPS_FACTOR` x ``steps``.
+
     Returns ``map`` (d,), ``loglik`` at the MAP, ``samples`` (k, d), ``interval`` (d, 2), ``at_bound`` (d,)
-    -1/0/+1, ``acceptance`` (mean acceptance fraction), ``tau`` (d,) autocorrelation times, ``thin``.
+    -1/0/+1, ``acceptance`` (mean acceptance fraction), ``tau`` (d,) autocorrelation times, ``thin``, ``steps``
+    (per walker, all), ``effective_samples`` (walkers x kept steps / the largest tau).
     The interval is the 2.5-97.5 percentile range, except where the MAP lies on a face of the cube (a
     candidate at its off value): there the equal-tailed interval would exclude the most probable value, so
     it is one-sided, from the face to the 95th (or from the 5th) percentile.
@@ -302,6 +313,9 @@ def calibrate(
     if best is None:
         raise ValueError("the log-likelihood is not finite at any start")
     u_map = np.clip(best.x, 0.0, 1.0)
+    at_bound = np.where(u_map <= EDGE, -1, np.where(u_map >= 1 - EDGE, 1, 0))
+    if steps == 0:
+        return {"map": u_map, "loglik": float(-best.fun), "at_bound": at_bound}
 
     nwalkers = walkers or max(4 * d, 16)
     nwalkers += nwalkers % 2  # the stretch move updates two equal halves of the ensemble
@@ -314,12 +328,20 @@ def calibrate(
     state = emcee.State(p0, random_state=np.random.RandomState(int(rng.integers(2**32))).get_state())
     sampler = emcee.EnsembleSampler(nwalkers, d, logpost, vectorize=True)
     sampler.run_mcmc(state, steps, progress=False)
-    burn = steps // 2
-    tau = sampler.get_autocorr_time(discard=burn, tol=0, quiet=True)
-    thin = max(1, int(np.nanmax(tau) / 2)) if np.any(np.isfinite(tau)) else 1
+    total = steps
+    while True:
+        burn = total // 2
+        tau = sampler.get_autocorr_time(discard=burn, tol=0, quiet=True)
+        tau_max = float(np.nanmax(tau)) if np.any(np.isfinite(tau)) else math.inf
+        # an interval's ends are tail percentiles: with fewer than TAU_SPAN autocorrelation times kept (emcee's
+        # advice) they move by much of their width from one seed or machine to the next; double the chain
+        if total - burn >= TAU_SPAN * tau_max or total >= MAX_STEPS_FACTOR * steps:
+            break
+        sampler.run_mcmc(None, total, progress=False)
+        total *= 2
+    thin = max(1, int(tau_max / 2)) if math.isfinite(tau_max) else 1
     samples = sampler.get_chain(discard=burn, thin=thin, flat=True)
 
-    at_bound = np.where(u_map <= EDGE, -1, np.where(u_map >= 1 - EDGE, 1, 0))
     interval = np.percentile(samples, [2.5, 97.5], axis=0).T
     for j in np.flatnonzero(at_bound):
         interval[j] = (
@@ -334,6 +356,8 @@ def calibrate(
         "acceptance": float(np.mean(sampler.acceptance_fraction)),
         "tau": tau,
         "thin": thin,
+        "steps": total,
+        "effective_samples": float(nwalkers * (total - burn) / tau_max) if math.isfinite(tau_max) else math.nan,
     }
 
 

@@ -99,9 +99,6 @@ SEPARATING = (
 """The measurements a lab can make that :func:`separating_measurement` may name (packing fraction is bulk
 density over the solid density; the angle's other estimators measure the same pile)."""
 
-FOLD_STEPS = 100
-"""MCMC steps of a held-out fold's calibration (only its maximum is used)."""
-
 EVIDENCE = 3.0
 """Log likelihood ratio [nats] by which one model must beat another: summed over the held-out data, or, with none,
 half the AIC difference (2 ln K = 6)."""
@@ -420,7 +417,7 @@ class Evaluator:
             var,
             len(model.dims),
             seed=_seed(self.spec, f"mcmc:{model.name}:{tag}"),
-            steps=self.spec.mcmc_steps if sample else FOLD_STEPS,
+            steps=self.spec.mcmc_steps if sample else 0,  # a fold uses its maximum only
         )
 
     def confirm_requests(self, model: Model, u, conds) -> list[tuple[dict, int]]:

@@ -333,5 +333,6 @@ def _surrogate_line(ev: dict) -> str:
         f"Surrogates: Gaussian processes (Matern 5/2, one length scale per parameter, white noise), one per condition "
         f"and response, {len(acc)} in all; leave-one-out Q^2 from {_f(np.nanmin(q2), 3)} to {_f(np.nanmax(q2), 3)}, "
         f"RMSE up to {_f(np.nanmax(rmse), 3)}. Posterior by MCMC (emcee), acceptance "
-        f"{_f(cal.get('acceptance'), 2)}."
+        f"{_f(cal.get('acceptance'), 2)}, {cal.get('steps', 0)} steps per walker (doubled until the kept half spans "
+        f"50 autocorrelation times), about {_f(cal.get('effective_samples'), 3)} independent samples."
     )
