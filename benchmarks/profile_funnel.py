@@ -6,6 +6,9 @@ GPU time over ``--steps`` eager steps (Warp's timing API, CUDA only).
 
     python benchmarks/profile_funnel.py --device cuda --worlds 4 --until 1.6 --profile-at 0.4 --profile-at 1.5
 
+``--set KEY=VALUE`` changes a rig parameter (``--set particle=sphere --set particle_radius=0.0015``: the
+diagnosis's lab-size funnels).
+
 The 5-world launch of the Box-Behnken study on an NVIDIA H200 took 3.2 ms per step up to 1.15 s and
 15.6 ms per step from 1.7 s to 2.1 s; this script is meant to say why.
 """
@@ -32,9 +35,16 @@ p.add_argument("--steps", type=int, default=100, help="eager steps per kernel pr
 p.add_argument("--smoke", action="store_true", help="the CPU smoke size instead of the full size")
 p.add_argument("--count", type=int, help="pellets per world (default: the rig's)")
 p.add_argument("--skin", type=float, help="Verlet skin [m] (default: the solver's, 0.4 x the smallest radius)")
+p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="a rig parameter, e.g. particle=sphere")
 a = p.parse_args()
 wp.init()
 params = {"particle": "pellet", "material": "pellet"} | ({"count": a.count} if a.count else {})
+for item in a.set:
+    key, _, value = item.partition("=")
+    try:
+        params[key] = float(value) if key not in ("particle", "material") else value
+    except ValueError:
+        params[key] = value
 spec = rigs.spec("funnel", params, a.smoke)
 model = build(spec, a.worlds).finalize(a.device)
 solver = scene_solver(model, spec.run, skin=a.skin)
