@@ -46,7 +46,9 @@ Schema (``DATA.toml``)::
     points = 0                      # space-filling points per condition, integer >= 0 (default 0: 4 + 4 x
                                     # the number of free parameters)
     confirm_seeds = 3               # world seeds of each confirming simulation, integer >= 1 (default 3)
-    mcmc_steps = 2000               # MCMC steps per walker, integer >= 100 (default 2000)
+    mcmc_steps = 2000               # MCMC steps per walker, integer >= 100 (default 2000); the chain is
+                                    # doubled until its kept half spans 50 autocorrelation times (at most
+                                    # 8 x mcmc_steps)
     alpha = 0.05                    # significance level of every test, in (0, 0.5) (default 0.05)
 
     [candidates]

@@ -12,6 +12,7 @@ import numpy as np
 from warpdem.scene.runner import _json_default
 
 from . import candidates as cands
+from . import inference as inf
 
 
 def _f(x, digits: int = 4) -> str:
@@ -334,5 +335,5 @@ def _surrogate_line(ev: dict) -> str:
         f"and response, {len(acc)} in all; leave-one-out Q^2 from {_f(np.nanmin(q2), 3)} to {_f(np.nanmax(q2), 3)}, "
         f"RMSE up to {_f(np.nanmax(rmse), 3)}. Posterior by MCMC (emcee), acceptance "
         f"{_f(cal.get('acceptance'), 2)}, {cal.get('steps', 0)} steps per walker (doubled until the kept half spans "
-        f"50 autocorrelation times), about {_f(cal.get('effective_samples'), 3)} independent samples."
+        f"{inf.TAU_SPAN} autocorrelation times), about {_f(cal.get('effective_samples'), 3)} independent samples."
     )
