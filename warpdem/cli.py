@@ -7,7 +7,20 @@ import json
 import sys
 
 
+def _plain_table(title, columns, rows) -> None:
+    """Columns padded to their widest cell, nothing cut (for logs and pipes)."""
+    cells = [[str(c) for c in columns]] + [[str(x) for x in r] for r in rows]
+    widths = [max(len(r[j]) for r in cells) for j in range(len(columns))]
+    print(title)
+    for r in cells:
+        print("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip())
+
+
 def _table(title, columns, rows):
+    if not sys.stdout.isatty():
+        # rich cuts a table at 80 columns when it cannot see a terminal: a log would lose the cells
+        _plain_table(title, columns, rows)
+        return
     try:
         from rich.console import Console
         from rich.table import Table
@@ -19,10 +32,7 @@ def _table(title, columns, rows):
             t.add_row(*[str(x) for x in r])
         Console().print(t)
     except ImportError:  # rich is a dependency, but keep the GPU machine (no rich) working
-        print(title)
-        print(" | ".join(columns))
-        for r in rows:
-            print(" | ".join(str(x) for x in r))
+        _plain_table(title, columns, rows)
 
 
 def _quiet_warp():
