@@ -227,11 +227,44 @@ def _print_analysis(out, summary: dict) -> None:
             )
 
 
+def _print_plan(plan: dict) -> None:
+    """The run table (coded and actual), the launches and the cost of :func:`execute.plan_study`."""
+    study, tab, cost = plan["study"], plan["table"], plan["cost"]
+    names = study.factor_names
+    cols = ["run", "type", *names, *(f"{n} actual" for n in names), "seed", "status"]
+    rows = [
+        [r["run"], r["point_type"], *(f"{r[n]:g}" for n in names), *(f"{r[n + '_actual']:.6g}" for n in names)]
+        + [r["world_seed"], r["status"]]
+        for _, r in tab.iterrows()
+    ]
+    _table(f"{study.name}: {len(tab)} runs", cols, rows)
+    _table(
+        f"{cost['launches']} launch(es) of the {cost['pending']} pending run(s)",
+        ["launch", "worlds", "runs", "particles per world", "simulated s (at most)"],
+        [
+            [k + 1, L["worlds"], ", ".join(map(str, L["runs"])), L["particles"] or "by mass", f"{L['duration_s']:g}"]
+            for k, L in enumerate(plan["launches"])
+        ],
+    )
+    particle_s = f"{cost['particle_s']:.4g}" if cost["particle_s"] is not None else "unknown (a factory gives a mass)"
+    print(
+        f"cost: {cost['simulated_s']:g} s simulated over the launches, {cost['world_s']:g} world-seconds, "
+        f"{particle_s} particle-seconds; nothing was run (output folder {plan['out']})"
+    )
+
+
 def cmd_study(args) -> int:
     _quiet_warp()
-    from .study.execute import run_study
+    from .study.execute import plan_study, run_study
     from .study.spec import StudyError
 
+    if args.plan:
+        try:
+            _print_plan(plan_study(args.study, args.out, args.device))
+        except StudyError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        return 0
     try:
         res = run_study(
             args.study,
@@ -394,6 +427,11 @@ def main(argv=None) -> int:
     st.add_argument("--out", help="output folder (default runs/NAME); rerunning resumes it")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
     st.add_argument("--no-verify", action="store_true", help="skip the verification runs at the optimum")
+    st.add_argument(
+        "--plan",
+        action="store_true",
+        help="print the run table (coded and actual, finished or pending), the launches and their cost; run nothing",
+    )
     _add_wall_time_options(
         st,
         checkpoint="save each launch's state every SECONDS of wall time (0: never); a rerun resumes from it",

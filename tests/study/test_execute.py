@@ -295,3 +295,32 @@ def test_press_runs_one_world_per_launch(tmp_path):
     assert [len(b) for b in execute._batches(study, rows)] == [1] * len(rows)
     with pytest.raises(ValueError, match="world_count = 2 is not allowed for a 'press' measurement"):
         run_scene(rigs.spec("die_press", smoke=True), world_count=2, frames=False)
+
+
+def test_plan_runs_nothing(finished, tmp_path, monkeypatch, capsys):
+    """``warpdem study --plan``: the run table with coded and actual values, finished or pending, the launches and
+    their cost, from the design alone: 6 runs in launches of at most 4 worlds (4 + 2), 40 spheres for at most
+    0.3 s each, so 6 x 0.3 = 1.8 world-seconds and 72 particle-seconds; nothing runs (a launch would raise) and
+    no output folder is made. A finished study's plan has every run finished and no launch."""
+    from warpdem.cli import main
+
+    def refuse(*a, **k):
+        raise AssertionError("--plan ran a launch")
+
+    monkeypatch.setattr(execute, "run_batch_iter", refuse)
+    study = _study(tmp_path, batch=4)
+    out = tmp_path / "never"
+    assert main(["study", str(study.path), "--plan", "--out", str(out)]) == 0
+    assert not out.exists()
+    text = capsys.readouterr().out
+    assert "A actual" in text and "0.8" in text and "pending" in text
+    assert "1, 2, 3, 4" in text  # a plain table when the output is not a terminal: no cell cut or wrapped
+    plan = execute.plan_study(study, out)
+    assert [L["worlds"] for L in plan["launches"]] == [4, 2]
+    assert sorted(r for L in plan["launches"] for r in L["runs"]) == list(range(1, 7))
+    assert all(L["particles"] == 40 and L["duration_s"] == pytest.approx(0.3) for L in plan["launches"])
+    assert plan["cost"]["world_s"] == pytest.approx(1.8) and plan["cost"]["particle_s"] == pytest.approx(72.0)
+    assert set(plan["table"]["A_actual"]) == {0.2, 0.5, 0.8}
+    done_study, done_out, _ = finished
+    done = execute.plan_study(done_study, done_out)
+    assert set(done["table"]["status"]) == {"finished"} and done["launches"] == []

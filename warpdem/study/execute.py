@@ -442,6 +442,58 @@ def _run_parallel(
     return "; ".join(stops) or None
 
 
+def _study_rows(study: sp.StudySpec, table: pd.DataFrame) -> list[dict]:
+    """One launch row per run of the design ``table`` (run number, point id, world seed, overrides, table row)."""
+    return [
+        {
+            "run": int(r["run"]),
+            "point_id": r["point_id"],
+            "world_seed": int(r["world_seed"]),
+            "overrides": sp.run_overrides(study, r),
+            "row": r.to_dict(),
+        }
+        for _, r in table.iterrows()
+    ]
+
+
+def plan_study(study, out_dir=None, device: str = "cpu") -> dict:
+    """What :func:`run_study` would run, without running anything: ``table`` (the design, coded and actual, with
+    a ``status`` column: finished in ``out_dir`` or pending), ``launches`` (one dict per launch of the pending
+    runs: ``runs`` (run numbers), ``worlds``, ``particles`` per world (the factories' counts; None where a
+    factory gives a mass), ``duration_s`` simulated at most) and ``cost``: the launches' simulated seconds and
+    world-seconds, and particle-seconds where every count is known (a run that settles stops sooner)."""
+    study = study if isinstance(study, sp.StudySpec) else sp.load_study(study)
+    out = Path(out_dir) if out_dir else Path("runs") / study.name
+    table = sp.design_table(study)
+    rows = _study_rows(study, table)
+    done = {r["point_id"] for r in rows if (out / "runs" / f"{r['point_id']}.json").exists()}
+    table["status"] = ["finished" if pid in done else "pending" for pid in table["point_id"]]
+    pending = [r for r in rows if r["point_id"] not in done]
+    launches = []
+    for batch in _batches(study, pending, len(parse_devices(device))) if pending else []:
+        scene = _scene(study, batch[0]["overrides"])
+        counts = [f.count for f in scene.factories]
+        particles = None if any(c is None for c in counts) else int(sum(counts))
+        launches.append(
+            {
+                "runs": [r["run"] for r in batch],
+                "worlds": len(batch),
+                "particles": particles,
+                "duration_s": float(scene.run.duration),
+            }
+        )
+    known = all(L["particles"] is not None for L in launches)
+    cost = {
+        "runs": len(rows),
+        "pending": len(pending),
+        "launches": len(launches),
+        "simulated_s": sum(L["duration_s"] for L in launches),
+        "world_s": sum(L["worlds"] * L["duration_s"] for L in launches),
+        "particle_s": sum(L["worlds"] * L["particles"] * L["duration_s"] for L in launches) if known else None,
+    }
+    return {"study": study, "out": str(out), "table": table, "launches": launches, "cost": cost}
+
+
 def run_study(
     study,
     out_dir=None,
@@ -478,17 +530,7 @@ def run_study(
     table.to_csv(out / "design.csv", index=False)
     runs_dir = out / "runs"
     runs_dir.mkdir(exist_ok=True)
-    rows = []
-    for _, r in table.iterrows():
-        rows.append(
-            {
-                "run": int(r["run"]),
-                "point_id": r["point_id"],
-                "world_seed": int(r["world_seed"]),
-                "overrides": sp.run_overrides(study, r),
-                "row": r.to_dict(),
-            }
-        )
+    rows = _study_rows(study, table)
     devices = parse_devices(device)
     pending = [r for r in rows if not (runs_dir / f"{r['point_id']}.json").exists()]
     done0 = len(rows) - len(pending)
