@@ -35,17 +35,19 @@ def _table(title, columns, rows):
         _plain_table(title, columns, rows)
 
 
-def _quiet_warp():
+def _quiet_warp(device: str = "cpu"):
     import warp as wp
+
+    from .engine.types import init_warp
 
     wp.config.quiet = True
     if hasattr(wp.config, "log_level"):  # Warp >= 1.19 prints its banner and module loads by log level
         wp.config.log_level = wp.LOG_WARNING
-    wp.init()
+    init_warp(device)
 
 
 def cmd_verify(args) -> int:
-    _quiet_warp()
+    _quiet_warp(args.device)
     from .verify import cases as verify
 
     records = verify.run_all(args.device, args.case or None)
@@ -76,7 +78,7 @@ def cmd_verify(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    _quiet_warp()
+    _quiet_warp(args.device)
     from .verify.bench import UNITS, run_bench
 
     res = run_bench(
@@ -115,7 +117,7 @@ def _sets(items) -> dict:
 
 
 def cmd_run(args) -> int:
-    _quiet_warp()
+    _quiet_warp(args.device)
     from .scene import rigs
     from .scene.runner import RunStopped, check_stop_after, run_scene
     from .scene.stage import StageError
@@ -254,7 +256,7 @@ def _print_plan(plan: dict) -> None:
 
 
 def cmd_study(args) -> int:
-    _quiet_warp()
+    _quiet_warp(args.device)
     from .study.execute import plan_study, run_study
     from .study.spec import StudyError
 
@@ -301,7 +303,7 @@ def cmd_study(args) -> int:
 
 
 def cmd_diagnose(args) -> int:
-    _quiet_warp()
+    _quiet_warp(args.device)
     from .diagnose.pipeline import diagnose
     from .study.spec import StudyError
 

@@ -324,3 +324,21 @@ def test_plan_runs_nothing(finished, tmp_path, monkeypatch, capsys):
     done_study, done_out, _ = finished
     done = execute.plan_study(done_study, done_out)
     assert set(done["table"]["status"]) == {"finished"} and done["launches"] == []
+
+
+def test_no_cuda_driver_line_unless_a_gpu_is_asked_for(tmp_path):
+    """On a machine without a GPU, Warp's C++ start-up writes "Could not find or load the NVIDIA CUDA driver" to
+    the terminal at every command; a command given a CPU device (here ``study --plan``, in a fresh process) no
+    longer shows it. On a machine with a driver there is no such line either way."""
+    import subprocess
+    import sys
+
+    study = _study(tmp_path)
+    res = subprocess.run(
+        [sys.executable, "-m", "warpdem.cli", "study", str(study.path), "--plan", "--out", str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 0, res.stderr
+    assert "CUDA driver" not in res.stderr and "run" in res.stdout

@@ -16,7 +16,39 @@ import warp as wp
 
 from warpdem.kernels.enums import ContactLaw, Overflow, RollingModel
 
-__all__ = ["ContactLaw", "Contacts", "Control", "Model", "Overflow", "RollingModel", "State", "host"]
+__all__ = [
+    "ContactLaw",
+    "Contacts",
+    "Control",
+    "Model",
+    "Overflow",
+    "RollingModel",
+    "State",
+    "host",
+    "init_warp",
+]
+
+
+def init_warp(device: str = "cpu") -> None:
+    """Initialise Warp for work on ``device`` (any device option, e.g. ``cpu,cpu`` or ``cuda:all``). Where no CUDA
+    device is asked for, Warp's native "Could not find or load the NVIDIA CUDA driver" line (written straight to
+    file descriptor 2 by its C++ start-up on a machine without a GPU) is kept off the terminal; an error at start
+    still raises."""
+    import os
+    import sys
+
+    if "cuda" in str(device):
+        wp.init()
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            wp.init()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def host(a: wp.array) -> np.ndarray:

@@ -262,11 +262,13 @@ def _device_worker(
     Returns {"ran", "stopped", "walls"}."""
     import warp as wp
 
+    from warpdem.engine.types import init_warp
     from warpdem.scene.runner import RunStopped
 
     wp.config.quiet = quiet[0]
     if quiet[1] is not None:
         wp.config.log_level = quiet[1]
+    init_warp(device)
     runs_dir = Path(out) / "runs"
     ran, walls = 0, []
     for k, batch in enumerate(batches):
