@@ -342,3 +342,31 @@ def test_no_cuda_driver_line_unless_a_gpu_is_asked_for(tmp_path):
     )
     assert res.returncode == 0, res.stderr
     assert "CUDA driver" not in res.stderr and "run" in res.stdout
+
+
+def test_progress_counts_whole_runs(tmp_path):
+    """The progress bar counts whole runs (it showed 3.6434989000174096/12); the running launch's own share is in
+    its postfix as a percentage. A stand-in bar records every count the study sets."""
+
+    class Bar:
+        def __init__(self):
+            self.n, self.counts, self.posts = 0, [], []
+
+        def set_postfix_str(self, text, refresh=False):
+            self.posts.append(text)
+
+        def refresh(self):
+            self.counts.append(self.n)
+
+    study = _study(tmp_path)
+    rows = [
+        {"run": int(r["run"]), "point_id": r["point_id"], "world_seed": int(r["world_seed"]), "row": r.to_dict()}
+        | {"overrides": execute.sp.run_overrides(study, r)}
+        for _, r in execute.sp.design_table(study).iterrows()
+    ]
+    bar = Bar()
+    (tmp_path / "o" / "runs").mkdir(parents=True)
+    execute._run_on_device(study, tmp_path / "o", execute._batches(study, rows), "cpu", bar, 0.0, 0.0, 0.0)
+    assert len(bar.counts) > 2 and all(isinstance(n, int) for n in bar.counts)
+    assert bar.counts[-1] == 6 and sorted(bar.counts) == bar.counts
+    assert any("%" in p for p in bar.posts)

@@ -329,8 +329,10 @@ def _run_on_device(
     def show(k: int, frac: float, msg: str) -> None:
         done[k] = frac * len(batches[k])
         if bar is not None:
-            bar.n = base + sum(done)
-            bar.set_postfix_str(f"launch {k + 1}/{len(batches)}: {len(batches[k])} worlds, {msg}", refresh=False)
+            bar.n = int(base + sum(done))  # whole runs: the launch's own share is in the postfix
+            bar.set_postfix_str(
+                f"launch {k + 1}/{len(batches)}: {len(batches[k])} worlds, {frac:.0%}, {msg}", refresh=False
+            )
             bar.refresh()
 
     def start(k: int):
@@ -422,7 +424,7 @@ def _run_parallel(
                 slot, k, frac, msg = q.get(timeout=0.5)
                 done[slot][k] = frac * len(plan[slot][1][k])
                 if bar is not None:
-                    bar.n = base + sum(map(sum, done))
+                    bar.n = int(base + sum(map(sum, done)))
                     bar.set_postfix_str(f"{len(plan)} devices, {plan[slot][0]}: {msg}", refresh=False)
                     bar.refresh()
             except queue_mod.Empty:
@@ -711,7 +713,7 @@ def run_verification(
 
         def tick(frac, msg):
             if bar is not None:
-                bar.n = frac * len(pending)
+                bar.n = int(frac * len(pending))
                 bar.refresh()
 
         try:
