@@ -124,3 +124,34 @@ def test_fit_summary_of_seed_000s_box_behnken_against_statsmodels():
     assert summ["lack_of_fit"].loc["Quadratic", "p"] == pytest.approx(quad.anova.loc["Lack of Fit", "p"])
     assert summ["statistics"].loc["Quadratic", "pred_r2"] == pytest.approx(quad.stats["pred_r2"])
     assert bool(seq.loc["Cubic", "aliased"]) and summ["suggested"] == "Quadratic"
+
+
+def test_confirmation_interval_against_statsmodels_and_by_hand():
+    """The quadratic of the first test at an off-design point (A 0.4, B -0.7): for one run the interval is
+    statsmodels' ``obs_ci`` of the same least squares built by hand; for four runs only the run-to-run part
+    shrinks: predicted +/- t(0.975, df) sqrt(MSE (1/4 + h0)), with h0 the point's leverage from (X'X)^-1 by hand.
+    A mean of four runs at the prediction lies inside, one 3 SE off lies outside."""
+    from warpdem.study.analysis import confirmation_interval
+
+    d = _factorial()
+    rng = np.random.default_rng(3)
+    d["y"] = 10 + 2 * d.A - d.B + 0.5 * d.A * d.B + 1.5 * d.A**2 + rng.normal(0, 0.3, len(d))
+    fit = fit_model(d, "y", ["A", "B"], "quadratic")
+    X = np.column_stack([np.ones(len(d)), d.A, d.B, d.A * d.B, d.A**2, d.B**2])
+    ols = sm.OLS(d.y.to_numpy(), X).fit()
+    x0 = np.array([[1.0, 0.4, -0.7, 0.4 * -0.7, 0.16, 0.49]])
+    frame = ols.get_prediction(x0).summary_frame(alpha=0.05)
+    one = confirmation_interval(fit, {"A": 0.4, "B": -0.7}, runs=1)
+    assert one["predicted"] == pytest.approx(float(frame["mean"].iloc[0]), rel=1e-12)
+    assert one["low"] == pytest.approx(float(frame["obs_ci_lower"].iloc[0]), rel=1e-10)
+    assert one["high"] == pytest.approx(float(frame["obs_ci_upper"].iloc[0]), rel=1e-10)
+    four = confirmation_interval(fit, {"A": 0.4, "B": -0.7}, runs=4)
+    h0 = float(x0[0] @ np.linalg.inv(X.T @ X) @ x0[0])
+    half = stats.t.ppf(0.975, ols.df_resid) * np.sqrt(ols.mse_resid * (0.25 + h0))
+    assert four["h0"] == pytest.approx(h0, rel=1e-10) and four["df"] == 12
+    assert (four["low"], four["high"]) == pytest.approx((one["predicted"] - half, one["predicted"] + half), rel=1e-10)
+    assert four["high"] - four["low"] < one["high"] - one["low"]
+    se = np.sqrt(ols.mse_resid * (0.25 + h0))
+    assert four["low"] < one["predicted"] < four["high"] and not (
+        four["low"] < one["predicted"] + 3 * se < four["high"]
+    )

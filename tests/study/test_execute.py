@@ -145,8 +145,9 @@ def test_another_study_in_the_folder_is_refused(finished, tmp_path):
 def test_analysis_and_verification(finished, tmp_path):
     """The analysis of the finished runs writes report.md and the ANOVA; with a target inside the fitted
     range the chosen settings predict it, and the verification runs (2 replicates, world seeds 1 and 2) are
-    summarised with mean, SD and relative error against the target, in verification.json and report.md; a
-    verification launch stopped by the wall-time limit resumes from its checkpoint."""
+    summarised with mean, SD and relative error against the target, and judged against the prediction interval
+    for a mean of 2 runs at the chosen point, in verification.json and report.md; a verification launch stopped
+    by the wall-time limit resumes from its checkpoint."""
     study, out, _ = finished
     table = execute.load_results(out, study)
     target = float(table["height"].median())
@@ -169,8 +170,15 @@ def test_analysis_and_verification(finished, tmp_path):
     mean = sum(v["values"]) / 2
     assert v["mean"] == pytest.approx(mean)
     assert v["relative_error_pct"] == pytest.approx(100 * abs(mean - target) / target)
+    # the confirmation interval: the fit's own prediction interval for a mean of 2 runs at the chosen point
+    from scipy import stats
+
+    c = s["confirmation"]
+    half = stats.t.ppf(0.975, c["df"]) * (c["mse"] * (0.5 + c["h0"])) ** 0.5
+    assert v["prediction_interval"] == pytest.approx([c["predicted"] - half, c["predicted"] + half], rel=1e-10)
+    assert v["within_prediction_interval"] == (c["predicted"] - half <= mean <= c["predicted"] + half)
     report = (out / "analysis" / "report.md").read_text()
-    assert "## Verification" in report
+    assert "## Verification" in report and "prediction interval for a mean of 2 runs" in report
     # a new analysis rewrites the report and keeps the verification section
     execute.analyze(out)
     assert (out / "analysis" / "report.md").read_text().count("## Verification") == 1

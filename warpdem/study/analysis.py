@@ -47,11 +47,13 @@ __all__ = [
     "TargetSolution",
     "backward_eliminate",
     "box_cox",
+    "confirmation_interval",
     "effects_table",
     "fit_model",
     "fit_summary",
     "influence",
     "lenth_pse",
+    "mean_prediction_interval",
     "model_terms",
     "outlier_limit",
     "parse_term",
@@ -745,6 +747,36 @@ def solve_target(
 
 BOX_COX_STANDARD = {-1.0: "inverse", -0.5: "inverse square root", 0.0: "ln", 0.5: "square root", 1.0: "none"}
 """The power transforms Design-Expert recommends by name, by their lambda."""
+
+
+def mean_prediction_interval(
+    predicted: float, mse: float, h0: float, df: int, runs: int = 1, alpha: float = 0.05
+) -> tuple[float, float]:
+    """Two-sided ``1 - alpha`` prediction interval for the mean of ``runs`` new runs at a point of leverage
+    ``h0`` whose model prediction is ``predicted``: predicted +/- t(1 - alpha/2, df) sqrt(mse (1/runs + h0))
+    (Design-Expert's confirmation interval; ``mse`` the residual mean square on ``df`` degrees of freedom)."""
+    from scipy import stats
+
+    if int(runs) < 1:
+        raise ValueError(f"mean_prediction_interval: runs = {runs}; expected an integer >= 1")
+    if df <= 0 or not math.isfinite(mse):
+        return math.nan, math.nan
+    half = float(stats.t.ppf(1.0 - alpha / 2.0, df)) * math.sqrt(mse * (1.0 / int(runs) + h0))
+    return predicted - half, predicted + half
+
+
+def confirmation_interval(fit: ModelFit, x, runs: int = 1, alpha: float = 0.05) -> dict:
+    """Design-Expert's confirmation check at the coded point ``x`` (mapping or (k,) array): the prediction,
+    its leverage h0 = x0' (X'X)^-1 x0, the residual mean square and its df, and
+    :func:`mean_prediction_interval` for ``runs`` runs (for one run it is statsmodels' ``obs_ci``)."""
+    X = _columns(fit.data[fit.factors].to_numpy(dtype=float), fit.terms, fit.factors)
+    x0 = _columns(fit._x(x), fit.terms, fit.factors)[0]
+    df = int(fit.ols.df_resid)
+    mse = float(fit.ols.mse_resid) if df > 0 else math.nan
+    h0 = float(x0 @ np.linalg.pinv(X.T @ X) @ x0)
+    y0 = float(fit.predict(fit._x(x))[0])
+    low, high = mean_prediction_interval(y0, mse, h0, df, runs, alpha)
+    return {"predicted": y0, "low": low, "high": high, "mse": mse, "h0": h0, "df": df, "runs": int(runs)}
 
 
 def influence(fit: ModelFit) -> pd.DataFrame:

@@ -670,6 +670,17 @@ def _append_verification(out: Path, v: dict) -> None:
         f"relative error of the mean {v['relative_error_pct']:.3g} %.",
         "",
     ]
+    pi, within = v.get("prediction_interval"), v.get("within_prediction_interval")
+    if within is not None:
+        level = 100.0 * (1.0 - v["interval_alpha"])
+        lines += [
+            f"Confirmation (Design-Expert's): the mean of the {n} runs lies "
+            + ("**inside**" if within else "**outside**")
+            + f" the {level:.0f} % prediction interval for a mean of {n} runs at these settings, "
+            f"[{pi[0]:.4g}, {pi[1]:.4g}]"
+            + (": the model is confirmed there." if within else ": the model does not hold there."),
+            "",
+        ]
     with open(out / "analysis" / "report.md", "a") as fh:
         fh.write("\n".join(lines))
 
@@ -746,6 +757,15 @@ def run_verification(
             values.append(json.load(fh)["responses"][resp.name])
     v = np.asarray(values, dtype=float)
     mean = float(np.nanmean(v)) if np.isfinite(v).any() else math.nan
+    from .analysis import mean_prediction_interval
+
+    # Design-Expert's confirmation: the mean of the k runs against the prediction interval for a mean of k runs
+    conf, k = s.get("confirmation"), int(np.isfinite(v).sum())
+    pi = (
+        mean_prediction_interval(conf["predicted"], conf["mse"], conf["h0"], conf["df"], k, conf["alpha"])
+        if conf and k
+        else (math.nan, math.nan)
+    )
     result = {
         "response": resp.name,
         "target": resp.target,
@@ -755,6 +775,9 @@ def run_verification(
         "mean": mean,
         "sd": float(np.nanstd(v, ddof=1)) if np.isfinite(v).sum() > 1 else math.nan,
         "relative_error_pct": 100.0 * abs(mean - resp.target) / abs(resp.target) if resp.target else math.nan,
+        "prediction_interval": list(pi),
+        "within_prediction_interval": bool(pi[0] <= mean <= pi[1]) if math.isfinite(pi[0]) else None,
+        "interval_alpha": conf["alpha"] if conf else None,
     }
     _write_json(vdir / "verification.json", result)
     _append_verification(out, result)

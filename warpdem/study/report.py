@@ -36,6 +36,7 @@ from .analysis import (
     _columns,
     backward_eliminate,
     box_cox,
+    confirmation_interval,
     effects_table,
     fit_model,
     fit_summary,
@@ -1152,6 +1153,9 @@ def write_report(
                     "",
                     f"Predicted {name} at the chosen settings: {pred:.6g}{unit}.",
                 ]
+                ci = confirmation_interval(fit, {f: float(sol.chosen[f]) for f in fnames}, alpha=alpha)
+                # what a confirmation of any number of runs needs (Design-Expert's confirmation node)
+                entry["confirmation"] = {k: ci[k] for k in ("predicted", "mse", "h0", "df")} | {"alpha": alpha}
                 entry.update(chosen=settings, predicted=pred, reachable=True)
             else:
                 md += [
