@@ -155,3 +155,36 @@ def test_confirmation_interval_against_statsmodels_and_by_hand():
     assert four["low"] < one["predicted"] < four["high"] and not (
         four["low"] < one["predicted"] + 3 * se < four["high"]
     )
+
+
+def test_alias_matrix_of_a_half_fraction_a_plackett_burman_and_the_defining_relation():
+    """Design-Expert's alias list, from the alias matrix of the runs:
+    - 2^(3-1) with C = AB, linear model: [Intercept] = Intercept + ABC, [A] = A + BC, [B] = B + AC, [C] = C + AB;
+    - the 12-run Plackett-Burman in 5 factors: each main effect carries 1/3 of every two-factor interaction
+      without it (6 of them) and none with it (the published partial aliasing of that design);
+    - 2^(5-2) with D = AB, E = AC: the full aliases of every main effect among the two-factor interactions
+      equal those of the defining relation I = ABD = ACE = BCDE (designs.alias_structure, group algebra)."""
+    from warpdem.study import designs as ds
+    from warpdem.study.analysis import alias_lines, alias_matrix
+
+    half = ds.fractional_factorial(3, "C=AB").reset_index(drop=True)
+    half["y"] = np.arange(4.0)
+    lines = alias_lines(alias_matrix(fit_model(half, "y", ["A", "B", "C"], "linear")))
+    assert lines == ["[Intercept] = Intercept + ABC", "[A] = A + BC", "[B] = B + AC", "[C] = C + AB"]
+
+    pb = ds.plackett_burman(5).reset_index(drop=True)
+    pb["y"] = np.random.default_rng(0).normal(size=12)
+    A = alias_matrix(fit_model(pb, "y", list("ABCDE"), "linear"), max_order=2)
+    for f in "ABCDE":
+        row = A.loc[f]
+        assert set(np.round(np.abs(row[row != 0]), 12)) == {round(1 / 3, 12)}
+        assert sorted(row[row != 0].index) == sorted(c for c in A.columns if f not in c)
+
+    frac = ds.fractional_factorial(5, ["D=AB", "E=AC"]).reset_index(drop=True)
+    frac["y"] = np.arange(8.0)
+    A = alias_matrix(fit_model(frac, "y", list("ABCDE"), "linear"), max_order=2)
+    group = ds.alias_structure(5, ["D=AB", "E=AC"], max_order=1).aliases
+    for f in "ABCDE":
+        row = A.loc[f]
+        full = sorted(c for c in row[np.isclose(np.abs(row), 1.0)].index)
+        assert full == sorted(a for a in group[f] if len(a) == 2)

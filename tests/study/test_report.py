@@ -189,7 +189,7 @@ def test_ccd_report_alpha_two_lack_of_fit(ccd_report):
 def test_pb_linear_report_and_unreachable_target(tmp_path):
     """Seed 000's 12-run Plackett-Burman, linear model: R^2 0.9441 (Table 7), no lack of fit
     row without replicates; a 90 deg target is outside the predicted range and reported as
-    unreachable, with no chosen settings."""
+    unreachable, with no chosen settings; the alias structure is listed (partial, 1/3)."""
     runs, factors, labels = _pb()
     res = _aor_report(tmp_path, (runs, factors, labels), "Pellets PB", 90.0, "linear", design_kind="Plackett-Burman")
     fit = fit_model(runs, "aor_deg", list("ABCDEF"), "linear", factors)
@@ -204,6 +204,10 @@ def test_pb_linear_report_and_unreachable_target(tmp_path):
     assert len([f for f in res["files"] if f.startswith("contour_")]) == 3
     md = (tmp_path / "report.md").read_text()
     assert "**Not reachable**" in md and "outside the predicted range" in md
+    # seed 000's PB has 6 factors in 12 runs: each main effect carries 1/3 of the 10 two-factor interactions
+    # without it, and its report lists them
+    assert "### Alias structure" in md and len(r["aliases"]) == 7
+    assert all(line.count("0.333") == 10 for line in r["aliases"][1:])
 
 
 def test_failed_run_excluded_and_listed(tmp_path):

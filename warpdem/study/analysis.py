@@ -45,6 +45,8 @@ from .designs import Factor
 __all__ = [
     "ModelFit",
     "TargetSolution",
+    "alias_lines",
+    "alias_matrix",
     "backward_eliminate",
     "box_cox",
     "confirmation_interval",
@@ -747,6 +749,48 @@ def solve_target(
 
 BOX_COX_STANDARD = {-1.0: "inverse", -0.5: "inverse square root", 0.0: "ln", 0.5: "square root", 1.0: "none"}
 """The power transforms Design-Expert recommends by name, by their lambda."""
+
+
+def alias_matrix(fit: ModelFit, max_order: int = 3, tol: float = 1e-9) -> pd.DataFrame:
+    """Design-Expert's alias matrix of ``fit``'s design: A = (X1'X1)^-1 X1'X2, with X1 the model's columns
+    (intercept and terms) and X2 every interaction of distinct factors up to ``max_order`` that the model
+    lacks. Entry (model term, potential term) is how much of that term's effect the model term's estimate
+    absorbs: 1 for a full alias (a 2^(k-p) fraction), a fraction for a partial one (Plackett-Burman's +/-1/3).
+    Rows: ``Intercept`` and the term labels; only columns with an entry above ``tol``."""
+    factors = fit.factors
+    x = fit.data[factors].to_numpy(dtype=float)
+    have = {tuple(sorted(t)) for t in fit.terms}
+    potential = [
+        t
+        for order in range(2, min(max_order, len(factors)) + 1)
+        for t in itertools.combinations(factors, order)
+        if tuple(sorted(t)) not in have
+    ]
+    X1 = _columns(x, fit.terms, factors)
+    X2 = _columns(x, potential, factors)[:, 1:]
+    A = np.linalg.pinv(X1.T @ X1) @ X1.T @ X2
+    A[np.abs(A) < tol] = 0.0
+    keep = np.abs(A).max(axis=0) > 0 if A.size else np.zeros(0, bool)
+    return pd.DataFrame(
+        A[:, keep],
+        index=["Intercept", *fit.labels],
+        columns=[term_label(t, factors) for t, k in zip(potential, keep) if k],
+    )
+
+
+def alias_lines(aliases: pd.DataFrame, digits: int = 3) -> list[str]:
+    """Design-Expert's alias list: ``[A] = A - 0.333 BC + 0.333 BD`` for each row of :func:`alias_matrix`."""
+    out = []
+    for term, row in aliases.iterrows():
+        parts = [term]
+        for col, a in row.items():
+            if a == 0.0:
+                continue
+            mag = abs(a)
+            coef = "" if abs(mag - 1.0) < 10**-digits else f"{mag:.{digits}g} "
+            parts.append(f"{'-' if a < 0 else '+'} {coef}{col}")
+        out.append(f"[{term}] = " + " ".join(parts))
+    return out
 
 
 def mean_prediction_interval(

@@ -34,6 +34,8 @@ from .analysis import (
     ModelFit,
     Term,
     _columns,
+    alias_lines,
+    alias_matrix,
     backward_eliminate,
     box_cox,
     confirmation_interval,
@@ -463,6 +465,27 @@ def _fit_response(
     else:
         fit = fit_model(data, name, fnames, terms, levels)
     return fit, fallback
+
+
+def _alias_section(fit: ModelFit) -> list[str]:
+    """Report lines of the alias structure of a two-level design (every run at +/-1 in every factor, or a centre
+    point): what each coefficient's estimate also carries of the interactions the model lacks, up to one order
+    above the model's highest (at least two-factor, at most three-factor). Empty for other designs."""
+    x = fit.data[fit.factors].to_numpy(dtype=float)
+    centre = np.all(x == 0.0, axis=1)
+    if not fit.terms or not np.all(np.isin(np.abs(x[~centre]), [1.0])):
+        return []
+    top = max(len(set(t)) for t in fit.terms)
+    order = min(max(top + 1, 2), 3)
+    lines = alias_lines(alias_matrix(fit, max_order=order))
+    where = "-factor interactions" if order == 2 else "- and three-factor interactions"
+    head = (
+        f"What each estimate also carries of the interactions the model lacks (up to two{where}; the alias "
+        "matrix (X1'X1)^-1 X1'X2 of the runs):"
+    )
+    if all(" = " in ln and ln.split(" = ")[1].count(" ") == 0 for ln in lines):
+        return ["", "### Alias structure", "", f"{head} no term is aliased."]
+    return ["", "### Alias structure", "", head, "", *[f"- {ln}" for ln in lines]]
 
 
 def _fit_summary_md(summ: dict, fitted: str) -> list[str]:
@@ -987,6 +1010,8 @@ def write_report(
                 [False] + [True] * 6,
             )
         )
+        aliases = _alias_section(fit)
+        md += aliases
         eq_coded = fit.equation_string("coded", 6)
         eq_actual = fit.equation_string("actual", 6)
         md += [
@@ -1098,6 +1123,7 @@ def write_report(
 
         # ---- target
         entry = {
+            "aliases": [line[2:] for line in aliases if line.startswith("- [")],
             "model": _model_name(fit),
             "model_fallback": fallback,
             "n_used": len(used),
