@@ -188,3 +188,36 @@ def test_alias_matrix_of_a_half_fraction_a_plackett_burman_and_the_defining_rela
         row = A.loc[f]
         full = sorted(c for c in row[np.isclose(np.abs(row), 1.0)].index)
         assert full == sorted(a for a in group[f] if len(a) == 2)
+
+
+def test_desirability_by_hand_and_its_optimum():
+    """Derringer-Suich desirabilities against values worked by hand:
+    - maximize on [10, 20], weight 2: y = 15 gives (5/10)^2 = 0.25; below 10, 0; above 20, 1;
+    - minimize on [1, 5], weight 1: y = 2 gives 3/4;
+    - target 30 in [20, 35], weights 1 below and 0.5 above: y = 25 gives 0.5, y = 32.5 gives 0.5^0.5;
+    - in range [0, 1]: 1 inside, 0 outside;
+    overall, importances 3 and 1: (0.25^3 x 0.75)^(1/4) = 0.3290. Then two fitted planes, y1 = 15 + 5A
+    (maximize on [10, 20]) and y2 = 30 + 5B (target 30 in [20, 40]): the optimum is A = 1, B = 0, D = 1."""
+    from warpdem.study.analysis import Goal, desirability, optimize_desirability
+
+    up = Goal("maximize", 10, 20, weight=2, importance=3)
+    down = Goal("minimize", 1, 5, importance=1)
+    aim = Goal("target", 20, 35, target=30, weight=1, weight_high=0.5)
+    inside = Goal("in_range", 0, 1)
+    np.testing.assert_allclose(up.d([15, 9, 25]), [0.25, 0.0, 1.0])
+    assert down.d(2.0) == pytest.approx(0.75)
+    np.testing.assert_allclose(aim.d([25, 32.5, 19, 36]), [0.5, 0.5**0.5, 0.0, 0.0])
+    np.testing.assert_allclose(inside.d([-0.1, 0.5, 1.2]), [0, 1, 0])
+    D = desirability({"y1": np.array([15.0]), "y2": np.array([2.0])}, {"y1": up, "y2": down})
+    assert D[0] == pytest.approx((0.25**3 * 0.75) ** 0.25, rel=1e-12)
+    with pytest.raises(ValueError, match="target = 40"):
+        Goal("target", 20, 35, target=40)
+
+    d = _factorial()
+    d["y1"] = 15 + 5 * d.A
+    d["y2"] = 30 + 5 * d.B
+    fits = {r: fit_model(d, r, ["A", "B"], "linear") for r in ("y1", "y2")}
+    goals = {"y1": Goal("maximize", 10, 20), "y2": Goal("target", 20, 40, target=30)}
+    best = optimize_desirability(fits, goals, starts=10, seed=1).iloc[0]
+    assert best["A"] == pytest.approx(1.0, abs=1e-3) and best["B"] == pytest.approx(0.0, abs=2e-3)
+    assert best["desirability"] == pytest.approx(1.0, abs=1e-3)

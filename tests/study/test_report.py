@@ -300,3 +300,32 @@ def test_format_anova_and_p_values():
     assert text.splitlines()[0].startswith("ANOVA for Quadratic model")
     assert format_p(3e-5) == "< 0.0001" and format_p(0.00482) == "0.0048" and format_p(float("nan")) == ""
     assert format_p(1e-4) == "0.0001"
+
+
+def test_desirability_of_two_responses(tmp_path):
+    """Seed 000's Box-Behnken with a second response, y2 = 2 + C (coded), to minimise on [1, 3], and the angle
+    aimed at 24 deg in [18, 30] (importance 5 against 1): the report's multi-response section and
+    desirability.csv; the best solution's D is the Derringer-Suich D of the two fitted models at its
+    settings, it is at least the D of every design run (the search starts from them), and it lies in the
+    design region."""
+    from warpdem.study.analysis import Goal, desirability, fit_model
+
+    runs, factors, labels = _bbd()
+    runs = runs.copy()
+    runs["y2"] = 2.0 + runs["C"]
+    goals = {"aor_deg": Goal("target", 18, 30, target=24, importance=5), "y2": Goal("minimize", 1, 3, importance=1)}
+    responses = [{**AOR, "target": None, "goal": goals["aor_deg"]}, {"name": "y2", "unit": "", "goal": goals["y2"]}]
+    res = write_report(
+        tmp_path, runs, title="BBD", factors=factors, labels=labels, responses=responses, model="quadratic"
+    )
+    md = (tmp_path / "report.md").read_text()
+    assert "## Multi-response optimisation (desirability)" in md and (tmp_path / "desirability.csv").exists()
+    sols = pd.read_csv(tmp_path / "desirability.csv")
+    fits = {r: fit_model(runs, r, list("CDE"), "quadratic") for r in goals}
+    best = sols.iloc[0]
+    x = best[list("CDE")].to_numpy(dtype=float)[None, :]
+    D = desirability({r: fits[r].predict(x) for r in goals}, goals)[0]
+    assert best["desirability"] == pytest.approx(D, rel=1e-9) == pytest.approx(res["desirability"]["desirability"])
+    D_runs = desirability({r: fits[r].predict(runs[list("CDE")]) for r in goals}, goals)
+    assert best["desirability"] >= D_runs.max() - 1e-9
+    assert np.all(np.abs(x) <= 1 + 1e-9)

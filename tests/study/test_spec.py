@@ -468,6 +468,36 @@ BAD = [
     ("analysis-alpha", 'model = "linear"', 'model = "linear"\nalpha = 1.5', ["[analysis]", "alpha = 1.5", "(0, 1)"]),
     ("verification-negative", "replicates = 0", "replicates = -1", ["[verification]", "replicates = -1"]),
     (
+        "goal-unknown",
+        'measure = "angle_fit_deg"',
+        'measure = "angle_fit_deg"\ngoal = "maximise"\nlow = 20\nhigh = 40',
+        ["[[responses]] 'aor_deg'", "goal = 'maximise'", "did you mean 'maximize'"],
+    ),
+    (
+        "goal-no-high",
+        'measure = "angle_fit_deg"',
+        'measure = "angle_fit_deg"\ngoal = "minimize"\nlow = 20',
+        ["[[responses]] 'aor_deg'", "high", "needs both low and high"],
+    ),
+    (
+        "goal-target-outside",
+        'measure = "angle_fit_deg"',
+        'measure = "angle_fit_deg"\ntarget = 45.0\ngoal = "target"\nlow = 20\nhigh = 40',
+        ["[[responses]] 'aor_deg'", "target = 45.0", "strictly between low 20.0 and high 40.0"],
+    ),
+    (
+        "goal-limits-without-goal",
+        'measure = "angle_fit_deg"',
+        'measure = "angle_fit_deg"\nlow = 20',
+        ["[[responses]] 'aor_deg'", "low = 20", "a goal"],
+    ),
+    (
+        "goal-importance",
+        'measure = "angle_fit_deg"',
+        'measure = "angle_fit_deg"\ngoal = "maximize"\nlow = 20\nhigh = 40\nimportance = 7',
+        ["[[responses]] 'aor_deg'", "importance = 7", "1 to 5"],
+    ),
+    (
         "clump-mass-word",
         '"interaction.grain.grain.restitution" = 0.3',
         '"interaction.grain.grain.restitution" = 0.3\n"run.clump_contact_mass" = "half"',

@@ -41,8 +41,11 @@ import statsmodels.api as sm
 from scipy import optimize, stats
 
 from .designs import Factor
+from .goals import GOALS, Goal
 
 __all__ = [
+    "GOALS",
+    "Goal",
     "ModelFit",
     "TargetSolution",
     "alias_lines",
@@ -50,6 +53,7 @@ __all__ = [
     "backward_eliminate",
     "box_cox",
     "confirmation_interval",
+    "desirability",
     "effects_table",
     "fit_model",
     "fit_summary",
@@ -57,6 +61,7 @@ __all__ = [
     "lenth_pse",
     "mean_prediction_interval",
     "model_terms",
+    "optimize_desirability",
     "outlier_limit",
     "parse_term",
     "response_range",
@@ -749,6 +754,53 @@ def solve_target(
 
 BOX_COX_STANDARD = {-1.0: "inverse", -0.5: "inverse square root", 0.0: "ln", 0.5: "square root", 1.0: "none"}
 """The power transforms Design-Expert recommends by name, by their lambda."""
+
+
+def desirability(values: Mapping[str, np.ndarray], goals: Mapping[str, Goal]) -> np.ndarray:
+    """Overall desirability D = (prod d_i^r_i)^(1 / sum r_i) of the responses' ``values`` (each (n,)) under their
+    ``goals`` (r_i: importance); 0 wherever one response is undesirable."""
+    total = sum(g.importance for g in goals.values())
+    logs = [g.importance * np.log(np.maximum(g.d(values[name]), 1e-300)) for name, g in goals.items()]
+    D = np.exp(np.sum(logs, axis=0) / total)
+    zero = np.any([g.d(values[name]) <= 0.0 for name, g in goals.items()], axis=0)
+    return np.where(zero, 0.0, D)
+
+
+def optimize_desirability(
+    fits: Mapping[str, ModelFit], goals: Mapping[str, Goal], bounds="cube", starts: int = 40, seed: int = 0
+) -> pd.DataFrame:
+    """Settings that maximise the overall :func:`desirability` of the fitted models ``fits`` (one per goal,
+    the same factors) over the coded region ``bounds``: L-BFGS-B from ``starts`` seeded uniform points and
+    the design's runs, on a smoothed D (each d_i floored at 1e-6, so that a start where a response is
+    undesirable still has a slope). Distinct solutions (coded settings to 3 decimals) ranked by D, best first:
+    coded factors, each response's prediction and d, and ``desirability``."""
+    names = list(goals)
+    fit0 = fits[names[0]]
+    factors = fit0.factors
+    b = _bounds(fit0, bounds)
+    lo = np.array([b[f][0] for f in factors])
+    hi = np.array([b[f][1] for f in factors])
+    total = sum(goals[n].importance for n in names)
+
+    def smooth(z):
+        x = z[None, :]
+        s_ = sum(goals[n].importance * math.log(max(float(goals[n].d(fits[n].predict(x))[0]), 1e-6)) for n in names)
+        return -s_ / total
+
+    pts = lo + (hi - lo) * np.random.default_rng(seed).random((starts, len(factors)))
+    runs = np.clip(fit0.data[factors].to_numpy(dtype=float), lo, hi)
+    rows = []
+    for z0 in np.vstack([pts, runs]):
+        res = optimize.minimize(smooth, z0, method="L-BFGS-B", bounds=list(zip(lo, hi)))
+        rows.append(np.clip(res.x, lo, hi))
+    X = np.unique(np.round(np.array(rows), 3), axis=0)
+    out = pd.DataFrame(X, columns=factors)
+    values = {n: fits[n].predict(X) for n in names}
+    for n in names:
+        out[n] = values[n]
+        out[f"d_{n}"] = goals[n].d(values[n])
+    out["desirability"] = desirability(values, goals)
+    return out.sort_values("desirability", ascending=False, kind="stable").reset_index(drop=True)
 
 
 def alias_matrix(fit: ModelFit, max_order: int = 3, tol: float = 1e-9) -> pd.DataFrame:

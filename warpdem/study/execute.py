@@ -633,7 +633,9 @@ def analyze(out, study: sp.StudySpec | None = None) -> dict:
         title=study.title or study.name,
         factors=study.levels,
         labels={f.name: f.label for f in study.factors},
-        responses=[{"name": r.name, "unit": r.unit, "target": r.target} for r in study.responses],
+        responses=[
+            {"name": r.name, "unit": r.unit, "target": r.target, "goal": r.desirability_goal()} for r in study.responses
+        ],
         model=list(model) if isinstance(model, tuple) else model,
         alpha=study.analysis.alpha,
         eliminate=study.analysis.eliminate,

@@ -44,6 +44,7 @@ from .analysis import (
     fit_summary,
     influence,
     model_terms,
+    optimize_desirability,
     outlier_limit,
     response_range,
     solve_target,
@@ -467,6 +468,56 @@ def _fit_response(
     return fit, fallback
 
 
+def _desirability_section(out: Path, fits: dict, goals: dict, fmap: dict, labels: dict, region, files, result) -> list:
+    """The multi-response optimisation: settings in the design region that maximise the overall desirability
+    of the responses with a goal (:func:`analysis.optimize_desirability`), the ten best distinct solutions as a
+    table and ``desirability.csv``; ``result["desirability"]`` the best (actual settings, predictions, D)."""
+    fnames = list(fmap)
+    bounds = {f: region[f] for f in fnames}
+    sols = optimize_desirability(fits, goals, bounds=bounds, starts=40, seed=0)
+    for f in fnames:
+        sols[f"{f}_actual"] = fmap[f].to_actual(sols[f].to_numpy())
+    sols.to_csv(out / "desirability.csv", index=False)
+    files.append("desirability.csv")
+    rows = []
+    for k, r in sols.head(10).iterrows():
+        rows.append(
+            [str(k + 1)]
+            + [f"{r[f + '_actual']:.4g}" for f in fnames]
+            + [f"{r[n]:.4g} ({r['d_' + n]:.3f})" for n in goals]
+            + [f"{r['desirability']:.3f}"]
+        )
+    goal_text = "; ".join(
+        f"{n}: {g.kind}"
+        + (f" {g.target:g}" if g.kind == "target" else "")
+        + f" in [{g.low:g}, {g.high:g}], weight {g.weight:g}, importance {g.importance}"
+        for n, g in goals.items()
+    )
+    best = sols.iloc[0]
+    result["desirability"] = _json(
+        {
+            "settings": {f: float(best[f + "_actual"]) for f in fnames},
+            "predicted": {n: float(best[n]) for n in goals},
+            "desirability": float(best["desirability"]),
+            "solutions": len(sols),
+        }
+    )
+    return [
+        "",
+        "## Multi-response optimisation (desirability)",
+        "",
+        f"Goals (Derringer-Suich; overall D the importance-weighted geometric mean of each d): {goal_text}. "
+        f"{len(sols)} distinct solutions from 40 seeded starts and the runs (L-BFGS-B over the design region; "
+        "all in `desirability.csv`), the ten best:",
+        "",
+        _md_table(
+            ["#", *(_axis_label(fmap[f], labels) for f in fnames), *(f"{n} (d)" for n in goals), "D"],
+            rows,
+            [False] + [True] * (len(fnames) + len(goals) + 1),
+        ),
+    ]
+
+
 def _alias_section(fit: ModelFit) -> list[str]:
     """Report lines of the alias structure of a two-level design (every run at +/-1 in every factor, or a centre
     point): what each coefficient's estimate also carries of the interactions the model lacks, up to one order
@@ -734,8 +785,11 @@ def _plot_diagnostics(out: Path, tag: str, fit: ModelFit, diag: dict, runs, used
         ax.axhline(bc["ln_ss_limit"], color="r", ls="--", label="confidence limit")
         ax.axvline(bc["lambda_hat"], color="g", label=f"best {bc['lambda_hat']:.2f}")
         ax.axvline(1.0, color="b", ls=":", label="current (1)")
-        # the limit line stays in view; a steep curve is cut 4 above it
-        ax.set_ylim(min(lss) - 0.5, max(min(max(lss), bc["ln_ss_limit"] + 4), bc["ln_ss_limit"] + 0.3))
+        # the limit line stays in view; a steep curve is cut 4 above it. An exact fit (residual SS 0) has no
+        # finite limit: matplotlib's own limits then
+        seen = np.asarray(lss, dtype=float)[np.isfinite(lss)]
+        if len(seen) and np.isfinite(bc["ln_ss_limit"]):
+            ax.set_ylim(seen.min() - 0.5, max(min(seen.max(), bc["ln_ss_limit"] + 4), bc["ln_ss_limit"] + 0.3))
         ax.legend(fontsize=8)
     else:
         ax.text(0.5, 0.5, bc.get("error", "not computed"), ha="center", va="center", wrap=True, transform=ax.transAxes)
@@ -895,6 +949,7 @@ def write_report(
             )
         )
 
+    fits: dict[str, ModelFit] = {}
     for resp in responses:
         name = resp["name"]
         tag = _safe(name)
@@ -927,6 +982,7 @@ def write_report(
             )
             continue
         fit, fallback = _fit_response(used, name, fnames, model, alpha, eliminate, fmap)
+        fits[name] = fit
         if fallback:
             auto_notes.append(f"{name}: {fallback}.")
             md += ["", f"**Model fallback:** {fallback}."]
@@ -1216,6 +1272,9 @@ def write_report(
         )
         result[name] = _json(entry)
 
+    goals = {r["name"]: r["goal"] for r in responses if r.get("goal") is not None and r["name"] in fits}
+    if goals:
+        md += _desirability_section(out, fits, goals, fmap, labels, region, files, result)
     all_notes = auto_notes + list(notes or [])
     md += ["", "## Notes", ""]
     md += [f"- {n}" for n in all_notes] if all_notes else ["None."]

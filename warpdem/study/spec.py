@@ -57,6 +57,13 @@ Schema (``studies/*.toml``)::
                                     # the metrics (e.g. "phases.load.Body.max_speed_m_s") (required)
     unit = "deg"
     target = 28.27                  # measured value to calibrate to (optional)
+    goal = "target"                 # desirability goal for the multi-response optimisation (optional):
+                                    # maximize | minimize | target (uses target) | in_range
+    low = 20.0                      # the goal's limits (needed with a goal), low < high; a target lies between
+    high = 35.0
+    weight = 1.0                    # > 0: 1 linear, above 1 stricter near the goal (default 1)
+    weight_high = 1.0               # a target's upper side (default: weight)
+    importance = 3                  # 1 to 5, in the overall desirability (default 3)
 
     [analysis]
     model = "linear"                # linear | 2fi | quadratic | none | a list of terms ["A", "A*B", "A^2"]
@@ -126,6 +133,7 @@ from warpdem.scene.runner import COMMON_METRICS, MEASURE_METRICS
 from . import designs
 from .analysis import model_terms
 from .designs import Factor
+from .goals import GOALS, Goal
 
 __all__ = [
     "AnalysisSpec",
@@ -494,12 +502,20 @@ class DesignSpec:
 
 @dataclass(frozen=True)
 class ResponseSpec:
-    """A response: the metric ``measure`` read from each run, its ``unit`` and an optional ``target``."""
+    """A response: the metric ``measure`` read from each run, its ``unit``, an optional ``target``, and an
+    optional desirability ``goal`` (:data:`goals.GOALS`; ``target`` uses ``target``) with its limits ``low``,
+    ``high``, shape ``weight`` (``weight_high`` above a target) and ``importance`` (1 to 5)."""
 
     name: str
     measure: str
     unit: str = ""
     target: float | None = None
+    goal: str | None = None
+    low: float | None = None
+    high: float | None = None
+    weight: float = 1.0
+    weight_high: float | None = None
+    importance: int = 3
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not _FACTOR_RE.match(self.name):
@@ -516,6 +532,37 @@ class ResponseSpec:
         _string(where, "unit", self.unit)
         if self.target is not None:
             object.__setattr__(self, "target", spec_number(where, "target", self.target))
+        if self.goal is None:
+            given = [k for k in ("low", "high", "weight_high") if getattr(self, k) is not None]
+            if given:
+                raise spec_error(
+                    where, given[0], getattr(self, given[0]), f"a goal ({' | '.join(GOALS)}) to go with it"
+                )
+            return
+        if self.goal not in GOALS:
+            raise spec_error(where, "goal", self.goal, " | ".join(GOALS) + did_you_mean(str(self.goal), GOALS))
+        for k in ("low", "high"):
+            if getattr(self, k) is None:
+                raise spec_error(where, k, None, f"a number: the {self.goal} goal needs both low and high")
+            object.__setattr__(self, k, spec_number(where, k, getattr(self, k)))
+        try:
+            self.desirability_goal()
+        except ValueError as e:
+            raise StudyError(f"{where}: {str(e).removeprefix('Goal: ')}") from None
+
+    def desirability_goal(self) -> Goal | None:
+        """The response's :class:`goals.Goal`, or None without a goal."""
+        if self.goal is None:
+            return None
+        return Goal(
+            self.goal,
+            float(self.low),
+            float(self.high),
+            self.target,
+            float(self.weight),
+            None if self.weight_high is None else float(self.weight_high),
+            self.importance,
+        )
 
 
 @dataclass(frozen=True)
@@ -808,7 +855,7 @@ _TABLES = {
     "fixed": None,
     "factors": ("name", "label", "parameter", "low", "high", "unit"),
     "design": ("kind", "replicates", "randomize") + _OPTIONS,
-    "responses": ("name", "measure", "unit", "target"),
+    "responses": ("name", "measure", "unit", "target", "goal", "low", "high", "weight", "weight_high", "importance"),
     "analysis": ("model", "alpha", "eliminate"),
     "verification": ("replicates",),
 }
