@@ -77,6 +77,18 @@ def finished(tmp_path_factory):
     return study, tmp / "out", res
 
 
+def test_a_log_file_in_the_output_folder(finished):
+    """The study keeps log.txt in its output folder, time-stamped, whatever the console got (the fixture's log
+    callable drops every line): the study file and device, the launch with its runs, worlds and wall time, and
+    the count of finished runs."""
+    study, out, _ = finished
+    text = (out / "log.txt").read_text()
+    assert f"{study.name}: study {study.path} on cpu" in text
+    assert "launch 1 of 1 done after" in text and "(runs 1, 2, 3, 4, 5, 6): 6 world(s) saved" in text
+    assert "6 of 6 runs finished (6 now, in" in text
+    assert all(line[:4].isdigit() for line in text.splitlines())
+
+
 def test_one_launch_one_file_per_point(finished):
     """All six runs share the scene, so they run as six worlds of one launch, and each finished point has
     its own result file named by its point id, holding its overrides and a finite response."""

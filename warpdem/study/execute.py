@@ -312,6 +312,7 @@ def _run_on_device(
     checkpoint_every: float,
     stop_after: float,
     on_saved=None,
+    log=None,
 ) -> str | None:
     """Run ``batches`` on one device: side by side on a GPU (:func:`runner.run_together`, up to
     ``runner.SIDE_BY_SIDE_SPHERES``), one after another on the CPU; each launch is saved (``OUT/runs``) the moment
@@ -353,13 +354,27 @@ def _run_on_device(
         return not (late or stops or errors)
 
     def end(k: int, outcome) -> None:
+        wall = time.perf_counter() - started[k]
+        runs = ", ".join(str(r["run"]) for r in batches[k])
         if isinstance(outcome, RunStopped):
             stops.append(f"launch {k + 1} of {len(batches)}: {outcome}")
         elif isinstance(outcome, BaseException):
             errors.append(outcome)
         else:
-            _save_batch(study, runs_dir, batches[k], outcome, time.perf_counter() - started[k], device)
+            _save_batch(study, runs_dir, batches[k], outcome, wall, device)
             show(k, 1.0, "done")
+        if log is not None:
+            what = (
+                "stopped"
+                if isinstance(outcome, RunStopped)
+                else "failed"
+                if isinstance(outcome, BaseException)
+                else "done"
+            )
+            log(
+                f"launch {k + 1} of {len(batches)} {what} after {wall:.1f} s on {device} (runs {runs}): "
+                + (str(outcome) if what != "done" else f"{len(batches[k])} world(s) saved")
+            )
             if on_saved is not None:
                 on_saved()
 
@@ -460,6 +475,19 @@ def _study_rows(study: sp.StudySpec, table: pd.DataFrame) -> list[dict]:
     ]
 
 
+def _logging_to(path: Path, log):
+    """``log`` that also appends each message, time-stamped, to ``path`` (the study's log.txt: what ran, where,
+    how long, and every stop and failure, kept after the console is gone)."""
+
+    def both(msg: str) -> None:
+        if log is not None:
+            log(msg)
+        with open(path, "a", encoding="utf-8") as fh:
+            fh.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {msg}\n")
+
+    return both
+
+
 def plan_study(study, out_dir=None, device: str = "cpu") -> dict:
     """What :func:`run_study` would run, without running anything: ``table`` (the design, coded and actual, with
     a ``status`` column: finished in ``out_dir`` or pending), ``launches`` (one dict per launch of the pending
@@ -528,6 +556,8 @@ def run_study(
     out = Path(out_dir) if out_dir else Path("runs") / study.name
     out.mkdir(parents=True, exist_ok=True)
     _check_folder(out, study)
+    log = _logging_to(out / "log.txt", log)
+    log(f"{study.name}: study {study.path or '(in memory)'} on {device}, into {out}")
     if study.path is not None:
         shutil.copyfile(study.path, out / "study.toml")
     table = sp.design_table(study)
@@ -548,12 +578,22 @@ def run_study(
         stopped = _run_parallel(study, out, batches, devices, bar, t0, checkpoint_every, stop_after, log)
     if len(devices) == 1 and batches:
         stopped = _run_on_device(
-            study, out, batches, devices[0], bar, t0, checkpoint_every, stop_after, lambda: _results_csv(study, out)
+            study,
+            out,
+            batches,
+            devices[0],
+            bar,
+            t0,
+            checkpoint_every,
+            stop_after,
+            lambda: _results_csv(study, out),
+            log=lambda m: log(f"{study.name}: {m}"),
         )
     if bar is not None:
         bar.close()
     wall = time.perf_counter() - t0
     finished = sum((runs_dir / f"{r['point_id']}.json").exists() for r in rows)
+    log(f"{study.name}: {finished} of {len(rows)} runs finished ({finished - done0} now, in {wall:.1f} s)")
     result = {
         "out": str(out),
         "runs": len(rows),
