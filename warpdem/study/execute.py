@@ -355,28 +355,22 @@ def _run_on_device(
 
     def end(k: int, outcome) -> None:
         wall = time.perf_counter() - started[k]
-        runs = ", ".join(str(r["run"]) for r in batches[k])
         if isinstance(outcome, RunStopped):
+            what = "stopped"
             stops.append(f"launch {k + 1} of {len(batches)}: {outcome}")
         elif isinstance(outcome, BaseException):
+            what = "failed"
             errors.append(outcome)
         else:
+            what = "done"
             _save_batch(study, runs_dir, batches[k], outcome, wall, device)
             show(k, 1.0, "done")
-        if log is not None:
-            what = (
-                "stopped"
-                if isinstance(outcome, RunStopped)
-                else "failed"
-                if isinstance(outcome, BaseException)
-                else "done"
-            )
-            log(
-                f"launch {k + 1} of {len(batches)} {what} after {wall:.1f} s on {device} (runs {runs}): "
-                + (str(outcome) if what != "done" else f"{len(batches[k])} world(s) saved")
-            )
             if on_saved is not None:
                 on_saved()
+        if log is not None:
+            runs = ", ".join(str(r["run"]) for r in batches[k])
+            told = f"{len(batches[k])} world(s) saved" if what == "done" else str(outcome)
+            log(f"launch {k + 1} of {len(batches)} {what} after {wall:.1f} s on {device} (runs {runs}): {told}")
 
     outcomes = run_together([functools.partial(start, k) for k in range(len(batches))], device, admit=admit, on_end=end)
     if errors:
