@@ -749,21 +749,18 @@ def solve_target(
 
 
 # --------------------------------------------------------------------------------------------
-# Diagnostics (Design-Expert's diagnostics node)
+# Several responses, aliases, confirmation
 # --------------------------------------------------------------------------------------------
-
-BOX_COX_STANDARD = {-1.0: "inverse", -0.5: "inverse square root", 0.0: "ln", 0.5: "square root", 1.0: "none"}
-"""The power transforms Design-Expert recommends by name, by their lambda."""
 
 
 def desirability(values: Mapping[str, np.ndarray], goals: Mapping[str, Goal]) -> np.ndarray:
     """Overall desirability D = (prod d_i^r_i)^(1 / sum r_i) of the responses' ``values`` (each (n,)) under their
     ``goals`` (r_i: importance); 0 wherever one response is undesirable."""
     total = sum(g.importance for g in goals.values())
-    logs = [g.importance * np.log(np.maximum(g.d(values[name]), 1e-300)) for name, g in goals.items()]
-    D = np.exp(np.sum(logs, axis=0) / total)
-    zero = np.any([g.d(values[name]) <= 0.0 for name, g in goals.items()], axis=0)
-    return np.where(zero, 0.0, D)
+    d = {name: g.d(values[name]) for name, g in goals.items()}
+    logs = [g.importance * np.log(np.maximum(d[name], 1e-300)) for name, g in goals.items()]
+    zero = np.any([d[name] <= 0.0 for name in goals], axis=0)
+    return np.where(zero, 0.0, np.exp(np.sum(logs, axis=0) / total))
 
 
 def optimize_desirability(
@@ -818,9 +815,9 @@ def alias_matrix(fit: ModelFit, max_order: int = 3, tol: float = 1e-9) -> pd.Dat
         for t in itertools.combinations(factors, order)
         if tuple(sorted(t)) not in have
     ]
-    X1 = _columns(x, fit.terms, factors)
     X2 = _columns(x, potential, factors)[:, 1:]
-    A = np.linalg.pinv(X1.T @ X1) @ X1.T @ X2
+    # the fit's own model matrix X1 and (X1'X1)^-1
+    A = np.asarray(fit.ols.normalized_cov_params) @ np.asarray(fit.ols.model.exog).T @ X2
     A[np.abs(A) < tol] = 0.0
     keep = np.abs(A).max(axis=0) > 0 if A.size else np.zeros(0, bool)
     return pd.DataFrame(
@@ -865,14 +862,21 @@ def confirmation_interval(fit: ModelFit, x, runs: int = 1, alpha: float = 0.05) 
     """Design-Expert's confirmation check at the coded point ``x`` (mapping or (k,) array): the prediction,
     its leverage h0 = x0' (X'X)^-1 x0, the residual mean square and its df, and
     :func:`mean_prediction_interval` for ``runs`` runs (for one run it is statsmodels' ``obs_ci``)."""
-    X = _columns(fit.data[fit.factors].to_numpy(dtype=float), fit.terms, fit.factors)
     x0 = _columns(fit._x(x), fit.terms, fit.factors)[0]
     df = int(fit.ols.df_resid)
     mse = float(fit.ols.mse_resid) if df > 0 else math.nan
-    h0 = float(x0 @ np.linalg.pinv(X.T @ X) @ x0)
+    h0 = float(x0 @ np.asarray(fit.ols.normalized_cov_params) @ x0)
     y0 = float(fit.predict(fit._x(x))[0])
     low, high = mean_prediction_interval(y0, mse, h0, df, runs, alpha)
     return {"predicted": y0, "low": low, "high": high, "mse": mse, "h0": h0, "df": df, "runs": int(runs)}
+
+
+# --------------------------------------------------------------------------------------------
+# Diagnostics (Design-Expert's diagnostics node)
+# --------------------------------------------------------------------------------------------
+
+BOX_COX_STANDARD = {-1.0: "inverse", -0.5: "inverse square root", 0.0: "ln", 0.5: "square root", 1.0: "none"}
+"""The power transforms Design-Expert recommends by name, by their lambda."""
 
 
 def influence(fit: ModelFit) -> pd.DataFrame:

@@ -468,19 +468,25 @@ def _fit_response(
     return fit, fallback
 
 
+DESIRABILITY_STARTS = 40
+"""Seeded starts of the desirability search (besides the design's runs)."""
+
+DESIRABILITY_SHOWN = 10
+"""Solutions of the desirability search listed in report.md (desirability.csv has them all)."""
+
+
 def _desirability_section(out: Path, fits: dict, goals: dict, fmap: dict, labels: dict, region, files, result) -> list:
     """The multi-response optimisation: settings in the design region that maximise the overall desirability
     of the responses with a goal (:func:`analysis.optimize_desirability`), the ten best distinct solutions as a
     table and ``desirability.csv``; ``result["desirability"]`` the best (actual settings, predictions, D)."""
     fnames = list(fmap)
-    bounds = {f: region[f] for f in fnames}
-    sols = optimize_desirability(fits, goals, bounds=bounds, starts=40, seed=0)
+    sols = optimize_desirability(fits, goals, bounds=region, starts=DESIRABILITY_STARTS, seed=0)
     for f in fnames:
         sols[f"{f}_actual"] = fmap[f].to_actual(sols[f].to_numpy())
     sols.to_csv(out / "desirability.csv", index=False)
     files.append("desirability.csv")
     rows = []
-    for k, r in sols.head(10).iterrows():
+    for k, r in sols.head(DESIRABILITY_SHOWN).iterrows():
         rows.append(
             [str(k + 1)]
             + [f"{r[f + '_actual']:.4g}" for f in fnames]
@@ -507,8 +513,8 @@ def _desirability_section(out: Path, fits: dict, goals: dict, fmap: dict, labels
         "## Multi-response optimisation (desirability)",
         "",
         f"Goals (Derringer-Suich; overall D the importance-weighted geometric mean of each d): {goal_text}. "
-        f"{len(sols)} distinct solutions from 40 seeded starts and the runs (L-BFGS-B over the design region; "
-        "all in `desirability.csv`), the ten best:",
+        f"{len(sols)} distinct solutions from {DESIRABILITY_STARTS} seeded starts and the runs (L-BFGS-B over the "
+        f"design region; all in `desirability.csv`), the {DESIRABILITY_SHOWN} best:",
         "",
         _md_table(
             ["#", *(_axis_label(fmap[f], labels) for f in fnames), *(f"{n} (d)" for n in goals), "D"],
