@@ -379,3 +379,54 @@ def test_contact_law_varies_per_world():
     # float32 positions of ~5 mm resolve overlaps to ~1e-9 m: 1 % of a ~1e-5 m overlap is far above it
     np.testing.assert_allclose(overlap, [hertz, jkr, hertz], rtol=0.01)
     assert jkr > 1.5 * hertz  # the check separates the laws
+
+
+def _scene_of(radius, clumps, gate_x, material=None):
+    b = wd.ModelBuilder()
+    b.add_material(material or wd.Material("glass", density=2500, youngs_modulus=5e7, poisson_ratio=0.25))
+    b.add_plane((0, 0, 0), (0, 0, 1), "glass")
+    tri = [(0, 1, 2)]
+    b.add_wall_mesh([(0, 0, 0.1), (0.1, 0, 0.1), (0, 0.1, 0.1)], tri, "glass", name="roof")
+    b.add_wall_mesh([(gate_x, 0, 0.05), (gate_x + 0.1, 0, 0.05), (gate_x, 0.1, 0.05)], tri, "glass", name="gate")
+    b.add_spheres([(0.01 * k, 0, 0.02) for k in range(3)], radius, "glass")
+    tpl = wd.ClumpTemplate.from_spheres(f"pair{radius}", [(-radius, 0, 0), (radius, 0, 0)], [radius, radius])
+    b.add_clumps(tpl, [(0.01 * k, 0.03, 0.02) for k in range(clumps)], "glass")
+    return b
+
+
+def test_stacked_scenes_keep_their_own_particles_and_walls():
+    """Two scenes of other grains as one Model (ModelBuilder.stack): world 0-1 are the first scene replicated,
+    world 2 the second; every sphere, clump and glued index stays within its world; the wall both share is one
+    wall, the one that differs (the gate) one per world; the step is the smallest grain's Rayleigh time."""
+    small, large = _scene_of(1e-3, 1, 0.0), _scene_of(2e-3, 2, 0.02)
+    small.replicate(2)
+    small.seed_worlds([3, 4])
+    small.stack(large)
+    m = small.finalize("cpu")
+    world, radius = m.sphere_world.numpy(), m.sphere_radius.numpy()
+    assert m.world_count == 3 and m.sphere_count == 2 * (3 + 2) + (3 + 4) and m.clump_count == 4
+    assert np.bincount(world).tolist() == [5, 5, 7]
+    assert np.allclose(radius[world < 2], 1e-3) and np.allclose(radius[world == 2], 2e-3)
+    starts, ends, cworld = m.clump_sphere_start.numpy(), m.clump_sphere_end.numpy(), m.clump_world.numpy()
+    assert cworld.tolist() == [0, 1, 2, 2]
+    for c in range(m.clump_count):
+        assert (m.sphere_clump.numpy()[starts[c] : ends[c]] == c).all()
+        assert (world[starts[c] : ends[c]] == cworld[c]).all()
+    assert m.wall_names == ["roof", "gate", "gate", "gate"]
+    assert m.wall_world.numpy().tolist() == [-1, 0, 1, 2]
+    assert m.world_seed.tolist() == [3, 4, 0]
+    assert np.asarray(m.clump_template).tolist() == [0, 0, 1, 1]
+    assert m.rayleigh_time == pytest.approx(m.materials[0].rayleigh_time(1e-3))
+    assert m.initial["sphere_x"].shape == (m.sphere_count, 3) and m.initial["clump_q"].shape == (4, 4)
+
+
+def test_stack_refuses_scenes_that_differ_in_more_than_particles():
+    """Another material (or a builder stacked twice) cannot share a Model: the error names what differs."""
+    a = _scene_of(1e-3, 1, 0.0)
+    other = wd.Material("glass", density=2600, youngs_modulus=5e7, poisson_ratio=0.25)
+    with pytest.raises(ValueError, match="stack: the other scene has different materials"):
+        a.stack(_scene_of(1e-3, 1, 0.0, other))
+    b = _scene_of(2e-3, 1, 0.0)
+    a.stack(b)
+    with pytest.raises(ValueError, match="stack: other = .* is not allowed"):
+        a.stack(b)

@@ -55,6 +55,7 @@ class ModelBuilder:
         self._variations = {}
         self._world_seeds = None
         self._domain = None
+        self._stacked: list[ModelBuilder] = []
 
     # materials -------------------------------------------------------------------------------
     def add_material(self, material: Material) -> int:
@@ -515,32 +516,163 @@ class ModelBuilder:
             tables_w.append(table)
         return mats_w, tables_w
 
+    def stack(self, other: ModelBuilder) -> None:
+        """Append the worlds of ``other`` (its replicas, variations and world seeds) after this builder's, so that
+        scenes that differ in their particles (grain size, shape, count, feed rate) run as one Model: one launch
+        instead of one each, which on a GPU costs little more than the largest alone. World k of ``other`` is
+        world ``self.world_count + k`` of the Model (after earlier stacks).
+
+        Both must define the same materials, interactions, planes and gravity, and the same walls by name and
+        order; a wall that differs between them (a gate placed by the grain size) becomes one wall per world.
+        The Model's domain is the union of the domains. The Model steps every world at the shortest step any
+        needs (its smallest grain), so a world matches its solo run exactly only when that is its own step.
+        Call once both are complete; stacking is not undone.
+        """
+        if not isinstance(other, ModelBuilder) or other is self or other in self._stacked:
+            raise ValueError(f"stack: other = {other!r} is not allowed; expected another, complete ModelBuilder")
+        what = None
+        if [m.name for m in other.materials] != [m.name for m in self.materials] or other.materials != self.materials:
+            what = "materials"
+        elif other.interactions != self.interactions:
+            what = "interactions"
+        elif not np.array_equal(other.gravity, self.gravity):
+            what = "gravity"
+        elif len(other._planes) != len(self._planes) or any(
+            not (np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) and a[2:] == b[2:])
+            for a, b in zip(self._planes, other._planes)
+        ):
+            what = "planes"
+        elif [w[4] for w in other._walls] != [w[4] for w in self._walls]:
+            what = "wall names"
+        elif other._stacked:
+            what = "stacked worlds of its own"
+        if what is not None:
+            raise ValueError(f"stack: the other scene has different {what}; expected the same as this one's")
+        if self._domain is None or other._domain is None:
+            self._domain = None
+        else:
+            lo = np.minimum(self._domain[0], other._domain[0])
+            hi = np.maximum(self._domain[1], other._domain[1])
+            self._domain = (tuple(map(float, lo)), tuple(map(float, hi)))
+        self._stacked.append(other)
+
+    @staticmethod
+    def _same_wall(a, b) -> bool:
+        return np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) and a[2:5] == b[2:5] and a[5] == b[5]
+
     # finalise --------------------------------------------------------------------------------
     def finalize(self, device: str = "cpu") -> Model:
-        """Build the Model on ``device`` ("cpu" or "cuda[:n]")."""
+        """Build the Model on ``device`` ("cpu" or "cuda[:n]"): this builder's worlds, then those of each
+        :meth:`stack` ed builder."""
         if not self.materials:
             raise ValueError("finalize: no material defined; call add_material first")
-        if self.sphere_count == 0:
-            raise ValueError("finalize: the scene has no sphere")
+        groups = [self, *self._stacked]
+        for g in groups:
+            if g.sphere_count == 0:
+                raise ValueError("finalize: the scene has no sphere")
         device = str(wp.get_device(device))
-        W = self.world_count
-        n0 = self.sphere_count
-        c0 = self.clump_count
-        radius = np.tile(np.asarray(self._r, dtype=np.float32), W)
-        material = np.tile(np.asarray(self._mat, dtype=np.int32), W)
-        world = np.repeat(np.arange(W, dtype=np.int32), n0)
-        clump0 = np.asarray(self._clump, dtype=np.int64)
-        sphere_clump = np.concatenate([np.where(clump0 >= 0, clump0 + w * c0, -1) for w in range(W)]).astype(np.int32)
-        sphere_wall = np.tile(np.asarray(self._glued, dtype=np.int32), W)
-        attached = np.flatnonzero(sphere_wall >= 0).astype(np.int32)
+        W = sum(g.world_count for g in groups)
+        world0 = np.cumsum([0] + [g.world_count for g in groups])
+        sphere0 = np.cumsum([0] + [g.sphere_count * g.world_count for g in groups])
+        clump0 = np.cumsum([0] + [g.clump_count * g.world_count for g in groups])
+        template0 = np.cumsum([0] + [len(g._templates) for g in groups])
 
-        mats_w, tables_w = self._world_tables()
+        # walls: one shared by every world where the scenes agree, else one per world (index per group and world)
+        walls, wall_of = [], [[[] for _ in range(g.world_count)] for g in groups]
+        for j, wall in enumerate(self._walls):
+            if all(self._same_wall(wall, g._walls[j]) for g in groups[1:]):
+                for per_world in wall_of:
+                    for lst in per_world:
+                        lst.append(len(walls))
+                walls.append(wall)
+                continue
+            for gi, g in enumerate(groups):
+                verts, tris, mat, own, name, motion = g._walls[j]
+                for w in range(g.world_count):
+                    if own < 0 or own == w:
+                        wall_of[gi][w].append(len(walls))
+                        walls.append((verts, tris, mat, int(world0[gi] + w), name, motion))
+                    else:
+                        wall_of[gi][w].append(-1)
+
+        def per_world(values, dtype, g, width=None):
+            a = np.asarray(values, dtype=dtype)
+            a = a.reshape(-1, width) if width else a.reshape(-1)
+            return np.tile(a, (g.world_count, 1)) if width else np.tile(a, g.world_count)
+
+        def cat(parts, dtype, width=None):
+            parts = [p for p in parts if len(p)]
+            if parts:
+                return np.concatenate(parts).astype(dtype)
+            return np.zeros((0, width) if width else 0, dtype=dtype)
+
+        radius, material, world, sphere_clump, sphere_wall, offset, body_volume = [], [], [], [], [], [], []
+        starts, ends, cscale, ctpl, cmat, cworld, seeds, factories, templates = [], [], [], [], [], [], [], [], []
+        init = {k: [] for k in ("sphere_x", "sphere_v", "sphere_w", "sphere_active")}
+        cinit = {k: [] for k in ("clump_x", "clump_q", "clump_v", "clump_w")}
+        mats_w, tables_w, gravity_w = [], [], []
+        for gi, g in enumerate(groups):
+            n, c, Wg = g.sphere_count, g.clump_count, g.world_count
+            radius.append(per_world(g._r, np.float32, g))
+            material.append(per_world(g._mat, np.int32, g))
+            world.append(np.repeat(np.arange(Wg, dtype=np.int32) + world0[gi], n))
+            local = np.asarray(g._clump, dtype=np.int64)
+            sphere_clump.append(
+                np.concatenate([np.where(local >= 0, local + clump0[gi] + w * c, -1) for w in range(Wg)])
+            )
+            glued = np.asarray(g._glued, dtype=np.int64)
+            sphere_wall.append(
+                np.concatenate([np.where(glued >= 0, np.asarray(wall_of[gi][w] + [-1])[glued], -1) for w in range(Wg)])
+            )
+            offset.append(per_world(g._offset, np.float32, g, 3))
+            body_volume.append(per_world(g._body_volume, np.float32, g))
+            if c:
+                cfirst = np.asarray(g._cfirst, dtype=np.int64)
+                tpl = np.asarray(g._ctemplate, dtype=np.int64)
+                clen = np.array([len(g._templates[t].sphere_radius) for t in tpl], dtype=np.int64)
+                starts.append(np.concatenate([cfirst + sphere0[gi] + w * n for w in range(Wg)]))
+                ends.append(np.concatenate([cfirst + clen + sphere0[gi] + w * n for w in range(Wg)]))
+                cscale.append(per_world(g._cscale, np.float64, g))
+                ctpl.append(per_world(tpl + template0[gi], np.int64, g))
+                cmat.append(per_world(g._cmat, np.int32, g))
+                cworld.append(np.repeat(np.arange(Wg, dtype=np.int32) + world0[gi], c))
+                for key, src, width in (("clump_x", g._cx, 3), ("clump_q", g._cq, 4), ("clump_v", g._cv, 3)):
+                    cinit[key].append(per_world(src, np.float32, g, width))
+                cinit["clump_w"].append(per_world(g._cw, np.float32, g, 3))
+            templates += g._templates
+            seeds.append(np.asarray(g._world_seeds if g._world_seeds is not None else [0] * Wg, dtype=np.int64))
+            for key, src, width in (("sphere_x", g._x, 3), ("sphere_v", g._v, 3), ("sphere_w", g._w, 3)):
+                init[key].append(per_world(src, np.float32, g, width))
+            init["sphere_active"].append(per_world(g._active, np.int32, g))
+            for rec in g._factories:
+                # where world w's copy of the factory's particles starts (-1: the world has no such factory)
+                first = np.full(W, -1, dtype=np.int64)
+                base, size = (sphere0[gi], n) if rec["kind"] == "sphere" else (clump0[gi], c)
+                first[world0[gi] : world0[gi] + Wg] = base + np.arange(Wg) * size + rec["first"]
+                factories.append({**rec, "world_first": first})
+            m_g, t_g = g._world_tables()
+            mats_w.append(m_g)
+            tables_w.append(t_g)
+            grav = g._variations.get(_GRAVITY)
+            gravity_w.append(
+                np.asarray(grav, dtype=np.float32).reshape(Wg, 3)
+                if grav is not None
+                else np.tile(g.gravity.astype(np.float32), (Wg, 1))
+            )
+        radius, material = cat(radius, np.float32), cat(material, np.int32)
+        world, sphere_clump = cat(world, np.int32), cat(sphere_clump, np.int32)
+        sphere_wall = cat(sphere_wall, np.int32)
+        attached = np.flatnonzero(sphere_wall >= 0).astype(np.int32)
+        if len(groups) == 1:
+            mats_w, tables_w = mats_w[0], tables_w[0]
+            gravity = gravity_w[0] if _GRAVITY in self._variations else self.gravity.astype(np.float32).reshape(1, 3)
+        else:
+            # a table per world once the scenes differ in it (length 1 per group when nothing varies)
+            mats_w = [m for g, ms in zip(groups, mats_w) for m in (ms if len(ms) > 1 else ms * g.world_count)]
+            tables_w = [t for g, ts in zip(groups, tables_w) for t in (ts if len(ts) > 1 else ts * g.world_count)]
+            gravity = np.concatenate(gravity_w).astype(np.float32)
         params = pair_table(mats_w, tables_w)
         density = np.array([[m.density for m in mats] for mats in mats_w], dtype=np.float32)
-        if _GRAVITY in self._variations:
-            gravity = np.asarray(self._variations[_GRAVITY], dtype=np.float32).reshape(W, 3)
-        else:
-            gravity = self.gravity.astype(np.float32).reshape(1, 3)
 
         pp = wp.empty(params.shape, dtype=PairParams, device=device)
         host = pp.numpy()
@@ -555,7 +687,7 @@ class ModelBuilder:
         plane_world = np.array([p[3] for p in planes], dtype=np.int32)
 
         meshes, face_start, tri_wall, wall_radius = [], [0], [], []
-        for k, (v, t, *_rest) in enumerate(self._walls):
+        for k, (v, t, *_rest) in enumerate(walls):
             meshes.append(
                 wp.Mesh(
                     points=wp.array(v.astype(np.float32), dtype=wp.vec3, device=device),
@@ -566,32 +698,30 @@ class ModelBuilder:
             tri_wall.append(np.full(len(t), k, dtype=np.int32))
             wall_radius.append(float(np.linalg.norm(v, axis=1).max()))
         triangle_wall = np.concatenate(tri_wall) if tri_wall else np.zeros(0, dtype=np.int32)
-        wall_material = np.array([w[2] for w in self._walls], dtype=np.int32)
-        wall_world = np.array([w[3] for w in self._walls], dtype=np.int32)
+        wall_material = np.array([w[2] for w in walls], dtype=np.int32)
+        wall_world = np.array([w[3] for w in walls], dtype=np.int32)
 
-        # clumps, replicated per world (sphere and clump indices shift by a world's counts)
-        cfirst = np.asarray(self._cfirst, dtype=np.int64)
-        tpl = np.asarray(self._ctemplate, dtype=np.int64)
-        clen = np.array([len(self._templates[t].sphere_radius) for t in tpl], dtype=np.int64)
-        starts = np.concatenate([cfirst + w * n0 for w in range(W)]).astype(np.int32)
-        ends = np.concatenate([cfirst + clen + w * n0 for w in range(W)]).astype(np.int32)
-        cscale = np.asarray(self._cscale, dtype=np.float64)
-        tvol = np.array([t.volume for t in self._templates], dtype=np.float64)
-        tinertia = np.array([np.asarray(t.inertia_unit, dtype=np.float64) for t in self._templates]).reshape(-1, 3)
-        cvol = (tvol[tpl] * cscale**3).astype(np.float32) if c0 else np.zeros(0, np.float32)
-        cinertia = (tinertia[tpl] * cscale[:, None] ** 5).astype(np.float32) if c0 else np.zeros((0, 3), np.float32)
-        if c0 == 0:
+        C = int(clump0[-1])
+        cscale, ctpl = cat(cscale, np.float64), cat(ctpl, np.int64)
+        if C:
+            tvol = np.array([t.volume for t in templates], dtype=np.float64)
+            tinertia = np.array([np.asarray(t.inertia_unit, dtype=np.float64) for t in templates]).reshape(-1, 3)
+            cvol = (tvol[ctpl] * cscale**3).astype(np.float32)
+            cinertia = (tinertia[ctpl] * cscale[:, None] ** 5).astype(np.float32)
+            starts, ends = cat(starts, np.int32), cat(ends, np.int32)
+        else:
+            cvol, cinertia = np.zeros(0, np.float32), np.zeros((0, 3), np.float32)
             starts = ends = np.zeros(1, dtype=np.int32)
 
         r_min = float(radius.min())
-        used = sorted(set(self._mat))
+        used = sorted({k for g in groups for k in g._mat})
         rayleigh = min(mats[k].rayleigh_time(r_min) for mats in mats_w for k in used)
         reach = contact_reach(params, float(radius.max()))
 
         model = Model(
             device=device,
             world_count=W,
-            sphere_count=n0 * W,
+            sphere_count=len(radius),
             material_count=len(self.materials),
             sphere_radius=wp.array(radius, dtype=float, device=device),
             sphere_material=wp.array(material, dtype=int, device=device),
@@ -614,51 +744,36 @@ class ModelBuilder:
             sphere_wall=wp.array(sphere_wall, dtype=int, device=device),
             attached_index=wp.array(attached if len(attached) else np.zeros(1, np.int32), dtype=int, device=device),
             attached_count=len(attached),
-            sphere_offset=wp.array(
-                np.tile(np.asarray(self._offset, dtype=np.float32).reshape(-1, 3), (W, 1)), dtype=wp.vec3, device=device
-            ),
-            sphere_body_volume=wp.array(
-                np.tile(np.asarray(self._body_volume, dtype=np.float32), W), dtype=float, device=device
-            ),
-            clump_count=c0 * W,
+            sphere_offset=wp.array(cat(offset, np.float32, 3), dtype=wp.vec3, device=device),
+            sphere_body_volume=wp.array(cat(body_volume, np.float32), dtype=float, device=device),
+            clump_count=C,
             clump_sphere_start=wp.array(starts, dtype=int, device=device),
             clump_sphere_end=wp.array(ends, dtype=int, device=device),
-            clump_material=wp.array(np.tile(np.asarray(self._cmat, dtype=np.int32), W), dtype=int, device=device),
-            clump_world=wp.array(np.repeat(np.arange(W, dtype=np.int32), c0), dtype=int, device=device),
-            clump_volume=wp.array(np.tile(cvol, W), dtype=float, device=device),
-            clump_inertia=wp.array(np.tile(cinertia, (W, 1)), dtype=wp.vec3, device=device),
+            clump_material=wp.array(cat(cmat, np.int32), dtype=int, device=device),
+            clump_world=wp.array(cat(cworld, np.int32), dtype=int, device=device),
+            clump_volume=wp.array(cvol, dtype=float, device=device),
+            clump_inertia=wp.array(cinertia, dtype=wp.vec3, device=device),
             contact_reach=reach,
             radius_max=float(radius.max()),
             radius_min=r_min,
             rayleigh_time=float(rayleigh),
             materials=list(self.materials),
             interactions=self.interactions,
-            wall_names=[w[4] for w in self._walls],
-            wall_motions=[w[5] for w in self._walls],
-            clump_templates=list(self._templates),
-            clump_template=np.tile(tpl, W),
-            clump_scale=np.tile(cscale, W),
-            factories=list(self._factories),
+            wall_names=[w[4] for w in walls],
+            wall_motions=[w[5] for w in walls],
+            clump_templates=templates,
+            clump_template=ctpl,
+            clump_scale=cscale,
+            factories=factories,
             domain=self._domain,
-            world_seed=np.asarray(self._world_seeds if self._world_seeds is not None else [0] * W, dtype=np.int64),
+            world_seed=np.concatenate(seeds),
         )
-
-        def tiled(values, width):
-            return np.tile(np.asarray(values, dtype=np.float32).reshape(-1, width), (W, 1))
-
         model.initial = {
-            "sphere_x": tiled(self._x, 3),
-            "sphere_v": tiled(self._v, 3),
-            "sphere_w": tiled(self._w, 3),
-            "sphere_active": np.tile(np.asarray(self._active, dtype=np.int32), W),
+            k: cat(v, np.int32 if k == "sphere_active" else np.float32, None if k == "sphere_active" else 3)
+            for k, v in init.items()
         }
-        if c0:
-            model.initial.update(
-                clump_x=tiled(self._cx, 3),
-                clump_q=tiled(self._cq, 4),
-                clump_v=tiled(self._cv, 3),
-                clump_w=tiled(self._cw, 3),
-            )
+        if C:
+            model.initial.update({k: cat(v, np.float32, 4 if k == "clump_q" else 3) for k, v in cinit.items()})
         return model
 
 

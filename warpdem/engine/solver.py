@@ -659,11 +659,10 @@ class Solver:
         active = host(state.sphere_active).astype(bool)
         radius = host(m.sphere_radius)
         world_of = host(m.sphere_world)
-        per_world = m.sphere_count // m.world_count
-        clumps_per_world = max(m.clump_count // m.world_count, 0)
         placed = None
         s_idx, s_x, s_v, c_idx, c_x, c_q, c_v = [], [], [], [], [], [], []
-        for w in range(m.world_count):
+        # the worlds that hold this factory (a stacked Model's scenes each have their own)
+        for w in np.flatnonzero(rec["world_first"] >= 0):
             mine = active & (world_of == w)
             ws = 0 if m.world_seed is None else int(m.world_seed[w])
             # a world seed gives that world its own placement stream (repeats of a design point differ)
@@ -673,11 +672,11 @@ class Solver:
             k = np.arange(done, done + len(x))
             vel = np.tile(np.asarray(fac.initial_velocity, dtype=np.float64), (len(x), 1))
             if rec["kind"] == "sphere":
-                s_idx.append(w * per_world + rec["first"] + k)
+                s_idx.append(rec["world_first"][w] + k)
                 s_x.append(x)
                 s_v.append(vel)
             else:
-                c_idx.append(w * clumps_per_world + rec["first"] + k)
+                c_idx.append(rec["world_first"][w] + k)
                 c_x.append(x)
                 c_q.append(np.asarray(fac.quaternions)[k])
                 c_v.append(vel)

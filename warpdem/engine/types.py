@@ -159,7 +159,8 @@ class Model:
     clump_scale: object = None
     """Host array: scale of each clump relative to its template, shape (clump_count,)."""
     factories: list = field(default_factory=list)
-    """Host records of the dynamic factories (see ModelBuilder.add_factory)."""
+    """Host records of the dynamic factories (see ModelBuilder.add_factory); ``world_first`` (world_count,): where
+    each world's copy of the factory's particles starts (sphere or clump index; -1 where a world has none)."""
     world_seed: object = None
     """Host array: placement seed of each world's dynamic factories, shape (world_count,) (0: the factory's
     own stream, the same in every world)."""
