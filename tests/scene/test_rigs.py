@@ -1095,6 +1095,34 @@ def test_world_seeds_make_repeats_differ():
     assert np.abs(x[2] - x[0]).max() > 1e-3
 
 
+def test_funnels_of_two_grain_sizes_share_a_launch():
+    """A gated funnel of 2 mm grains and one of 3 mm (its gate placed by its grains) run as one launch
+    (``run_scene(also=...)``): each world holds its own grains and its own gate, the funnel and plate are shared,
+    the launch steps at the 2 mm grains' step. Scenes of another material or a press cannot share it."""
+    from warpdem.engine.solver import Solver, SolverOptions
+    from warpdem.scene.stage import build
+
+    params = {"count": 30, "gate_time": 0.06, "duration": 0.08}
+    small = rigs.spec("funnel", params, smoke=True)
+    large = rigs.spec("funnel", {**params, "particle_radius": 0.003}, smoke=True)
+    assert runner.shares_launch(small, large)
+    assert not runner.shares_launch(small, rigs.spec("funnel", {**params, "material": "pellet"}, smoke=True))
+    assert not runner.shares_launch(rigs.spec("die_press", smoke=True), rigs.spec("die_press", smoke=True))
+    builder = build(small, 2)
+    builder.stack(build(large))
+    model = builder.finalize("cpu")
+    assert model.wall_names == ["Funnel", "Plate", "Gate", "Gate", "Gate"]
+    assert model.wall_world.numpy().tolist() == [-1, -1, 0, 1, 2]
+    solo = Solver(build(small).finalize("cpu"), SolverOptions(dt_fraction=small.run.dt_fraction))
+    assert Solver(model, SolverOptions(dt_fraction=small.run.dt_fraction)).dt == solo.dt
+    res = runner.run_scene(small, "cpu", world_count=2, frames=False, also=[runner.WorldGroup(large)])
+    assert len(res.metrics) == 3 and res.info["dt_s"] == pytest.approx(solo.dt)
+    radius, world = model.sphere_radius.numpy(), model.sphere_world.numpy()
+    assert radius[world == 2].min() > 1.3 * radius[world < 2].max()
+    with pytest.raises(ValueError, match="cannot share a launch"):
+        next(runner.run_scene_iter(small, also=[runner.WorldGroup(rigs.spec("die_press", smoke=True))]))
+
+
 def test_world_seeds_input_errors():
     from warpdem.scene.stage import build
 

@@ -190,6 +190,61 @@ def independent_worlds(spec: SceneSpec) -> bool:
     return spec.measure.kind not in SHARED_WALL_MEASURES
 
 
+@dataclass(frozen=True)
+class WorldGroup:
+    """Worlds of another scene that run in the same launch as :func:`run_scene_iter`'s own (``also``): its
+    ``world_count`` worlds of ``spec``, with ``variations`` and ``world_seeds`` as that function takes them.
+    The scenes must share a launch (:func:`shares_launch`)."""
+
+    spec: SceneSpec
+    world_count: int = 1
+    variations: dict | None = None
+    world_seeds: tuple | None = None
+
+
+LAUNCH_RUN_FIELDS = ("duration", "settle_energy", "settle_after")
+"""RunSpec fields in which scenes that share a launch may differ: the launch runs to the longest duration and
+the latest settle_after, and each world settles by its own settle_energy (:func:`launch_run`)."""
+
+WORLD_MEASURE_FIELDS = ("packing_radius", "packing_margin", "packing_base")
+"""MeasureSpec fields read per world after the run (a fill's core, sized by its grains), in which scenes that
+share a launch may differ; every other field steers the run itself."""
+
+
+def shares_launch(a: SceneSpec, b: SceneSpec) -> bool:
+    """True when the worlds of ``a`` and ``b`` can run as one launch (``ModelBuilder.stack``): the same rig,
+    materials, pairs, gravity and walls by name, the same run settings but :data:`LAUNCH_RUN_FIELDS`, the same
+    measure but :data:`WORLD_MEASURE_FIELDS`, and worlds that measure independently. Particles, factories,
+    shapes, the walls' shapes and motions and the domain may differ."""
+
+    def fields(obj, skip):
+        return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if f.name not in skip}
+
+    return (
+        a.rig == b.rig
+        and independent_worlds(a)
+        and independent_worlds(b)
+        and repr(a.materials) == repr(b.materials)
+        and repr(a.pairs) == repr(b.pairs)
+        and tuple(a.gravity) == tuple(b.gravity)
+        and [w.name for w in a.walls] == [w.name for w in b.walls]
+        and fields(a.run, LAUNCH_RUN_FIELDS) == fields(b.run, LAUNCH_RUN_FIELDS)
+        and repr(fields(a.measure, WORLD_MEASURE_FIELDS)) == repr(fields(b.measure, WORLD_MEASURE_FIELDS))
+    )
+
+
+def launch_run(specs) -> tuple:
+    """The run settings of one launch of ``specs`` (SceneSpecs that :func:`shares_launch`): the first's, run to
+    the longest ``duration`` and the latest ``settle_after``, and the settle threshold of each scene [J] (one per
+    spec)."""
+    run = dataclasses.replace(
+        specs[0].run,
+        duration=max(s.run.duration for s in specs),
+        settle_after=max(s.run.settle_after for s in specs),
+    )
+    return run, [s.run.settle_energy for s in specs]
+
+
 COMMON_METRICS = ("time_s",)
 """Scalar metrics every world writes, whatever its scene measures."""
 
@@ -333,6 +388,7 @@ def run_scene_iter(
     world_seeds=None,
     checkpoint_every: float = 0.0,
     stop_after: float = 0.0,
+    also=(),
 ) -> Generator[int | None, None, RunResult]:
     """Run ``spec`` on ``device`` as a generator (:func:`run_scene` runs it to the end); with ``out_dir`` write
     metrics.json, result.usdc (+ VTK series), pile.png.
@@ -352,6 +408,10 @@ def run_scene_iter(
             a later call with the same inputs resumes from it, and a finished run deletes it. A checkpoint
             also forces a neighbour-list rebuild, which the resumed run repeats, so the resumed run is
             bit-identical to one that was never interrupted.
+        also: :class:`WorldGroup` s of other scenes that share this launch (:func:`shares_launch`), their worlds
+            after this scene's: world k of the first group is world ``world_count + k``. The launch steps every
+            world at the shortest step any needs and runs to :func:`launch_run`'s settings; each world is
+            measured by its own scene's measure.
         stop_after: with ``out_dir`` and no frames, save a checkpoint and raise :class:`RunStopped` at the
             last output tick from which one more tick (taken to last as long as the one just run) would end
             past this many wall seconds from the call's start (0: never), e.g. to fit a job into a batch
@@ -366,11 +426,22 @@ def run_scene_iter(
             f"run_scene: world_count = {world_count} is not allowed for a {spec.measure.kind!r} measurement; "
             "expected 1 (its worlds would share the wall it is read from)"
         )
+    also = tuple(also)
+    for g in also:
+        if not shares_launch(spec, g.spec):
+            raise ValueError(
+                f"run_scene: also = a {g.spec.rig!r} scene that cannot share a launch with this {spec.rig!r} one; "
+                "expected scenes that differ only in their particles, factories, wall shapes and domain"
+            )
     t_wall0 = time.perf_counter()
     builder = build(spec, world_count, variations, world_seeds)
+    for g in also:
+        builder.stack(build(g.spec, g.world_count, g.variations, g.world_seeds))
     model = builder.finalize(device)
     yield model.sphere_count
-    run = spec.run
+    run, settle_energies = launch_run([spec, *(g.spec for g in also)])
+    # each world is measured by its own scene's measure (a fill's core is sized by its grains)
+    measures = [spec.measure] * world_count + [g.spec.measure for g in also for _ in range(g.world_count)]
     solver = scene_solver(model, run)
     state, contacts = model.state(), solver.contacts()
     h = _host(model)
@@ -413,13 +484,21 @@ def run_scene_iter(
     stop_reason = "duration"
     # RunSpec: settled when every world stays below settle_energy for three outputs in a row
     settle = ms.SettleMonitor(run.settle_energy, window=3) if run.settle_energy > 0 else None
+    settle_scale = None
+    if min(settle_energies) <= 0:
+        settle = None  # a scene that never counts as settled keeps the launch running
+    elif len(set(settle_energies)) > 1:
+        # scenes of one launch settle by their own thresholds: the monitor reads each world's energy over its own
+        counts = [world_count] + [g.world_count for g in also]
+        settle_scale = np.repeat(np.asarray(settle_energies, dtype=np.float64), counts)
+        settle = ms.SettleMonitor(1.0, window=3)
     eps = 0.5 * solver.dt
     ckpt = (
         out / "checkpoint.npz"
         if (out is not None and (checkpoint_every > 0 or stop_after > 0) and writer is None)
         else None
     )
-    fingerprint = _fingerprint(spec, device, world_count, variations, world_seeds)
+    fingerprint = _fingerprint(spec, device, world_count, variations, world_seeds, also)
     resumed_from = None
     if ckpt is not None and ckpt.exists():
         book = _load_checkpoint(ckpt, fingerprint, state, contacts)
@@ -482,7 +561,7 @@ def run_scene_iter(
         # the tick that ends at the packing time lands within half a step of it (advance rounds to whole steps),
         # which a tolerance of exactly half a step can miss by rounding: take the first tick at or past it
         if packing_time is not None and t >= packing_time - eps and "packing" not in series:
-            series["packing"] = [_packing_metrics(model, state, h, w, m) for w in range(W)]
+            series["packing"] = [_packing_metrics(model, state, h, w, measures[w]) for w in range(W)]
         if writer is not None:
             _frame(writer, model, state, h, spec, t)
         if progress:
@@ -507,7 +586,12 @@ def run_scene_iter(
         factories_done = all(
             state.released.get(f, {}).get("count", 0) >= rec["count"] for f, rec in enumerate(model.factories)
         )
-        if settle is not None and t >= run.settle_after and factories_done and settle.update(t, ke):
+        if (
+            settle is not None
+            and t >= run.settle_after
+            and factories_done
+            and settle.update(t, ke if settle_scale is None else ke / settle_scale)
+        ):
             stop_reason = "settled"
             break
         now = time.perf_counter()
@@ -632,12 +716,15 @@ def run_scene_iter(
     return result
 
 
-def _fingerprint(spec, device, world_count, variations, world_seeds) -> str:
+def _fingerprint(spec, device, world_count, variations, world_seeds, also=()) -> str:
     """Hash of what a run is made of: a checkpoint only resumes the run it was saved from."""
     import hashlib
 
+    more = [[repr(g.spec), int(g.world_count), g.variations, g.world_seeds] for g in also]
     text = json.dumps(
-        [repr(spec), str(device), int(world_count), variations, world_seeds], sort_keys=True, default=_json_default
+        [repr(spec), str(device), int(world_count), variations, world_seeds] + more,
+        sort_keys=True,
+        default=_json_default,
     )
     return hashlib.sha1(text.encode()).hexdigest()
 
