@@ -43,7 +43,7 @@ for f in sorted(glob.glob(f"{a.runs}/*.json")):
     if d["design"].get("stage") == a.stage:
         ov = {**d["overrides"], "run.duration": a.until}
         rows.append({"run": len(rows) + 1, "point_id": d["point_id"], "world_seed": d["world_seed"], "overrides": ov})
-batches = execute._batches(study, rows)
+batches = execute._batches(study, rows, merge=execute.merges_scenes([a.device]))
 print(f"{a.stage}: {len(rows)} worlds in {len(batches)} launches, to {a.until} s, {wp.get_device(a.device).name}")
 # compile every kernel variant first, so no limit's timing pays for it
 for b in batches:

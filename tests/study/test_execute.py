@@ -390,3 +390,28 @@ def test_progress_counts_whole_runs(tmp_path):
     assert len(bar.counts) > 2 and all(isinstance(n, int) for n in bar.counts)
     assert bar.counts[-1] == 6 and sorted(bar.counts) == bar.counts
     assert any("%" in p for p in bar.posts)
+
+
+def test_scenes_of_other_grains_share_a_launch_on_gpus(tmp_path):
+    """Runs whose scenes differ only in their particles (here the pour's count) join one launch where launches
+    hold several scenes (GPUs; ``merge``), each scene's runs as one group of worlds; not on CPUs. At a fixed
+    step the launch is the separate launches again: every run's pile to the last bit, in the order asked."""
+    study = _study(tmp_path)
+    base = {"count": 40, "duration": 0.3, "run.dt_levels": 0}
+    asked = [({**base}, 0), ({**base, "count": 25}, 0), ({**base}, 7)]
+    rows = [{"overrides": ov, "world_seed": s, "point_id": str(k)} for k, (ov, s) in enumerate(asked)]
+    assert execute.merges_scenes(["cuda:0", "cuda:1"]) and not execute.merges_scenes(["cpu"])
+    apart = execute._batches(study, rows)
+    assert [[r["point_id"] for r in b] for b in apart] == [["0", "2"], ["1"]]
+    together = execute._batches(study, rows, merge=True)
+    assert [[r["point_id"] for r in b] for b in together] == [["0", "2", "1"]]
+    merged = execute.run_batch(study, rows, "cpu")
+    separate = {r["point_id"]: rec for b in apart for r, rec in zip(b, execute.run_batch(study, b, "cpu"))}
+    for r, rec in zip(rows, merged):
+        solo = separate[r["point_id"]]
+        assert rec["metrics"]["particles"] == solo["metrics"]["particles"]
+        assert rec["metrics"]["angle_fit_deg"] == solo["metrics"]["angle_fit_deg"]
+        assert rec["responses"] == solo["responses"]
+    assert merged[1]["metrics"]["particles"] <= 25 < merged[0]["metrics"]["particles"]
+    plan = execute.plan_study(study, tmp_path / "nothing", device="cpu")
+    assert plan["launches"][0]["particles"] == 40

@@ -144,7 +144,7 @@ class Simulations:
             rows.append({"run": len(rows) + 1, "point_id": pid, "world_seed": int(seed), "overrides": ov})
             rows[-1]["row"] = {"stage": stage}
         if rows:
-            batches = execute._batches(self.study, rows, len(self.devices))
+            batches = execute._batches(self.study, rows, len(self.devices), execute.merges_scenes(self.devices))
             self.log(f"{stage}: {len(rows)} simulation(s) in {len(batches)} launch(es)")
             bar = execute._progress_bar(len(rows), 0, stage, self.progress)
             try:

@@ -103,19 +103,36 @@ def parse_devices(device: str) -> list[str]:
     return out
 
 
-def _batches(study: sp.StudySpec, rows: list[dict], parts: int = 1) -> list[list[dict]]:
-    """Runs grouped by what they must share (scene, rig parameters), each group cut to ``study.batch``
-    (to single runs where the worlds would share the wall they are measured by, ``runner.independent_worlds``);
-    with ``parts`` > 1 (devices) each group is also cut into at least ``parts`` launches (as many as it has
-    runs at most), their sizes differing by one at most."""
-    from warpdem.scene.runner import independent_worlds
+def merges_scenes(devices: list[str]) -> bool:
+    """Whether launches on ``devices`` hold worlds of several scenes (:func:`_batches`): on GPUs, where a launch
+    costs about its steps whatever its worlds; not on CPUs, where it costs its particle-steps and a scene of
+    larger grains would step at the smaller grains' step."""
+    return all(d.startswith("cuda") for d in devices)
 
-    groups: dict[tuple, list[dict]] = {}
+
+def _batches(study: sp.StudySpec, rows: list[dict], parts: int = 1, merge: bool = False) -> list[list[dict]]:
+    """Runs grouped by what they must share (scene, rig parameters); with ``merge``, groups whose scenes differ
+    only in their particles (grain size, shape, count, feed: ``runner.shares_launch``) join one group, each
+    scene's runs together; each group cut to ``study.batch`` (to single runs where the worlds would share the wall they are
+    measured by, ``runner.independent_worlds``); with ``parts`` > 1 (devices) each group is also cut into at
+    least ``parts`` launches (as many as it has runs at most), their sizes differing by one at most."""
+    from warpdem.scene.runner import independent_worlds, shares_launch
+
+    by_key: dict[tuple, list[dict]] = {}
     for row in rows:
-        groups.setdefault(sp.batch_key(study, row["overrides"]), []).append(row)
+        by_key.setdefault(sp.batch_key(study, row["overrides"]), []).append(row)
+    # a GPU launch costs about its steps, whatever its worlds: scenes that can share one do
+    groups: list[tuple] = []  # (scene, rows)
+    for g in by_key.values():
+        scene = _scene(study, g[0]["overrides"])
+        mate = next((k for k, (other, _) in enumerate(groups) if merge and shares_launch(other, scene)), None)
+        if mate is None:
+            groups.append((scene, list(g)))
+        else:
+            groups[mate][1].extend(g)
     out = []
-    for g in groups.values():
-        if not independent_worlds(_scene(study, g[0]["overrides"])):
+    for scene, g in groups:
+        if not independent_worlds(scene):
             out += [[r] for r in g]
             continue
         if parts <= 1:
@@ -173,30 +190,46 @@ def run_batch_iter(
     stop_after: float = 0.0,
 ):
     """:func:`run_batch` as a generator that yields as :func:`runner.run_scene_iter` does."""
-    from warpdem.scene.runner import run_scene_iter
+    from warpdem.scene.runner import WorldGroup, run_scene_iter
 
-    scene = _scene(study, rows[0]["overrides"])
+    # the rows of each scene (rig parameters and shared overrides) are one group of worlds (see _batches)
+    by_key: dict[tuple, list[int]] = {}
+    for i, r in enumerate(rows):
+        by_key.setdefault(sp.batch_key(study, r["overrides"]), []).append(i)
     varying = sorted({k for r in rows for k in r["overrides"] if sp.varies_per_world(k)})
-    # a world whose run does not set a varied key keeps the scene's value (None)
-    variations = {k: [r["overrides"].get(k) for r in rows] for k in varying}
-    seeds = [int(r["world_seed"]) for r in rows]
+    groups = []
+    for idx in by_key.values():
+        part = [rows[i] for i in idx]
+        # a world whose run does not set a varied key keeps the scene's value (None)
+        variations = {k: [r["overrides"].get(k) for r in part] for k in varying}
+        seeds = [int(r["world_seed"]) for r in part]
+        groups.append(
+            WorldGroup(
+                _scene(study, part[0]["overrides"]),
+                len(part),
+                variations or None,
+                tuple(seeds) if any(seeds) else None,
+            )
+        )
+    first = groups[0]
     res = yield from run_scene_iter(
-        scene,
+        first.spec,
         device=device,
         out_dir=out_dir,
-        world_count=len(rows),
-        variations=variations or None,
+        world_count=first.world_count,
+        variations=first.variations,
         frames=False,
         progress=progress,
-        world_seeds=seeds if any(seeds) else None,
+        world_seeds=list(first.world_seeds) if first.world_seeds else None,
         checkpoint_every=checkpoint_every,
         stop_after=stop_after,
+        also=groups[1:],
     )
     info = dict(res.info)
-    out = []
-    for m in res.metrics:
+    out: list = [None] * len(rows)
+    for i, m in zip([i for idx in by_key.values() for i in idx], res.metrics):
         responses = {r.name: _response(m, r.measure) for r in study.responses}
-        out.append({"responses": responses, "metrics": m, "info": info})
+        out[i] = {"responses": responses, "metrics": m, "info": info}
     return out
 
 
@@ -485,8 +518,8 @@ def _logging_to(path: Path, log):
 def plan_study(study, out_dir=None, device: str = "cpu") -> dict:
     """What :func:`run_study` would run, without running anything: ``table`` (the design, coded and actual, with
     a ``status`` column: finished in ``out_dir`` or pending), ``launches`` (one dict per launch of the pending
-    runs: ``runs`` (run numbers), ``worlds``, ``particles`` per world (the factories' counts; None where a
-    factory gives a mass), ``duration_s`` simulated at most) and ``cost``: the launches' simulated seconds and
+    runs: ``runs`` (run numbers), ``worlds``, ``particles`` per world (the factories' counts, the
+    mean where the launch's scenes differ; None where a factory gives a mass), ``duration_s`` simulated at most) and ``cost``: the launches' simulated seconds and
     world-seconds, and particle-seconds where every count is known (a run that settles stops sooner)."""
     study = study if isinstance(study, sp.StudySpec) else sp.load_study(study)
     out = Path(out_dir) if out_dir else Path("runs") / study.name
@@ -496,16 +529,17 @@ def plan_study(study, out_dir=None, device: str = "cpu") -> dict:
     table["status"] = ["finished" if pid in done else "pending" for pid in table["point_id"]]
     pending = [r for r in rows if r["point_id"] not in done]
     launches = []
-    for batch in _batches(study, pending, len(parse_devices(device))) if pending else []:
-        scene = _scene(study, batch[0]["overrides"])
-        counts = [f.count for f in scene.factories]
-        particles = None if any(c is None for c in counts) else int(sum(counts))
+    devices = parse_devices(device)
+    for batch in _batches(study, pending, len(devices), merges_scenes(devices)) if pending else []:
+        scenes = [_scene(study, r["overrides"]) for r in batch]
+        counts = [f.count for scene in scenes for f in scene.factories]
+        particles = None if any(c is None for c in counts) else int(sum(counts)) / len(batch)
         launches.append(
             {
                 "runs": [r["run"] for r in batch],
                 "worlds": len(batch),
-                "particles": particles,
-                "duration_s": float(scene.run.duration),
+                "particles": particles if particles is None or particles % 1 else int(particles),
+                "duration_s": max(float(scene.run.duration) for scene in scenes),
             }
         )
     known = all(L["particles"] is not None for L in launches)
@@ -566,7 +600,7 @@ def run_study(
         log(f"{study.name}: {done0} of {len(rows)} runs already finished in {out}; running {len(pending)}")
     t0 = time.perf_counter()
     bar = _progress_bar(len(rows), done0, study.name, progress)
-    batches = _batches(study, pending, len(devices)) if pending else []
+    batches = _batches(study, pending, len(devices), merges_scenes(devices)) if pending else []
     stopped = None
     if len(devices) > 1 and batches:
         stopped = _run_parallel(study, out, batches, devices, bar, t0, checkpoint_every, stop_after, log)
