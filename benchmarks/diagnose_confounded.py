@@ -12,7 +12,7 @@ friction). Two data files, one data set: ``angle`` holds the angle only, ``both`
 The two diagnoses share their stored worlds.
 
     python benchmarks/diagnose_confounded.py [--device cuda] [--out DIR] [--case angle|both|all]
-        [--stop-after S]
+        [--stop-after S] [--aspect A]
 
 Prints each diagnosis's verdict, its cause or tie, the separating measurement it names, the wall time, the
 worlds and the launches; resumes from DIR.
@@ -44,13 +44,13 @@ PARAMETER = {
 """The base model's free parameter."""
 
 
-def make_data(out: Path, device: str) -> dict[str, Path]:
+def make_data(out: Path, device: str, aspect: float = ASPECT) -> dict[str, Path]:
     """The two data files (``angle``, ``both``) of one simulated data set; made once, then reused."""
     paths = {case: out / f"shape_{case}.toml" for case in ("angle", "both")}
     if all(p.exists() for p in paths.values()):
         return paths
     hidden = {"interaction.grain.grain.static_friction": MU_S}
-    rows = syn.funnel_data(syn.funnel_experiments(), {"aspect_ratio": ASPECT}, hidden, device, seed=2027)
+    rows = syn.funnel_data(syn.funnel_experiments(), {"aspect_ratio": aspect}, hidden, device, seed=2027)
     angle_rows = [{k: v for k, v in r.items() if k != "bulk_density_kg_m3"} for r in rows]
     for name, what, case_rows in (
         ("shape_angle", "angle only", angle_rows),
@@ -67,10 +67,11 @@ def main() -> None:
     ap.add_argument("--out", default="runs/diagnose_confounded")
     ap.add_argument("--case", choices=("data", "angle", "both", "all"), default="all")
     ap.add_argument("--stop-after", type=float, default=0.0, help="wall seconds after which a diagnosis stops")
+    ap.add_argument("--aspect", type=float, default=ASPECT, help="hidden aspect ratio of the data (length / width)")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    paths = make_data(out, a.device)
+    paths = make_data(out, a.device, a.aspect)
     cases = {"data": [], "all": ["angle", "both"]}.get(a.case, [a.case])
     runs = out / "runs"
     runs.mkdir(exist_ok=True)
