@@ -87,12 +87,12 @@ def test_trend_conditions_drop_repeats_and_columns_of_two_values():
 
 
 def test_design_levels_of_a_rig_parameter():
-    """A parameter that cannot vary per world (a rig parameter: each value is a launch) takes LAUNCH_LEVELS
-    values, the ends and the middle of its range; a per-world parameter keeps its Latin hypercube strata."""
+    """A parameter that cannot vary per world (a rig parameter: each value is a scene) takes LAUNCH_LEVELS
+    values, evenly over its range; a per-world parameter keeps its Latin hypercube strata."""
     from warpdem.diagnose.pipeline import LAUNCH_LEVELS, Dim, design_points
 
     dims = [Dim("mu_r", "interaction.g.g.rolling_friction", 0.0, 0.5), Dim("shape", "aspect_ratio", 1.0, 2.5)]
     U = design_points(dims, 12, seed=3)
     assert U.shape == (12, 2)
     assert np.array_equal(np.sort(np.floor(U[:, 0] * 12)), np.arange(12))  # one point per stratum
-    assert set(np.round(U[:, 1], 12)) == {0.0, 0.5, 1.0} and LAUNCH_LEVELS == 3
+    assert set(np.round(U[:, 1], 12)) == {0.0, 0.25, 0.5, 0.75, 1.0} and LAUNCH_LEVELS == 5

@@ -15,7 +15,7 @@ Stages (every simulated world is stored as it finishes, ``OUT/runs/<id>.json``, 
    gives k equal runs).
 2. **Calibration.** A space-filling design (:func:`design_points`) over the free parameters, at every
    condition (training and test), each condition's worlds batched in one launch where the scene allows (a rig
-   parameter, which cannot vary per world, takes :data:`LAUNCH_LEVELS` values, one launch each); a
+   parameter, which cannot vary per world, takes :data:`LAUNCH_LEVELS` values, one scene each); a
    Gaussian-process surrogate per (condition, response) (:class:`inference.Surrogate`: smooth, interpolating,
    with its own predictive variance, which the likelihood takes in); the posterior on a flat prior over the
    ranges by MCMC on the surrogates (:func:`inference.calibrate`); the maximum a posteriori point confirmed by
@@ -68,10 +68,11 @@ from . import candidates as cands
 from . import inference as inf
 from .data import DiagnoseError, DiagnosisSpec, Experiments, load_diagnosis
 
-LAUNCH_LEVELS = 3
-"""Values a design takes along a parameter that cannot vary per world (0, 1/2 and 1 of its range): each value is
-a launch of its own (about 12 s of a GPU however few its worlds), and three levels resolve the curvature a
-surrogate of a smooth response needs."""
+LAUNCH_LEVELS = 5
+"""Values a design takes along a parameter that cannot vary per world (0, 1/4, ..., 1 of its range): each value is
+a scene of its own (on a GPU they share the stage's launch; on a CPU a launch each, costing their worlds as any
+launch does). Three levels were too few for shape: a rod's sphere count changes in steps with its aspect ratio,
+and the estimate settled in the middle level's step."""
 
 DESIGN_SEED = 0
 """World seed of the space-filling design's simulations (the factories' own placement)."""
@@ -227,7 +228,7 @@ def design_points(dims: list[Dim], n: int, seed: int) -> np.ndarray:
     """``n`` design points over ``dims`` in the unit cube, shape (n, len(dims)): a space-filling Latin
     hypercube (:func:`inference.space_filling`) whose coordinates along a parameter that cannot vary between
     the worlds of a launch (a rig parameter such as shape's aspect ratio) are rounded to
-    :data:`LAUNCH_LEVELS` values, so that the design costs that many launches per condition instead of n."""
+    :data:`LAUNCH_LEVELS` values, so that the design costs that many scenes per condition instead of n."""
     U = inf.space_filling(n, len(dims), seed)
     step = 1.0 / (LAUNCH_LEVELS - 1)
     for j, dim in enumerate(dims):
