@@ -67,6 +67,13 @@ def test_press_plasticity_is_named(tmp_path, press_runs):
     assert res["gain"]["rmse"]["residual_set_ratio"]["reduction"] >= 0.5
     saved = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
     assert saved["verdict"] == "cause" and (tmp_path / "out" / "report.md").exists()
+    # every extended model shows its own misfit, and why it is or is not adequate
+    assert saved["extended"]["plasticity"]["failed_tests"] == []
+    report = (tmp_path / "out" / "report.md").read_text()
+    for name in saved["extended"]:
+        section = report.split(f"### Extended model: base + {name}")[1].split("###")[0]
+        assert "Its misfit" in section and "| experiment | response | measured | simulated | z |" in section
+    assert "No adequacy test is significant" in report.split("### Extended model: base + plasticity")[1]
 
 
 # --------------------------------------------------------------------------------------------------

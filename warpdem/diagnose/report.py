@@ -50,6 +50,11 @@ def _model_json(ev: dict) -> dict:
             for d in m.dims
         },
         "adequate": bool(ev["adequacy"]["adequate"]),
+        "failed_tests": [
+            {"kind": t["kind"], "response": t["response"], "on": _on(t), "p_holm": float(t["p_holm"])}
+            for _, t in ev["adequacy"]["tests"].iterrows()
+            if t["significant"]
+        ],
         "loglik_train": ev["loglik"],
         "n_train": ev["n_train"],
         "surrogate_accuracy": ev["surrogate_accuracy"].to_dict(orient="records"),
@@ -238,19 +243,9 @@ def _markdown(prob, evals, decision, diag, screens, skipped, separating, gains) 
     L += _params_table(base)
     L += ["", _surrogate_line(base), ""]
     L += ["## What the base model gets wrong (training data, confirming simulations)", ""]
-    L += ["| experiment | response | measured | simulated | z |", "|---|---|---|---|---|"]
-    obs = prob.obs[prob.train]
-    z = base["residual"] / np.sqrt(base["variance"])
-    for (_, o), r, zz in zip(obs.iterrows(), base["residual"], z):
-        L.append(f"| {o['id']} | {o['response']} | {_f(o['mean'])} | {_f(o['mean'] - r)} | {_f(zz, 3)} |")
+    L += _residual_table(prob, base)
     L += ["", "Adequacy tests (Holm-corrected as one family):", ""]
-    tests = base["adequacy"]["tests"]
-    L += ["| test | response | on | statistic | p | p (Holm) | significant |", "|---|---|---|---|---|---|---|"]
-    for _, t in tests.iterrows():
-        L.append(
-            f"| {t['kind']} | {t['response']} | {_on(t)} | {_f(t['statistic'], 3)} | {_f(t['p'], 3)} | "
-            f"{_f(t['p_holm'], 3)} | {'yes' if t['significant'] else 'no'} |"
-        )
+    L += _tests_table(base["adequacy"]["tests"])
     if screens:
         L += ["", "## Candidates", "", "Screen at the calibrated point (effect of moving each candidate from off "]
         L += ["halfway to the far end of its range, base parameters free to re-tune):", ""]
@@ -282,7 +277,15 @@ def _markdown(prob, evals, decision, diag, screens, skipped, separating, gains) 
                 continue
             L += ["", f"### Extended model: base + {name}", ""]
             L += _params_table(ev)
-            L += ["", _surrogate_line(ev)]
+            L += ["", _surrogate_line(ev), "", "Its misfit (training data, confirming simulations):", ""]
+            L += _residual_table(prob, ev)
+            failed = ev["adequacy"]["tests"]
+            failed = failed[failed["significant"].astype(bool)]
+            if len(failed):
+                L += ["", "Adequacy tests that fail (Holm-corrected as one family):", ""]
+                L += _tests_table(failed)
+            else:
+                L += ["", "No adequacy test is significant (Holm-corrected as one family): adequate."]
     if gains:
         L += ["", "## Gain on held-out data", ""]
         if gains["rmse"]:
@@ -316,6 +319,27 @@ def _markdown(prob, evals, decision, diag, screens, skipped, separating, gains) 
         L += ["", "## Pictures", ""]
         L += [f"![{p}]({p})" for p in diag["pictures"]]
     return "\n".join(L) + "\n"
+
+
+def _residual_table(prob, ev: dict) -> list[str]:
+    """Measured against the model's confirming simulations, per training observation, with z = residual over the
+    noise budget's SD."""
+    L = ["| experiment | response | measured | simulated | z |", "|---|---|---|---|---|"]
+    obs = prob.obs[prob.train]
+    z = ev["residual"] / np.sqrt(ev["variance"])
+    for (_, o), r, zz in zip(obs.iterrows(), ev["residual"], z):
+        L.append(f"| {o['id']} | {o['response']} | {_f(o['mean'])} | {_f(o['mean'] - r)} | {_f(zz, 3)} |")
+    return L
+
+
+def _tests_table(tests) -> list[str]:
+    L = ["| test | response | on | statistic | p | p (Holm) | significant |", "|---|---|---|---|---|---|---|"]
+    for _, t in tests.iterrows():
+        L.append(
+            f"| {t['kind']} | {t['response']} | {_on(t)} | {_f(t['statistic'], 3)} | {_f(t['p'], 3)} | "
+            f"{_f(t['p_holm'], 3)} | {'yes' if t['significant'] else 'no'} |"
+        )
+    return L
 
 
 def _params_table(ev: dict) -> list[str]:
