@@ -415,3 +415,38 @@ def test_scenes_of_other_grains_share_a_launch_on_gpus(tmp_path):
     assert merged[1]["metrics"]["particles"] <= 25 < merged[0]["metrics"]["particles"]
     plan = execute.plan_study(study, tmp_path / "nothing", device="cpu")
     assert plan["launches"][0]["particles"] == 40
+
+
+def test_runs_that_may_be_wrong_are_flagged(finished, tmp_path):
+    """run_checks reads each finished run: the tiny study's 0.3 s piles are still moving when they stop (the
+    funnel stops once settled), which it says of every run, in the log and the report's notes. A run edited to
+    lose 3 of its 40 spheres (7.5 %, over 2 %), to fail its measurement, to press faster than quasi-static and to
+    step above the stable step gets each of those flags with its figures; one that lost none gets no such flag."""
+    import shutil
+
+    study, out1, res = finished
+    assert {f["check"] for f in res["checks"]} == {"unsettled"} and len(res["checks"]) == 6
+    assert (
+        "check: did not settle: runs 1, 2, 3, 4, 5, 6 (run 1: still moving at the end of its 0.3 s)"
+        in (out1 / "log.txt").read_text()
+    )
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    pid = execute.load_results(out, study)["point_id"][1]
+    path = out / "runs" / f"{pid}.json"
+    rec = json.loads(path.read_text())
+    rec["metrics"].update(removed=3, inertial_number_max=0.02, angle_error="no pile")
+    rec["responses"]["height"] = None
+    rec["info"]["step_warning"] = "the step reached 1.20 of the stable step"
+    path.write_text(json.dumps(rec))
+    flags = [f for f in execute.run_checks(out, study) if f["run"] == 2]
+    details = {f["check"]: f["detail"] for f in flags}
+    assert details["lost"] == "3 of 40 particles (7.5 %) left the domain"
+    assert details["measurement"] == "no height (pile_height_m): no pile"
+    assert details["inertial"].startswith("inertial number 0.02, above the quasi-static 0.001")
+    assert details["step"] == "the step reached 1.20 of the stable step"
+    assert not any(f["check"] == "lost" for f in execute.run_checks(out, study) if f["run"] != 2)
+    execute.analyze(out, study)
+    report = (out / "analysis" / "report.md").read_text()
+    assert "- Check: lost particles: run 2: 3 of 40 particles (7.5 %) left the domain." in report
+    assert "- Check: did not settle: runs 1, 2, 3, 4, 5, 6" in report

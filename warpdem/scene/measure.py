@@ -64,6 +64,10 @@ __all__ = [
 
 # A radial bin must be wide enough to hold at least one sphere of the outermost layer in every sector;
 # otherwise its highest top comes from a buried sphere and drags the fitted line down unevenly.
+QUASI_STATIC_INERTIAL_NUMBER = 1.0e-3
+"""Inertial number I = (shear rate) d / sqrt(p / rho) below which granular flow is quasi-static (GDR MiDi 2004): a
+press or shear test run faster than this measures inertia as well as the bed."""
+
 MIN_BIN_DIAMETERS = 2.5
 # Spheres whose centre is this many (largest) radii or less above the base form the bottom layer.
 BASE_LAYER_RADII = 2.5

@@ -293,6 +293,21 @@ METRIC_NEEDS = {
 unloading branch of a press that retracts at ``unload_speed``."""
 
 
+METRIC_ERRORS = {"packing_time": "packing_error", "outlet_height": "discharge_error", "unload_speed": "press_error"}
+"""The ``*_error`` key a run writes in place of the metrics that need this ``MeasureSpec`` field
+(:data:`METRIC_NEEDS`); a kind's other metrics fail under :data:`KIND_ERRORS`."""
+
+KIND_ERRORS = {"angle_of_repose": "angle_error", "press": "press_error", "drum": "drum_error"}
+"""The ``*_error`` key a run writes in place of its measure kind's own metrics."""
+
+
+def metric_error(metrics: dict, kind: str, metric: str) -> str | None:
+    """Why one world's ``metrics`` (of a scene whose measure is ``kind``) lack ``metric``: the error the run wrote
+    in its place, or None."""
+    key = METRIC_ERRORS.get(METRIC_NEEDS.get(metric, ""), KIND_ERRORS.get(kind))
+    return metrics.get(key) if key else None
+
+
 def metric_needs_met(measure, metric: str) -> bool:
     """True when a scene measuring with ``measure`` (a ``MeasureSpec``) sets up what ``metric`` needs
     (:data:`METRIC_NEEDS`; always True for a metric that needs nothing)."""

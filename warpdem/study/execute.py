@@ -622,6 +622,9 @@ def run_study(
     wall = time.perf_counter() - t0
     finished = sum((runs_dir / f"{r['point_id']}.json").exists() for r in rows)
     log(f"{study.name}: {finished} of {len(rows)} runs finished ({finished - done0} now, in {wall:.1f} s)")
+    flags = run_checks(out, study)
+    for line in check_lines(flags):
+        log(f"{study.name}: check: {line}")
     result = {
         "out": str(out),
         "runs": len(rows),
@@ -632,6 +635,7 @@ def run_study(
         "analysis": None,
         "verification": None,
         "stopped": stopped,
+        "checks": flags,
     }
     if not batches or stopped:
         _results_csv(study, out)
@@ -678,6 +682,92 @@ def load_results(out, study: sp.StudySpec | None = None) -> pd.DataFrame:
     return table
 
 
+LOST_FRACTION_MAX = 0.02
+"""Share of a run's particles that may leave the scene's domain (rolled off the plate, thrown out) before the
+run is flagged: beyond it the measured pile or bed is not the one the factories made."""
+
+
+def _checks_of(rec: dict, scene, study: sp.StudySpec) -> list[tuple[str, str]]:
+    """(check, detail) of one run's record (see :func:`run_checks`); ``scene`` is the run's SceneSpec."""
+    from warpdem.scene.measure import QUASI_STATIC_INERTIAL_NUMBER
+    from warpdem.scene.runner import metric_error
+
+    m, info, found = rec["metrics"], rec["info"], []
+    for r in study.responses:
+        v = rec["responses"].get(r.name)
+        if v is None or not math.isfinite(float(v)):
+            why = metric_error(m, scene.measure.kind, r.measure.split(".")[0])
+            found.append(("measurement", f"no {r.name} ({r.measure})" + (f": {why}" if why else "")))
+    if scene.run.settle_energy > 0 and m.get("stop", info.get("stop")) == "duration":
+        found.append(("unsettled", f"still moving at the end of its {m.get('time_s', scene.run.duration):.3g} s"))
+    counts = [fac.count for fac in scene.factories]
+    total = sum(counts) if counts and None not in counts else m.get("particles", 0) + m.get("removed", 0)
+    removed = int(m.get("removed", 0))
+    if total and removed > LOST_FRACTION_MAX * total:
+        found.append(("lost", f"{removed} of {total} particles ({100 * removed / total:.1f} %) left the domain"))
+    inertial = m.get("inertial_number_max")
+    if inertial is not None and inertial > QUASI_STATIC_INERTIAL_NUMBER:
+        found.append(
+            (
+                "inertial",
+                f"inertial number {inertial:.3g}, above the quasi-static {QUASI_STATIC_INERTIAL_NUMBER:g}: slow the "
+                "piston",
+            )
+        )
+    if info.get("step_warning"):
+        found.append(("step", info["step_warning"]))
+    return found
+
+
+def run_checks(out, study: sp.StudySpec | None = None) -> list[dict]:
+    """What may make a finished run's numbers wrong, per run of ``out`` (run, point_id, check, detail), in run
+    order: ``measurement`` (a response it could not measure, with the metric's own error), ``unsettled`` (a scene
+    that stops once settled ran to its duration instead), ``lost`` (more than :data:`LOST_FRACTION_MAX` of its
+    particles left the domain), ``inertial`` (a press faster than
+    :data:`warpdem.scene.measure.QUASI_STATIC_INERTIAL_NUMBER`) and ``step`` (the step exceeded the stable step
+    in some tick)."""
+    out = Path(out)
+    study = study or sp.load_study(out / "study.toml", check_scene=False)
+    flags, scenes = [], {}
+    for row in _study_rows(study, sp.design_table(study)):
+        f = out / "runs" / f"{row['point_id']}.json"
+        if not f.exists():
+            continue
+        with open(f) as fh:
+            rec = json.load(fh)
+        key = sp.batch_key(study, row["overrides"])
+        if key not in scenes:
+            scenes[key] = _scene(study, row["overrides"])
+        scene = scenes[key]
+        for check, detail in _checks_of(rec, scene, study):
+            flags.append({"run": row["run"], "point_id": row["point_id"], "check": check, "detail": detail})
+    return flags
+
+
+def check_lines(flags: list[dict]) -> list[str]:
+    """:func:`run_checks`' flags as one line per check: its runs, and the first one's detail."""
+    lines = []
+    for check in dict.fromkeys(f["check"] for f in flags):
+        these = [f for f in flags if f["check"] == check]
+        first = these[0]
+        if len(these) == 1:
+            lines.append(f"{CHECK_WORDS[check]}: run {first['run']}: {first['detail']}")
+        else:
+            runs = ", ".join(str(f["run"]) for f in these)
+            lines.append(f"{CHECK_WORDS[check]}: runs {runs} (run {first['run']}: {first['detail']})")
+    return lines
+
+
+CHECK_WORDS = {
+    "measurement": "measurement failed",
+    "unsettled": "did not settle",
+    "lost": "lost particles",
+    "inertial": "not quasi-static",
+    "step": "step above the stable step",
+}
+"""How the report and the console name each of :func:`run_checks`' checks."""
+
+
 def _results_csv(study, out: Path) -> None:
     load_results(out, study).to_csv(out / "results.csv", index=False)
 
@@ -694,6 +784,7 @@ def analyze(out, study: sp.StudySpec | None = None) -> dict:
     notes = []
     if not finished.all():
         notes.append(f"{int((~finished).sum())} of {len(data)} runs have not finished; they are left out.")
+    notes += [f"Check: {line}." for line in check_lines(run_checks(out, study))]
     model = study.analysis.model
     summary = write_report(
         out / "analysis",
