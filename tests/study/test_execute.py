@@ -450,3 +450,27 @@ def test_runs_that_may_be_wrong_are_flagged(finished, tmp_path):
     report = (out / "analysis" / "report.md").read_text()
     assert "- Check: lost particles: run 2: 3 of 40 particles (7.5 %) left the domain." in report
     assert "- Check: did not settle: runs 1, 2, 3, 4, 5, 6" in report
+
+
+def test_settling_of_every_run_is_kept_and_drawn(finished, tmp_path):
+    """Each run keeps its kinetic energy per particle at every output tick and its scene's settle threshold; the
+    report draws them all (settling.png) and says how many ended below it: none of the tiny study's 0.3 s piles,
+    each of which stopped at its duration with its last energy above the threshold, as run_checks says."""
+    import shutil
+
+    from warpdem.scene import rigs
+
+    study, out1, _ = finished
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    threshold = rigs.spec("funnel", {"count": 40, "duration": 0.3}, smoke=True).run.settle_energy
+    for pid in execute.load_results(out, study)["point_id"]:
+        rec = json.loads((out / "runs" / f"{pid}.json").read_text())
+        st = rec["metrics"]["settling"]
+        assert st["threshold_j"] == pytest.approx(threshold) and rec["metrics"]["stop"] == "duration"
+        assert st["time_s"][-1] == pytest.approx(0.3, abs=1e-4) and len(st["kinetic_energy_j"]) == len(st["time_s"])
+        assert st["kinetic_energy_j"][-1] > threshold
+    execute.analyze(out, study)
+    report = (out / "analysis" / "report.md").read_text()
+    assert "0 of 6 runs end below their settle threshold" in report and "![settling of each run](settling.png)" in report
+    assert (out / "analysis" / "settling.png").stat().st_size > 10_000

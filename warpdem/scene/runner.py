@@ -635,9 +635,17 @@ def run_scene_iter(
     # the scalar metrics each kind writes are listed in MEASURE_METRICS and METRIC_NEEDS: keep them in step
     metrics = []
     removed = host(state.world_removed)
+    thresholds = np.repeat(settle_energies, [world_count] + [g.world_count for g in also])
+    ke_series = np.asarray(series["kinetic_energy"], dtype=np.float64).reshape(len(series["time"]), W)
     for w in range(W):
         # removed: bodies that left the scene's domain (e.g. rolled off the plate's edge)
         mw = {"world": w, "time_s": state.time, "stop": stop_reason, "removed": int(removed[w])}
+        # how the world came to rest: its kinetic energy per particle at every output tick, and the threshold
+        mw["settling"] = {
+            "time_s": list(map(float, series["time"])),
+            "kinetic_energy_j": ke_series[:, w].tolist(),
+            "threshold_j": float(thresholds[w]),
+        }
         if m.kind == "angle_of_repose":
             x, r = _particles(model, state, h, w)
             # what rolled off the base is not part of the pile

@@ -803,11 +803,28 @@ def analyze(out, study: sp.StudySpec | None = None) -> dict:
     )
     with open(out / "analysis" / "summary.json", "w") as fh:
         json.dump(summary, fh, indent=1, default=_json_default)
+    _append_settling(out, study)
     vfile = out / "verification" / "verification.json"
     if vfile.exists():
         with open(vfile) as fh:
             _append_verification(out, json.load(fh))
     return summary
+
+
+def _append_settling(out: Path, study: sp.StudySpec) -> None:
+    """Add the settling picture of every finished run to the report (see ``report.settling_section``)."""
+    from .report import settling_section
+
+    runs = []
+    for row in _study_rows(study, sp.design_table(study)):
+        f = out / "runs" / f"{row['point_id']}.json"
+        if f.exists():
+            with open(f) as fh:
+                runs.append((row["run"], json.load(fh)["metrics"].get("settling")))
+    lines = settling_section(out / "analysis", runs)
+    if lines:
+        with open(out / "analysis" / "report.md", "a") as fh:
+            fh.write("\n".join(lines))
 
 
 def _append_verification(out: Path, v: dict) -> None:

@@ -817,6 +817,44 @@ def _plot_diagnostics(out: Path, tag: str, fit: ModelFit, diag: dict, runs, used
     return [f"diagnostics_{tag}.png", f"residuals_vs_factors_{tag}.png"]
 
 
+def settling_section(out: Path, runs: Sequence[tuple[int, dict]]) -> list[str]:
+    """``settling.png`` in ``out`` (each run's kinetic energy per particle [J] against time [s], log scale, its
+    threshold dashed) and the report lines that read it; ``runs`` holds (run number, the world's ``settling``
+    metric: time_s, kinetic_energy_j, threshold_j). No runs with a series: no picture, no lines."""
+    from matplotlib.figure import Figure
+
+    runs = [(k, st) for k, st in runs if st and len(st.get("time_s", []))]
+    if not runs:
+        return []
+    fig = Figure(figsize=(7, 4.5))
+    ax = fig.subplots()
+    settled = []
+    for k, st in runs:
+        t, e = np.asarray(st["time_s"], float), np.asarray(st["kinetic_energy_j"], float)
+        ax.semilogy(t, np.maximum(e, 1e-300), lw=1, label=f"run {k}")
+        thr = float(st.get("threshold_j", 0.0))
+        if thr > 0:
+            settled.append(bool(len(e) and e[-1] < thr))
+    thresholds = sorted({float(st.get("threshold_j", 0.0)) for _, st in runs} - {0.0})
+    for thr in thresholds:
+        ax.axhline(thr, color="k", ls="--", lw=1)
+    ax.set(xlabel="time [s]", ylabel="kinetic energy per particle [J]", title="Settling of each run")
+    if len(runs) <= 20:
+        ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    fig.savefig(Path(out) / "settling.png", dpi=90)
+    lines = ["", "## Settling", ""]
+    if thresholds:
+        lines.append(
+            f"{sum(settled)} of {len(settled)} runs end below their settle threshold (dashed: "
+            + ", ".join(f"{v:.3g} J" for v in thresholds)
+            + " per particle); a run above it was still moving when it stopped."
+        )
+    else:
+        lines.append("The scene has no settle threshold: each run ran to its duration.")
+    return lines + ["", "![settling of each run](settling.png)", ""]
+
+
 def write_report(
     out_dir,
     data: pd.DataFrame,
