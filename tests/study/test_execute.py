@@ -9,7 +9,7 @@ import math
 import pytest
 
 from warpdem.study import execute
-from warpdem.study.spec import load_study
+from warpdem.study.spec import StudyError, load_study
 
 pytest.importorskip("warp")
 
@@ -472,5 +472,31 @@ def test_settling_of_every_run_is_kept_and_drawn(finished, tmp_path):
         assert st["kinetic_energy_j"][-1] > threshold
     execute.analyze(out, study)
     report = (out / "analysis" / "report.md").read_text()
-    assert "0 of 6 runs end below their settle threshold" in report and "![settling of each run](settling.png)" in report
+    assert (
+        "0 of 6 runs end below their settle threshold" in report and "![settling of each run](settling.png)" in report
+    )
     assert (out / "analysis" / "settling.png").stat().st_size > 10_000
+
+
+def test_a_study_files_transform_reaches_the_report(finished, tmp_path):
+    """``[analysis] transform = "ln"`` in the study file: a target of 0 is refused where the file is read (ln
+    cannot take it); with 0.01, analyze fits ln(height) to the same finished runs (their point ids do not depend
+    on the analysis) and the report says so."""
+    import shutil
+
+    study, out1, _ = finished
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    path = tmp_path / "ln.toml"
+    text = STUDY.format(batch=0, target=0.0, verify=0).replace('model = "linear"', 'model = "linear"\ntransform = "ln"')
+    path.write_text(text)
+    with pytest.raises(StudyError, match=r"\[\[responses\]\] 'height': target = 0.0 cannot be transformed by ln"):
+        load_study(path)
+    path.write_text(text.replace("target = 0.0", "target = 0.01"))
+    ln_study = load_study(path)
+    assert [r["point_id"] for r in execute._study_rows(ln_study, execute.sp.design_table(ln_study))] == [
+        r["point_id"] for r in execute._study_rows(study, execute.sp.design_table(study))
+    ]
+    execute.analyze(out, ln_study)
+    md = (out / "analysis" / "report.md").read_text()
+    assert "**Transform:** the model is fitted to ln(height)" in md and "ln(height) = " in md

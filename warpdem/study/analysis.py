@@ -42,6 +42,7 @@ from scipy import optimize, stats
 
 from .designs import Factor
 from .goals import GOALS, Goal
+from .transforms import NONE, Transform
 
 __all__ = [
     "GOALS",
@@ -206,6 +207,9 @@ class ModelFit:
         levels: factor levels used for the actual-units equation, when given.
         elimination: log of :func:`backward_eliminate` (removed term, its p), else empty.
         ols: the statsmodels results object.
+        transform: the response transform the model is fitted to (:mod:`.transforms`): the ANOVA, ``data``'s
+            response column, fitted values, residuals and :meth:`predict` are on that scale; :meth:`to_response`
+            brings values back to the response's units.
     """
 
     response: str
@@ -221,6 +225,7 @@ class ModelFit:
     levels: dict[str, Factor] | None = None
     elimination: list[dict] = field(default_factory=list)
     ols: object = None
+    transform: Transform = NONE
 
     @property
     def labels(self) -> list[str]:
@@ -240,8 +245,17 @@ class ModelFit:
             return np.array([[float(x[f]) for f in self.factors]])
         return np.atleast_2d(np.asarray(x, dtype=float))
 
+    def to_response(self, values) -> np.ndarray:
+        """Model-scale ``values`` (of :meth:`predict`) in the response's own units (the transform's inverse)."""
+        return np.asarray(self.transform.inverse(values), dtype=float)
+
+    def predict_response(self, x) -> np.ndarray:
+        """Prediction at coded points in the response's own units (:meth:`predict`, back-transformed)."""
+        return self.to_response(self.predict(x))
+
     def predict(self, x) -> np.ndarray:
-        """Prediction at coded points (DataFrame with factor columns, mapping, or array n x k)."""
+        """Prediction at coded points (DataFrame with factor columns, mapping, or array n x k), on the model's
+        scale (the transformed response; see :meth:`predict_response`)."""
         beta = self.coefficients["coef"].to_numpy()
         return _columns(self._x(x), self.terms, self.factors) @ beta
 
@@ -301,7 +315,7 @@ class ModelFit:
             cnt = Counter(mono)
             name = "*".join(n + (f"^{cnt[n]}" if cnt[n] > 1 else "") for n in dict.fromkeys(mono))
             parts.append(("- " if c < 0 else "+ ") + f"{abs(c):.{digits}g}*{name}")
-        return f"{self.response} = " + " ".join(parts)
+        return f"{self.transform.label(self.response)} = " + " ".join(parts)
 
     def summary(self) -> str:
         """ANOVA table, fit statistics and the coded equation as plain text."""
@@ -339,6 +353,7 @@ def fit_model(
     factors: Sequence[str],
     model: str | Sequence = "quadratic",
     levels: Iterable[Factor] | Mapping[str, Factor] | None = None,
+    transform: Transform | None = None,
 ) -> ModelFit:
     """Fit ``model`` to the coded ``data`` by OLS and build the Design-Expert ANOVA.
 
@@ -348,12 +363,16 @@ def fit_model(
         factors: names of the factor columns.
         model: ``"linear"``, ``"2fi"``, ``"quadratic"`` or a list of terms.
         levels: :class:`~warpdem.study.designs.Factor` per factor, for the actual-units equation.
+        transform: fit the model to this transform of the response (default none).
     """
     factors = list(factors)
     terms = model_terms(model, factors)
+    transform = NONE if transform is None else transform
     df = data[factors + [response]].astype(float).reset_index(drop=True)
     if df.isna().any().any():
         raise ValueError("data contains missing values")
+    if transform != NONE:
+        df[response] = transform.forward(df[response].to_numpy(), f"response {response!r}")
     y = df[response].to_numpy()
     xk = df[factors].to_numpy()
     X = _columns(xk, terms, factors)
@@ -432,7 +451,7 @@ def fit_model(
     lv = None
     if levels is not None:
         lv = dict(levels) if isinstance(levels, Mapping) else {f.name: f for f in levels}
-    return ModelFit(response, factors, terms, df, coefs, anova, st, fitted, resid, h, lv, [], res)
+    return ModelFit(response, factors, terms, df, coefs, anova, st, fitted, resid, h, lv, [], res, transform)
 
 
 def backward_eliminate(
@@ -443,8 +462,10 @@ def backward_eliminate(
     alpha: float = 0.05,
     hierarchical: bool = True,
     levels: Iterable[Factor] | Mapping[str, Factor] | None = None,
+    transform: Transform | None = None,
 ) -> ModelFit:
-    """Backward elimination of non-significant terms, one at a time, largest p first.
+    """Backward elimination of non-significant terms, one at a time, largest p first (of the model of the
+    ``transform`` ed response, see :func:`fit_model`).
 
     A term is removed when its p-value exceeds ``alpha`` (0.05 or 0.1 are usual). With
     ``hierarchical=True`` a term is kept while a higher-order term containing it stays in the
@@ -455,7 +476,7 @@ def backward_eliminate(
     terms = model_terms(model, factors)
     log: list[dict] = []
     while True:
-        fit = fit_model(data, response, factors, terms, levels)
+        fit = fit_model(data, response, factors, terms, levels, transform)
         cand = [t for t in terms if not (hierarchical and any(_contains(u, t) for u in terms))]
         pv = {t: fit.anova.loc[term_label(t, factors), "p"] for t in cand}
         pv = {t: v for t, v in pv.items() if np.isfinite(v)}
@@ -650,6 +671,16 @@ def response_range(
     return out[0], out[1]
 
 
+def response_extremes(
+    fit: ModelFit, bounds="cube", fixed: Mapping[str, float] | None = None, seed: int = 0
+) -> tuple[tuple[float, np.ndarray], tuple[float, np.ndarray]]:
+    """:func:`response_range` in the response's own units: ((min, argmin), (max, argmax)) of the back-transformed
+    prediction (the model scale's ends swapped for a falling transform)."""
+    (lo, x_lo), (hi, x_hi) = response_range(fit, bounds, fixed, seed=seed)
+    a, b = (float(fit.to_response(lo)), x_lo), (float(fit.to_response(hi)), x_hi)
+    return (b, a) if fit.transform.decreasing else (a, b)
+
+
 def solve_target(
     fit: ModelFit,
     target: float,
@@ -669,10 +700,12 @@ def solve_target(
     default), ``"design"``/``"axial"`` (the largest |coded value| in the data, e.g. +-alpha of a
     CCD), a number b for [-b, b], a pair, or a mapping per factor. ``fixed`` holds factors at
     coded values. When the target is outside the predicted range, ``reachable`` is False and
-    the extreme nearest the target is returned.
+    the extreme nearest the target is returned. ``target`` and the ``predicted`` values are in the response's
+    units; with a transform the contour is solved on the model's scale, at the transformed target.
     """
     b, free, lo, hi, surf = _region(fit, bounds, fixed)
     (vmin, xmin), (vmax, xmax) = response_range(fit, b, fixed, seed=seed)
+    target_response, target = float(target), float(fit.transform.forward(target, "target"))
     tol = 1e-7 * max(1.0, abs(target), vmax - vmin) if tol is None else tol
     rng = np.random.default_rng(seed)
     fi = surf.free_idx
@@ -680,7 +713,7 @@ def solve_target(
     def record(z) -> dict:
         x = surf.full(z)
         row = {f: float(x[i]) for i, f in enumerate(fit.factors)}
-        row["predicted"] = surf(z)
+        row["predicted"] = float(fit.to_response(surf(z)))
         row["distance"] = float(np.linalg.norm(x[fi]))
         return row
 
@@ -744,7 +777,7 @@ def solve_target(
         else "target outside the predicted range: the region's extreme nearest the target"
     )
     return TargetSolution(
-        float(target), bool(reachable), chosen, chosen_actual, family, rule, b, (float(vmin), float(vmax))
+        target_response, bool(reachable), chosen, chosen_actual, family, rule, b, fit.transform.interval(vmin, vmax)
     )
 
 
@@ -781,7 +814,9 @@ def optimize_desirability(
 
     def smooth(z):
         x = z[None, :]
-        s_ = sum(goals[n].importance * math.log(max(float(goals[n].d(fits[n].predict(x))[0]), 1e-6)) for n in names)
+        s_ = sum(
+            goals[n].importance * math.log(max(float(goals[n].d(fits[n].predict_response(x))[0]), 1e-6)) for n in names
+        )
         return -s_ / total
 
     pts = lo + (hi - lo) * np.random.default_rng(seed).random((starts, len(factors)))
@@ -792,7 +827,7 @@ def optimize_desirability(
         rows.append(np.clip(res.x, lo, hi))
     X = np.unique(np.round(np.array(rows), 3), axis=0)
     out = pd.DataFrame(X, columns=factors)
-    values = {n: fits[n].predict(X) for n in names}
+    values = {n: fits[n].predict_response(X) for n in names}
     for n in names:
         out[n] = values[n]
         out[f"d_{n}"] = goals[n].d(values[n])
@@ -861,14 +896,21 @@ def mean_prediction_interval(
 def confirmation_interval(fit: ModelFit, x, runs: int = 1, alpha: float = 0.05) -> dict:
     """Design-Expert's confirmation check at the coded point ``x`` (mapping or (k,) array): the prediction,
     its leverage h0 = x0' (X'X)^-1 x0, the residual mean square and its df, and
-    :func:`mean_prediction_interval` for ``runs`` runs (for one run it is statsmodels' ``obs_ci``)."""
+    :func:`mean_prediction_interval` for ``runs`` runs (for one run it is statsmodels' ``obs_ci``). With a
+    transform the interval is the model scale's, brought back to the response's units (``predicted``, ``low``,
+    ``high``; ``model_scale`` keeps the model scale's three)."""
     x0 = _columns(fit._x(x), fit.terms, fit.factors)[0]
     df = int(fit.ols.df_resid)
     mse = float(fit.ols.mse_resid) if df > 0 else math.nan
     h0 = float(x0 @ np.asarray(fit.ols.normalized_cov_params) @ x0)
     y0 = float(fit.predict(fit._x(x))[0])
     low, high = mean_prediction_interval(y0, mse, h0, df, runs, alpha)
-    return {"predicted": y0, "low": low, "high": high, "mse": mse, "h0": h0, "df": df, "runs": int(runs)}
+    out = {"predicted": y0, "low": low, "high": high, "mse": mse, "h0": h0, "df": df, "runs": int(runs)}
+    if fit.transform != NONE:
+        out["model_scale"] = {"predicted": y0, "low": low, "high": high}
+        out["predicted"] = float(fit.to_response(y0))
+        out["low"], out["high"] = fit.transform.interval(low, high)
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -922,7 +964,8 @@ def box_cox(fit: ModelFit, alpha: float = 0.05, lambdas=None) -> dict:
     in the interval nearest lambda_hat, "none" when the interval holds 1, else "power") and ``lambda_recommended``;
     or ``error`` when a response is not positive (add a constant first).
     """
-    y = np.asarray(fit.ols.model.endog, dtype=float)
+    # always of the response itself (plus the transform's constant), whatever transform the fit uses
+    y = fit.to_response(np.asarray(fit.ols.model.endog, dtype=float)) + fit.transform.k
     X = np.asarray(fit.ols.model.exog, dtype=float)
     if np.any(y <= 0):
         return {"error": f"the response has values <= 0 (min {y.min():.4g}): Box-Cox needs positive values"}
@@ -966,6 +1009,7 @@ def box_cox(fit: ModelFit, alpha: float = 0.05, lambdas=None) -> dict:
         "ln_ss_limit": limit,
         "recommended": rec,
         "lambda_recommended": lam_rec,
+        "lambda_current": 0.0 if fit.transform.exponent is None else fit.transform.exponent,
     }
 
 
@@ -985,7 +1029,9 @@ def _order_terms(order: str, factors: Sequence[str]) -> list[Term]:
     ]
 
 
-def fit_summary(data: pd.DataFrame, response: str, factors: Sequence[str], alpha: float = 0.05) -> dict:
+def fit_summary(
+    data: pd.DataFrame, response: str, factors: Sequence[str], alpha: float = 0.05, transform: Transform | None = None
+) -> dict:
     """Design-Expert's fit summary of the coded ``data``: for the mean and each of :data:`SUMMARY_ORDERS`,
     whether the design can estimate it (``aliased`` when not), and
 
@@ -998,10 +1044,13 @@ def fit_summary(data: pd.DataFrame, response: str, factors: Sequence[str], alpha
       significant (p >= ``alpha``, or untested), as Design-Expert suggests it; None when no order adds
       significantly to the mean.
 
-    Returns a dict of those three DataFrames (index: the orders) and ``suggested``.
+    Returns a dict of those three DataFrames (index: the orders) and ``suggested``. With ``transform``, of the
+    transformed response.
     """
     factors = list(factors)
     df = data[factors + [response]].astype(float).reset_index(drop=True)
+    if transform is not None and transform != NONE:
+        df[response] = transform.forward(df[response].to_numpy(), f"response {response!r}")
     y = df[response].to_numpy()
     n = len(y)
     xk = df[factors].to_numpy()

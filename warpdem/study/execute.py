@@ -793,7 +793,14 @@ def analyze(out, study: sp.StudySpec | None = None) -> dict:
         factors=study.levels,
         labels={f.name: f.label for f in study.factors},
         responses=[
-            {"name": r.name, "unit": r.unit, "target": r.target, "goal": r.desirability_goal()} for r in study.responses
+            {
+                "name": r.name,
+                "unit": r.unit,
+                "target": r.target,
+                "goal": r.desirability_goal(),
+                "transform": study.analysis.transform_for(r),
+            }
+            for r in study.responses
         ],
         model=list(model) if isinstance(model, tuple) else model,
         alpha=study.analysis.alpha,

@@ -46,7 +46,7 @@ from .analysis import (
     model_terms,
     optimize_desirability,
     outlier_limit,
-    response_range,
+    response_extremes,
     solve_target,
     term_label,
 )
@@ -355,13 +355,13 @@ def _plot_pareto(path: Path, eff: pd.DataFrame, alpha: float, df_res: int, title
 
 
 def _grid(fit: ModelFit, a: str, b: str, region: Mapping[str, tuple[float, float]], n: int = 61):
-    """Prediction on an n x n coded grid over the region of factors a, b (others at 0)."""
+    """Prediction (in the response's units) on an n x n coded grid over the region of factors a, b (others at 0)."""
     ga = np.linspace(*region[a], n)
     gb = np.linspace(*region[b], n)
     A, B = np.meshgrid(ga, gb)
     pts = pd.DataFrame({f: np.zeros(A.size) for f in fit.factors})
     pts[a], pts[b] = A.ravel(), B.ravel()
-    return A, B, fit.predict(pts).reshape(A.shape)
+    return A, B, fit.predict_response(pts).reshape(A.shape)
 
 
 def _plot_contour(
@@ -458,13 +458,22 @@ def _point_type(row: np.ndarray) -> str:
 
 
 def _fit_response(
-    data: pd.DataFrame, name: str, fnames: list[str], model, alpha: float, eliminate: bool, levels: dict[str, Factor]
+    data: pd.DataFrame,
+    name: str,
+    fnames: list[str],
+    model,
+    alpha: float,
+    eliminate: bool,
+    levels: dict[str, Factor],
+    transform=None,
 ) -> tuple[ModelFit, str | None]:
     terms, fallback = _choose_terms(data, fnames, model)
     if eliminate:
-        fit = backward_eliminate(data, name, fnames, terms, alpha, hierarchical=True, levels=levels)
+        fit = backward_eliminate(
+            data, name, fnames, terms, alpha, hierarchical=True, levels=levels, transform=transform
+        )
     else:
-        fit = fit_model(data, name, fnames, terms, levels)
+        fit = fit_model(data, name, fnames, terms, levels, transform)
     return fit, fallback
 
 
@@ -790,7 +799,8 @@ def _plot_diagnostics(out: Path, tag: str, fit: ModelFit, diag: dict, runs, used
         ax.plot(lam, lss, "-")
         ax.axhline(bc["ln_ss_limit"], color="r", ls="--", label="confidence limit")
         ax.axvline(bc["lambda_hat"], color="g", label=f"best {bc['lambda_hat']:.2f}")
-        ax.axvline(1.0, color="b", ls=":", label="current (1)")
+        cur = bc.get("lambda_current", 1.0)
+        ax.axvline(cur, color="b", ls=":", label=f"current ({cur:g})")
         # the limit line stays in view; a steep curve is cut 4 above it. An exact fit (residual SS 0) has no
         # finite limit: matplotlib's own limits then
         seen = np.asarray(lss, dtype=float)[np.isfinite(lss)]
@@ -880,7 +890,8 @@ def write_report(
         title: report title.
         factors: the design's factors with their coding (``low > high`` allowed).
         labels: factor name -> what it is (e.g. ``"restitution, particle-wall"``).
-        responses: ``{"name": column, "unit": str, "target": float | None}`` each.
+        responses: ``{"name": column, "unit": str, "target": float | None}`` each, optionally ``"goal"`` (a
+            :class:`goals.Goal`) and ``"transform"`` (a :class:`transforms.Transform`: the model is fitted to it).
         model: ``"linear"``, ``"2fi"``, ``"quadratic"`` or a list of terms; when the runs cannot
             estimate it, the largest of quadratic > 2FI > linear that they can (said in the notes).
         alpha: significance level (elimination, significance remarks, Pareto limits, CIs).
@@ -1025,14 +1036,23 @@ def write_report(
                 }
             )
             continue
-        fit, fallback = _fit_response(used, name, fnames, model, alpha, eliminate, fmap)
+        transform = resp.get("transform")
+        fit, fallback = _fit_response(used, name, fnames, model, alpha, eliminate, fmap, transform)
         fits[name] = fit
         if fallback:
             auto_notes.append(f"{name}: {fallback}.")
             md += ["", f"**Model fallback:** {fallback}."]
+        if fit.transform.kind != "none":
+            md += [
+                "",
+                f"**Transform:** the model is fitted to {fit.transform.label(name)}: its fit summary, ANOVA, "
+                "equations and diagnostics are on that scale; predictions, contours, solutions and intervals are "
+                f"brought back to {name}'s units (the back-transformed mean, the median where the model scale's "
+                "errors are symmetric).",
+            ]
 
         # ---- fit summary: which order the runs support, before the chosen model's ANOVA
-        summ = fit_summary(used, name, fnames, alpha)
+        summ = fit_summary(used, name, fnames, alpha, fit.transform)
         md += _fit_summary_md(summ, _model_name(fit))
 
         # ---- ANOVA
@@ -1154,7 +1174,7 @@ def write_report(
         # ---- pictures
         pics: list[str] = []
         if fit.terms:
-            eff = effects_table(used, name, fnames, fit.terms)
+            eff = effects_table(fit.data, name, fnames, fit.terms)  # on the model scale
             df_res = int(fit.anova.loc["Residual", "df"])
             _plot_pareto(out / f"pareto_{tag}.png", eff, alpha, df_res, f"Pareto chart, {name} ({eff.attrs['method']})")
             pics.append(f"pareto_{tag}.png")
@@ -1212,7 +1232,7 @@ def write_report(
         auto_notes += [f"{name}: {n}" for n in diag["notes"]]
         y_used = used[name].to_numpy(dtype=float)
         if fit.terms and np.all(y_used > 0):
-            (low, at), _ = response_range(fit, region)
+            (low, at), _ = response_extremes(fit, region)
             if low < 0:
                 where = ", ".join(f"{f} {at[j]:+.2f}" for j, f in enumerate(fnames))
                 auto_notes.append(

@@ -64,6 +64,8 @@ Schema (``studies/*.toml``)::
     weight = 1.0                    # > 0: 1 linear, above 1 stricter near the goal (default 1)
     weight_high = 1.0               # a target's upper side (default: weight)
     importance = 3                  # 1 to 5, in the overall desirability (default 3)
+    transform = "ln"                # this response's own transform, in place of [analysis]'s (optional; with
+                                    # transform_power and transform_k as there)
 
     [analysis]
     model = "linear"                # linear | 2fi | quadratic | none | a list of terms ["A", "A*B", "A^2"]
@@ -71,6 +73,11 @@ Schema (``studies/*.toml``)::
                                     # central_composite, none for steepest_ascent and explicit)
     alpha = 0.05                    # significance level, in (0, 1)
     eliminate = false               # hierarchical backward elimination at alpha
+    transform = "none"              # fit every response's model to f(y + k): none | sqrt | ln | log10 |
+                                    # inverse_sqrt | inverse | power (Design-Expert's); ANOVA, equations and
+                                    # diagnostics on that scale, predictions and solutions back-transformed
+    transform_power = 0.25          # the exponent of transform = "power" (not 0: that is ln)
+    transform_k = 0.0               # a constant added first, so that y + k fits f's domain (default 0)
 
     [verification]
     replicates = 0                  # verification runs at the chosen optimum, >= 0
@@ -134,6 +141,7 @@ from . import designs
 from .analysis import model_terms
 from .designs import Factor
 from .goals import GOALS, Goal
+from .transforms import TRANSFORMS, Transform
 
 __all__ = [
     "AnalysisSpec",
@@ -221,6 +229,19 @@ def spec_integer(where: str, key: str, v, minimum: int) -> int:
     if not is_number(v) or float(v) != int(v) or int(v) < minimum:
         raise spec_error(where, key, v, f"an integer >= {minimum}")
     return int(v)
+
+
+def _transform(where: str, kind, power, k) -> Transform:
+    """A :class:`transforms.Transform` from a table's ``transform``, ``transform_power`` and ``transform_k``;
+    StudyError naming the table, the key and the value otherwise."""
+    if not isinstance(kind, str) or kind not in TRANSFORMS:
+        raise spec_error(where, "transform", kind, " | ".join(TRANSFORMS) + did_you_mean(str(kind), TRANSFORMS))
+    power = None if power is None else spec_number(where, "transform_power", power)
+    k = spec_number(where, "transform_k", k)
+    try:
+        return Transform(kind, power, k)
+    except ValueError as e:
+        raise StudyError(f"{where}: {e}") from None
 
 
 def _boolean(where: str, key: str, v) -> bool:
@@ -504,7 +525,8 @@ class DesignSpec:
 class ResponseSpec:
     """A response: the metric ``measure`` read from each run, its ``unit``, an optional ``target``, and an
     optional desirability ``goal`` (:data:`goals.GOALS`; ``target`` uses ``target``) with its limits ``low``,
-    ``high``, shape ``weight`` (``weight_high`` above a target) and ``importance`` (1 to 5)."""
+    ``high``, shape ``weight`` (``weight_high`` above a target) and ``importance`` (1 to 5); optional
+    ``transform``, ``transform_power`` and ``transform_k`` in place of ``[analysis]``'s."""
 
     name: str
     measure: str
@@ -516,6 +538,9 @@ class ResponseSpec:
     weight: float = 1.0
     weight_high: float | None = None
     importance: int = 3
+    transform: str | None = None
+    transform_power: float | None = None
+    transform_k: float | None = None
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not _FACTOR_RE.match(self.name):
@@ -530,6 +555,8 @@ class ResponseSpec:
                 f"a metric key: {', '.join(MEASURES)}{did_you_mean(m, MEASURES)}, or a dotted path into the metrics",
             )
         _string(where, "unit", self.unit)
+        if self.transform is not None or self.transform_power is not None or self.transform_k is not None:
+            _transform(where, self.transform or "none", self.transform_power, self.transform_k or 0.0)
         if self.target is not None:
             object.__setattr__(self, "target", spec_number(where, "target", self.target))
         if self.goal is None:
@@ -569,11 +596,17 @@ class ResponseSpec:
 class AnalysisSpec:
     """The regression: ``model`` (``linear``, ``2fi``, ``quadratic``, ``none`` or a tuple of terms), the
     significance level ``alpha`` and whether to ``eliminate`` terms (hierarchical backward elimination).
-    ``model = None`` takes the design kind's default (see the module docstring)."""
+    ``model = None`` takes the design kind's default (see the module docstring). ``transform``
+    (:data:`transforms.TRANSFORMS`), with ``transform_power`` (its exponent, for ``power``) and ``transform_k``
+    (a constant added first): every response's model is fitted to f(y + k), unless its ``[[responses]]`` entry
+    names its own."""
 
     model: str | tuple[str, ...] | None = None
     alpha: float = 0.05
     eliminate: bool = False
+    transform: str = "none"
+    transform_power: float | None = None
+    transform_k: float = 0.0
 
     def __post_init__(self):
         w = "[analysis]"
@@ -599,6 +632,13 @@ class AnalysisSpec:
             raise spec_error(w, "alpha", self.alpha, "a significance level in (0, 1)")
         object.__setattr__(self, "alpha", a)
         object.__setattr__(self, "eliminate", _boolean(w, "eliminate", self.eliminate))
+        _transform(w, self.transform, self.transform_power, self.transform_k)
+
+    def transform_for(self, response: ResponseSpec) -> Transform:
+        """The transform ``response`` 's model is fitted to: its own, else this table's."""
+        if response.transform is not None or response.transform_power is not None or response.transform_k is not None:
+            return Transform(response.transform or "none", response.transform_power, response.transform_k or 0.0)
+        return Transform(self.transform, self.transform_power, self.transform_k)
 
 
 @dataclass(frozen=True)
@@ -855,8 +895,22 @@ _TABLES = {
     "fixed": None,
     "factors": ("name", "label", "parameter", "low", "high", "unit"),
     "design": ("kind", "replicates", "randomize") + _OPTIONS,
-    "responses": ("name", "measure", "unit", "target", "goal", "low", "high", "weight", "weight_high", "importance"),
-    "analysis": ("model", "alpha", "eliminate"),
+    "responses": (
+        "name",
+        "measure",
+        "unit",
+        "target",
+        "goal",
+        "low",
+        "high",
+        "weight",
+        "weight_high",
+        "importance",
+        "transform",
+        "transform_power",
+        "transform_k",
+    ),
+    "analysis": ("model", "alpha", "eliminate", "transform", "transform_power", "transform_k"),
     "verification": ("replicates",),
 }
 _REQUIRED = {
@@ -930,6 +984,13 @@ def _from_dict(data: Mapping, path) -> StudySpec:
         responses.append(ResponseSpec(**check_table_keys("responses", r, label)))
     design = DesignSpec(**check_table_keys("design", data["design"], "[design]"))
     analysis = AnalysisSpec(**check_table_keys("analysis", data.get("analysis", {}), "[analysis]"))
+    for r in responses:
+        # a target the transform cannot take would stop the analysis after every run: refuse it here
+        if r.target is not None:
+            try:
+                analysis.transform_for(r).forward(r.target, "target")
+            except ValueError as e:
+                raise StudyError(f"[[responses]] {r.name!r}: {e}") from None
     verification = VerificationSpec(**check_table_keys("verification", data.get("verification", {}), "[verification]"))
     return StudySpec(
         factors=tuple(factors),
