@@ -117,3 +117,28 @@ def test_the_report_fits_the_transform_and_says_so(tmp_path):
     md = (tmp_path / "report.md").read_text()
     assert "**Transform:** the model is fitted to ln(y)" in md and "ln(y) = " in md
     assert res["y"]["predicted"] == pytest.approx(10.0, rel=1e-6)
+
+
+def test_confirmation_runs_are_judged_on_the_models_scale(tmp_path):
+    """The report entry keeps the model scale's prediction and the transform; the interval for a mean of four
+    confirmation runs is exp of the ln scale's interval for four runs (mean_prediction_interval), not an interval
+    of mixed scales."""
+    from warpdem.study.analysis import mean_prediction_interval
+    from warpdem.study.execute import confirmation_runs_interval
+    from warpdem.study.report import write_report
+
+    d = _multiplicative()
+    res = write_report(
+        tmp_path,
+        d,
+        title="t",
+        factors=[Factor("A", 0.0, 1.0), Factor("B", 0.0, 1.0)],
+        labels={},
+        responses=[{"name": "y", "unit": "", "target": 10.0, "transform": Transform("ln")}],
+        model="linear",
+    )
+    conf = res["y"]["confirmation"]
+    assert conf["predicted"] == pytest.approx(np.log(10.0), rel=1e-6) and conf["transform"]["kind"] == "ln"
+    lo, hi = mean_prediction_interval(conf["predicted"], conf["mse"], conf["h0"], conf["df"], 4, conf["alpha"])
+    assert confirmation_runs_interval(conf, 4) == pytest.approx((np.exp(lo), np.exp(hi)), rel=1e-12)
+    assert confirmation_runs_interval(conf, 4)[0] < 10.0 < confirmation_runs_interval(conf, 4)[1]

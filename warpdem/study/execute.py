@@ -818,6 +818,17 @@ def analyze(out, study: sp.StudySpec | None = None) -> dict:
     return summary
 
 
+def confirmation_runs_interval(conf: dict, runs: int) -> tuple[float, float]:
+    """The prediction interval for the mean of ``runs`` confirmation runs from a report entry's ``confirmation``
+    (the model scale's prediction, mse, h0, df, alpha and transform), in the response's units: computed on the
+    model's scale and brought back through the transform."""
+    from .analysis import mean_prediction_interval
+    from .transforms import Transform
+
+    lo, hi = mean_prediction_interval(conf["predicted"], conf["mse"], conf["h0"], conf["df"], runs, conf["alpha"])
+    return Transform(**conf.get("transform", {})).interval(lo, hi)
+
+
 def _append_settling(out: Path, study: sp.StudySpec) -> None:
     """Add the settling picture of every finished run to the report (see ``report.settling_section``)."""
     from .report import settling_section
@@ -942,15 +953,9 @@ def run_verification(
             values.append(json.load(fh)["responses"][resp.name])
     v = np.asarray(values, dtype=float)
     mean = float(np.nanmean(v)) if np.isfinite(v).any() else math.nan
-    from .analysis import mean_prediction_interval
-
     # Design-Expert's confirmation: the mean of the k runs against the prediction interval for a mean of k runs
     conf, k = s.get("confirmation"), int(np.isfinite(v).sum())
-    pi = (
-        mean_prediction_interval(conf["predicted"], conf["mse"], conf["h0"], conf["df"], k, conf["alpha"])
-        if conf and k
-        else (math.nan, math.nan)
-    )
+    pi = confirmation_runs_interval(conf, k) if conf and k else (math.nan, math.nan)
     result = {
         "response": resp.name,
         "target": resp.target,

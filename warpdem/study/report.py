@@ -1301,7 +1301,14 @@ def write_report(
                 ]
                 ci = confirmation_interval(fit, {f: float(sol.chosen[f]) for f in fnames}, alpha=alpha)
                 # what a confirmation of any number of runs needs (Design-Expert's confirmation node)
-                entry["confirmation"] = {k: ci[k] for k in ("predicted", "mse", "h0", "df")} | {"alpha": alpha}
+                # on the model's scale, with the transform that brings an interval back
+                entry["confirmation"] = {
+                    k: ci.get("model_scale", ci)["predicted"] if k == "predicted" else ci[k]
+                    for k in ("predicted", "mse", "h0", "df")
+                } | {
+                    "alpha": alpha,
+                    "transform": {"kind": fit.transform.kind, "power": fit.transform.power, "k": fit.transform.k},
+                }
                 entry.update(chosen=settings, predicted=pred, reachable=True)
             else:
                 md += [
