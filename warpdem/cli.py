@@ -339,10 +339,13 @@ def cmd_diagnose(args) -> int:
 
 def cmd_analyze(args) -> int:
     from .study.execute import analyze
-    from .study.spec import StudyError
+    from .study.spec import StudyError, load_study
 
     try:
-        summary = analyze(args.out)
+        if args.runs and not args.study:
+            raise StudyError(f"--runs {args.runs}: give the study file its runs follow (--study STUDY.toml)")
+        study = load_study(args.study, check_scene=False) if args.study else None
+        summary = analyze(args.out, study, runs=args.runs)
     except (StudyError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -455,7 +458,15 @@ def main(argv=None) -> int:
     )
     dg.set_defaults(fn=cmd_diagnose)
     an = sub.add_parser("analyze", help="fit, ANOVA, plots and report.md of a study folder")
-    an.add_argument("out", help="a study's output folder")
+    an.add_argument("out", help="a study's output folder (with --runs: where the analysis goes)")
+    an.add_argument(
+        "--study",
+        help="analyse with this study file instead of the folder's copy (e.g. with a response added: it is read "
+        "from the runs' stored metrics)",
+    )
+    an.add_argument(
+        "--runs", help="a CSV run table made elsewhere (a column per factor in actual units and per response)"
+    )
     an.set_defaults(fn=cmd_analyze)
     sc = sub.add_parser("scene", help="author scenes")
     scs = sc.add_subparsers(dest="scene_command", required=True)

@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
+import pandas as pd
 import pytest
 
 from warpdem.study import execute
@@ -500,3 +502,60 @@ def test_a_study_files_transform_reaches_the_report(finished, tmp_path):
     execute.analyze(out, ln_study)
     md = (out / "analysis" / "report.md").read_text()
     assert "**Transform:** the model is fitted to ln(height)" in md and "ln(height) = " in md
+
+
+def test_a_response_added_later_comes_from_the_stored_metrics(finished, tmp_path):
+    """#20's re-analysis: the study file gains a response (the surface-fit angle) after its runs; analyze reads it
+    from each run's stored metrics, and it equals what a fresh run of the new file records, run by run."""
+    import shutil
+
+    study, out1, _ = finished
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    text = STUDY.format(batch=0, target=0.0, verify=0)
+    text = text.replace(
+        "[analysis]", '[[responses]]\nname = "angle"\nmeasure = "angle_fit_deg"\nunit = "deg"\n\n[analysis]'
+    )
+    path = tmp_path / "more.toml"
+    path.write_text(text)
+    more = load_study(path)
+    later = execute.load_results(out, more)
+    fresh_out = tmp_path / "fresh"
+    _run(more, fresh_out, analyze_after=False)
+    fresh = execute.load_results(fresh_out, more)
+    assert list(later["point_id"]) == list(fresh["point_id"])
+    assert np.isfinite(later["angle"]).all() and list(later["angle"]) == list(fresh["angle"])
+    execute.analyze(out, more)
+    assert "## Response angle" in (out / "analysis" / "report.md").read_text()
+
+
+def test_runs_made_elsewhere_are_analysed_from_a_csv(finished, tmp_path, capsys):
+    """``warpdem analyze OUT --study S --runs runs.csv``: the finished runs written out as a table in actual units
+    (as an EDEM run table would be) give the same fit as the study folder; a missing column, a cell that is not a
+    number or an empty factor cell is named with the file, column and row; --runs without --study is refused
+    without a traceback."""
+    from warpdem.cli import main
+
+    study, out1, _ = finished
+    table = execute.load_results(out1, study)
+    csv = tmp_path / "runs.csv"
+    pd.DataFrame({"A": table["A_actual"], "B": table["B_actual"], "height": table["height"]}).to_csv(csv, index=False)
+    ref = execute.analyze(out1, study)
+    got = execute.analyze(tmp_path / "ext", study, runs=csv)
+    assert got["height"]["equation_coded"] == ref["height"]["equation_coded"]
+    assert got["height"]["r2"] == pytest.approx(ref["height"]["r2"], rel=1e-12)
+    bad = tmp_path / "bad.csv"
+    pd.DataFrame({"A": table["A_actual"], "height": table["height"]}).to_csv(bad, index=False)
+    with pytest.raises(StudyError, match=r"bad.csv: column 'B' is missing"):
+        execute.external_runs(bad, study)
+    odd = pd.DataFrame({"A": table["A_actual"], "B": table["B_actual"], "height": table["height"].astype(object)})
+    odd.loc[2, "height"] = "n/a"
+    odd.to_csv(bad, index=False)
+    with pytest.raises(StudyError, match=r"bad.csv: column 'height', row 4: 'n/a' is not a number"):
+        execute.external_runs(bad, study)
+    odd.loc[2, "height"], odd.loc[3, "A"] = 0.01, None
+    odd.to_csv(bad, index=False)
+    with pytest.raises(StudyError, match=r"bad.csv: column 'A', row 5 is empty; a factor needs a value"):
+        execute.external_runs(bad, study)
+    assert main(["analyze", str(tmp_path / "x"), "--runs", str(csv)]) == 2
+    assert "give the study file" in capsys.readouterr().err

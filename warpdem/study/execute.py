@@ -663,7 +663,8 @@ def run_study(
 
 
 def load_results(out, study: sp.StudySpec | None = None) -> pd.DataFrame:
-    """The design table of ``out`` with one column per response (NaN where a run has not finished)."""
+    """The design table of ``out`` with one column per response (NaN where a run has not finished); a response
+    its runs did not record (one added to the study file since) is read from each run's stored metrics."""
     out = Path(out)
     study = study or sp.load_study(out / "study.toml", check_scene=False)
     table = pd.read_csv(out / "design.csv")
@@ -676,7 +677,8 @@ def load_results(out, study: sp.StudySpec | None = None) -> pd.DataFrame:
             with open(f) as fh:
                 rec = json.load(fh)
             for r in study.responses:
-                v = rec["responses"].get(r.name)
+                # a response added to the study after its runs is read from their stored metrics
+                v = rec["responses"][r.name] if r.name in rec["responses"] else _response(rec["metrics"], r.measure)
                 table.loc[i, r.name] = math.nan if v is None else v
             table.loc[i, "wall_s"] = rec["info"].get("batch_wall_s", math.nan)
     return table
@@ -772,19 +774,59 @@ def _results_csv(study, out: Path) -> None:
     load_results(out, study).to_csv(out / "results.csv", index=False)
 
 
-def analyze(out, study: sp.StudySpec | None = None) -> dict:
+def external_runs(path, study: sp.StudySpec) -> pd.DataFrame:
+    """Runs made elsewhere (an EDEM run table, a lab's), as :func:`load_results` gives a study's: the CSV at
+    ``path`` holds one row per run with a column per factor of ``study`` (actual units) and per response, and
+    optionally ``run``; an empty response cell is a run that could not be measured (left out). Raises StudyError
+    naming the file, the column and the value."""
+    path = Path(path)
+    try:
+        # only an empty cell is a missing value (a failed run's response); "n/a" and the like are refused
+        raw = pd.read_csv(path, keep_default_na=False, na_values=[""])
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as e:
+        raise sp.StudyError(f"{path}: cannot be read as a CSV run table: {e}") from None
+    need = [f.name for f in study.factors] + [r.name for r in study.responses]
+    missing = [c for c in need if c not in raw.columns]
+    if missing:
+        raise sp.StudyError(
+            f"{path}: column {missing[0]!r} is missing; expected a column per factor (actual units) and per "
+            f"response: {', '.join(need)}"
+        )
+    out = pd.DataFrame({"run": raw["run"] if "run" in raw.columns else np.arange(1, len(raw) + 1)})
+    for c in need:
+        vals = pd.to_numeric(raw[c], errors="coerce")
+        bad = vals.isna() & raw[c].notna()
+        if bad.any():
+            i = int(np.flatnonzero(bad.to_numpy())[0])
+            raise sp.StudyError(f"{path}: column {c!r}, row {i + 2}: {raw[c].iloc[i]!r} is not a number")
+        out[c] = vals
+    for f in study.factors:
+        if out[f.name].isna().any():
+            i = int(np.flatnonzero(out[f.name].isna().to_numpy())[0])
+            raise sp.StudyError(f"{path}: column {f.name!r}, row {i + 2} is empty; a factor needs a value in every run")
+    for f in study.levels:
+        out[f"{f.name}_actual"] = out[f.name]
+        out[f.name] = f.to_coded(out[f.name].to_numpy(dtype=float))
+    return out
+
+
+def analyze(out, study: sp.StudySpec | None = None, runs=None) -> dict:
     """Fit the study's model to the finished runs of ``out`` and write ``out/analysis`` (report.md, ANOVA
-    tables, Pareto and contour plots, target solutions). Returns :func:`report.write_report`'s summary."""
+    tables, Pareto and contour plots, target solutions). With ``runs`` (a CSV run table, :func:`external_runs`)
+    analyse those instead, into ``out``. Returns :func:`report.write_report`'s summary."""
     from .report import write_report
 
     out = Path(out)
     study = study or sp.load_study(out / "study.toml", check_scene=False)
-    data = load_results(out, study)
+    data = load_results(out, study) if runs is None else external_runs(runs, study)
     finished = data[[r.name for r in study.responses]].notna().any(axis=1)
     notes = []
     if not finished.all():
         notes.append(f"{int((~finished).sum())} of {len(data)} runs have not finished; they are left out.")
-    notes += [f"Check: {line}." for line in check_lines(run_checks(out, study))]
+    if runs is None:
+        notes += [f"Check: {line}." for line in check_lines(run_checks(out, study))]
+    else:
+        notes.append(f"Runs read from {runs} (made elsewhere): {len(data)} rows.")
     model = study.analysis.model
     summary = write_report(
         out / "analysis",
@@ -810,6 +852,8 @@ def analyze(out, study: sp.StudySpec | None = None) -> dict:
     )
     with open(out / "analysis" / "summary.json", "w") as fh:
         json.dump(summary, fh, indent=1, default=_json_default)
+    if runs is not None:
+        return summary
     _append_settling(out, study)
     vfile = out / "verification" / "verification.json"
     if vfile.exists():
