@@ -98,6 +98,7 @@ def test_bbd_report_files_anova_and_target(bbd_report):
         "optimum_aor_deg.csv",
         "diagnostics_aor_deg.png",
         "residuals_vs_factors_aor_deg.png",
+        "model_graphs_aor_deg.png",
     }
     assert set(res["files"]) == expected
     for name in expected:
@@ -329,3 +330,53 @@ def test_desirability_of_two_responses(tmp_path):
     D_runs = desirability({r: fits[r].predict(runs[list("CDE")]) for r in goals}, goals)
     assert best["desirability"] >= D_runs.max() - 1e-9
     assert np.all(np.abs(x) <= 1 + 1e-9)
+
+
+def test_model_graphs_data_against_the_fit_and_scipy(tmp_path):
+    """The model graphs' numbers: the perturbation curve of each factor is the fit's prediction with that factor
+    alone moved; the interaction plot's two lines are the predictions at B = -1 and +1; the cube's corners are the
+    predictions there; the half-normal quantiles are SciPy's halfnorm.ppf((i - 0.5) / m). A two-level design's
+    report draws the half-normal plot; the Box-Behnken's (not two-level) draws the cube and no half-normal."""
+    from scipy import stats
+
+    from warpdem.study.analysis import cube, half_normal, interaction, perturbation
+
+    runs = full_factorial(3).assign(centre=0)
+    runs = pd.concat([runs, pd.DataFrame({"A": [0.0] * 3, "B": [0.0] * 3, "C": [0.0] * 3})], ignore_index=True)
+    rng = np.random.default_rng(2)
+    runs["y"] = 20 + 3 * runs.A - 2 * runs.B + 1.5 * runs.A * runs.B + 0.5 * runs.C + rng.normal(0, 0.2, len(runs))
+    fit = fit_model(runs, "y", ["A", "B", "C"], "2fi")
+    pert = perturbation(fit)
+    a_curve = pert[pert["factor"] == "A"]
+    pts = pd.DataFrame({"A": a_curve["deviation"], "B": 0.0, "C": 0.0})
+    np.testing.assert_allclose(a_curve["predicted"], fit.predict_response(pts), rtol=1e-12)
+    inter = interaction(fit, "A", "B")
+    high = inter[inter["b"] == 1.0]
+    np.testing.assert_allclose(
+        high["predicted"], fit.predict_response(pd.DataFrame({"A": high["a"], "B": 1.0, "C": 0.0}))
+    )
+    cb = cube(fit, ["A", "B", "C"])
+    np.testing.assert_allclose(cb["predicted"], fit.predict_response(cb[["A", "B", "C"]]), rtol=1e-12)
+    hn = half_normal(pd.Series({"A": 6.0, "B": -4.0, "C": 1.0, "A*B": 3.0}))
+    assert list(hn["term"]) == ["C", "A*B", "B", "A"]
+    np.testing.assert_allclose(hn["quantile"], stats.halfnorm.ppf((np.arange(1, 5) - 0.5) / 4), rtol=1e-12)
+    two = write_report(
+        tmp_path / "two",
+        runs,
+        title="t",
+        factors=[Factor(f, 0, 1) for f in "ABC"],
+        labels={},
+        responses=[{"name": "y", "unit": ""}],
+        model="2fi",
+    )
+    md = (tmp_path / "two" / "report.md").read_text()
+    assert "half-normal plot" in md and "interaction plot" in md and "cube plot" in md and two["y"]["r2"] > 0.9
+    assert (tmp_path / "two" / "model_graphs_y.png").exists()
+
+
+def test_contour_plots_share_one_colour_scale():
+    """_shared_levels spans every grid of a response, so one colour means one value in each of its plots."""
+    from warpdem.study.report import _shared_levels
+
+    levels = _shared_levels([np.array([[1.0, 2.0]]), np.array([[0.5, 4.0]])])
+    assert levels[0] == 0.5 and levels[-1] == 4.0 and len(levels) == 15

@@ -782,6 +782,58 @@ def solve_target(
 
 
 # --------------------------------------------------------------------------------------------
+# Model graphs (Design-Expert's): perturbation, interaction, half-normal, cube
+# --------------------------------------------------------------------------------------------
+
+
+def perturbation(fit: ModelFit, reference: Mapping[str, float] | None = None, n: int = 21) -> pd.DataFrame:
+    """Design-Expert's perturbation plot: the prediction (in the response's units) as each factor alone moves from
+    -1 to +1 coded about the ``reference`` point (coded; default the centre), the others held there. Columns
+    ``factor``, ``deviation`` (coded), ``predicted``; a steep curve is a factor the response is sensitive to."""
+    ref = {f: float((reference or {}).get(f, 0.0)) for f in fit.factors}
+    dev = np.linspace(-1.0, 1.0, n)
+    rows = []
+    for f in fit.factors:
+        pts = pd.DataFrame({g: np.full(n, ref[g]) for g in fit.factors})
+        pts[f] = ref[f] + dev
+        rows.append(pd.DataFrame({"factor": f, "deviation": dev, "predicted": fit.predict_response(pts)}))
+    return pd.concat(rows, ignore_index=True)
+
+
+def interaction(fit: ModelFit, a: str, b: str, n: int = 21) -> pd.DataFrame:
+    """Design-Expert's interaction plot of factors ``a`` and ``b``: the prediction (response units) along ``a``
+    (coded -1 to +1) with ``b`` at -1 and at +1, the others at the centre. Columns ``a``, ``b``, ``predicted``;
+    lines that are not parallel are the interaction."""
+    x = np.linspace(-1.0, 1.0, n)
+    rows = []
+    for level in (-1.0, 1.0):
+        pts = pd.DataFrame({g: np.zeros(n) for g in fit.factors})
+        pts[a], pts[b] = x, level
+        rows.append(pd.DataFrame({"a": x, "b": level, "predicted": fit.predict_response(pts)}))
+    return pd.concat(rows, ignore_index=True)
+
+
+def half_normal(effects) -> pd.DataFrame:
+    """Half-normal plot of effects (Daniel 1959): the absolute effects sorted, against the half-normal quantiles
+    Phi^-1(0.5 + 0.5 (i - 0.5) / m), i = 1..m. Inert effects fall on a line through the origin; active ones stand
+    off it to the right. Columns ``term``, ``abs_effect``, ``quantile``."""
+    e = pd.Series(effects, dtype=float).abs().sort_values()
+    m = len(e)
+    q = stats.norm.ppf(0.5 + 0.5 * (np.arange(1, m + 1) - 0.5) / m)
+    return pd.DataFrame({"term": list(e.index), "abs_effect": e.to_numpy(), "quantile": q})
+
+
+def cube(fit: ModelFit, factors: Sequence[str]) -> pd.DataFrame:
+    """Design-Expert's cube plot of three ``factors``: the prediction (response units) at the eight corners of
+    their coded cube, the other factors at the centre. Columns: the three factors (+-1) and ``predicted``."""
+    a, b, c = factors
+    corners = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
+    pts = pd.DataFrame({g: np.zeros(8) for g in fit.factors})
+    pts[a], pts[b], pts[c] = corners[:, 0], corners[:, 1], corners[:, 2]
+    return pts[[a, b, c]].assign(predicted=fit.predict_response(pts))
+
+
+# --------------------------------------------------------------------------------------------
 # Several responses, aliases, confirmation
 # --------------------------------------------------------------------------------------------
 

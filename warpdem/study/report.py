@@ -39,13 +39,17 @@ from .analysis import (
     backward_eliminate,
     box_cox,
     confirmation_interval,
+    cube,
     effects_table,
     fit_model,
     fit_summary,
+    half_normal,
     influence,
+    interaction,
     model_terms,
     optimize_desirability,
     outlier_limit,
+    perturbation,
     response_extremes,
     solve_target,
     term_label,
@@ -374,12 +378,15 @@ def _plot_contour(
     resp: Mapping,
     runs: pd.DataFrame,
     chosen: pd.Series | None,
+    levels=14,
 ):
     fig, ax = _figure()
     A, B, Z = _grid(fit, a.name, b.name, region)
     XA, XB = a.to_actual(A), b.to_actual(B)
-    cs = ax.contourf(XA, XB, Z, levels=14, cmap="viridis")
-    ax.contour(XA, XB, Z, levels=cs.levels, colors="white", linewidths=0.3)
+    # one colour scale for all of a response's contour plots (``levels``): a colour means one value in each
+    cs = ax.contourf(XA, XB, Z, levels=levels, cmap="viridis", extend="both")
+    lines = ax.contour(XA, XB, Z, levels=cs.levels, colors="white", linewidths=0.4)
+    ax.clabel(lines, lines.levels[::2], fmt="%.3g", fontsize=6, colors="white")
     fig.colorbar(cs, ax=ax).set_label(_response_label(resp), fontsize=8)
     target = resp.get("target")
     handles = []
@@ -414,11 +421,19 @@ def _plot_contour(
     fig.savefig(path)
 
 
-def _plot_surface(path: Path, fit: ModelFit, a: Factor, b: Factor, region, labels, resp: Mapping):
+def _plot_surface(
+    path: Path, fit: ModelFit, a: Factor, b: Factor, region, labels, resp: Mapping, runs: pd.DataFrame | None = None
+):
     fig, ax = _figure(three_d=True)
     A, B, Z = _grid(fit, a.name, b.name, region, n=41)
     XA, XB = a.to_actual(A), b.to_actual(B)
-    ax.plot_surface(XA, XB, Z, cmap="viridis", linewidth=0, antialiased=True, alpha=0.9)
+    ax.plot_surface(XA, XB, Z, cmap="viridis", linewidth=0, antialiased=True, alpha=0.75)
+    if runs is not None:
+        # the runs at their measured values: above or below the surface by their residual (and, off the plot's
+        # plane, by the other factors' effect)
+        ax.scatter(
+            a.to_actual(runs[a.name]), b.to_actual(runs[b.name]), runs[resp["name"]], c="black", s=10, depthshade=False
+        )
     target = resp.get("target")
     if target is not None and Z.min() <= target <= Z.max():
         ax.contour(XA, XB, Z, levels=[target], colors="red", linewidths=2)
@@ -428,7 +443,87 @@ def _plot_surface(path: Path, fit: ModelFit, a: Factor, b: Factor, region, label
     ax.tick_params(labelsize=6)
     others = [f for f in fit.factors if f not in (a.name, b.name)]
     ax.set_title(resp["name"] + (f" ({', '.join(others)} at centre)" if others else ""), fontsize=9)
+    ax.zaxis.labelpad = 6
+    # the z label sits outside the axes box: a tight box keeps it
+    fig.savefig(path, bbox_inches="tight", pad_inches=0.3)
+
+
+def _plot_model_graphs(path: Path, fit: ModelFit, eff: pd.DataFrame, two_level: bool, top: list[str], resp) -> list:
+    """Design-Expert's model graphs in one picture: the perturbation plot; the interaction plot of the model's
+    strongest two-factor interaction (if it has one); the half-normal plot of the terms' effects (two-level
+    designs); the cube plot of the three most significant factors (three or more). Returns the panels drawn."""
+    from matplotlib.figure import Figure
+
+    ylabel = _response_label(resp)
+    # the strongest two-factor interaction (eff is ordered by |standardized effect|)
+    pairs = {term_label(t, fit.factors): t for t in fit.terms if len(t) == 2 and t[0] != t[1]}
+    inter = next((pairs[lab] for lab in eff.index if lab in pairs), None)
+    panels = ["perturbation"] + (["interaction"] if inter else []) + (["half-normal"] if two_level else [])
+    panels += ["cube"] if len(top) >= 3 else []
+    fig = Figure(figsize=(4.2 * len(panels), 3.8), dpi=100)
+    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    for ax, kind in zip(axes, panels):
+        if kind == "perturbation":
+            pert = perturbation(fit)
+            for f, g in pert.groupby("factor", sort=False):
+                ax.plot(g["deviation"], g["predicted"], label=f)
+            ax.set(xlabel="deviation from the centre (coded)", ylabel=ylabel, title="Perturbation")
+            ax.legend(fontsize=7)
+        elif kind == "interaction":
+            a, b = inter
+            d = interaction(fit, a, b)
+            for level, g in d.groupby("b"):
+                ax.plot(g["a"], g["predicted"], marker="", label=f"{b} {'+1' if level > 0 else '-1'}")
+            ax.set(xlabel=f"{a} (coded)", ylabel=ylabel, title=f"Interaction {a}*{b}")
+            ax.legend(fontsize=7)
+        elif kind == "half-normal":
+            hn = half_normal(eff["effect"])
+            ax.plot(hn["abs_effect"], hn["quantile"], "o", ms=4)
+            small = hn.iloc[: max(len(hn) // 2, 1)]
+            slope = float(
+                np.sum(small["quantile"] * small["abs_effect"]) / max(np.sum(small["abs_effect"] ** 2), 1e-300)
+            )
+            xs = np.array([0.0, float(hn["abs_effect"].max())])
+            ax.plot(xs, slope * xs, "k--", lw=0.8)
+            for _, r in hn.tail(min(4, len(hn))).iterrows():
+                ax.annotate(
+                    r["term"], (r["abs_effect"], r["quantile"]), fontsize=7, xytext=(3, -3), textcoords="offset points"
+                )
+            ax.set(xlabel="|effect|", ylabel="half-normal quantile", title="Half-normal plot of effects")
+        else:
+            a, b, c = top[:3]
+            cb = cube(fit, [a, b, c])
+            # an oblique projection of the cube, each corner labelled with its prediction
+            px = cb[a] + 0.45 * cb[c]
+            py = cb[b] + 0.35 * cb[c]
+            for i in range(8):
+                for j in range(i + 1, 8):
+                    if int(np.sum(np.abs(cb.iloc[i, :3].to_numpy() - cb.iloc[j, :3].to_numpy()) > 0)) == 1:
+                        ax.plot([px[i], px[j]], [py[i], py[j]], color="0.6", lw=0.8)
+            for i in range(8):
+                ax.annotate(
+                    f"{cb['predicted'].iloc[i]:.3g}",
+                    (px[i], py[i]),
+                    fontsize=7,
+                    ha="center",
+                    va="center",
+                    bbox={"boxstyle": "round", "fc": "white", "ec": "0.5"},
+                )
+            ax.set(title=f"Cube: {a} right, {b} up, {c} back", xticks=[], yticks=[])
+            ax.axis("off")
+            ax.set_xlim(-1.5, 1.9)
+            ax.set_ylim(-1.5, 1.8)
+    fig.suptitle(f"Model graphs: {resp['name']}", fontsize=9)
+    fig.tight_layout()
     fig.savefig(path)
+    return panels
+
+
+def _shared_levels(grids, count: int = 15) -> np.ndarray:
+    """Contour levels spanning every grid of one response, so that its contour plots share one colour scale."""
+    lo = min(float(np.nanmin(g)) for g in grids)
+    hi = max(float(np.nanmax(g)) for g in grids)
+    return np.linspace(lo, hi if hi > lo else lo + 1e-12, count)
 
 
 def _factor_ranking(fit: ModelFit, eff: pd.DataFrame) -> list[str]:
@@ -1194,14 +1289,32 @@ def write_report(
             sol = solve_target(fit, float(target), region, n_samples=_TARGET_SAMPLES, seed=0)
         chosen_coded = sol.chosen if (sol is not None and sol.reachable) else None
         if len(top) >= 2:
-            for i, a in enumerate(top):
-                for b in top[i + 1 :]:
-                    fn = f"contour_{tag}_{_safe(a)}_{_safe(b)}.png"
-                    _plot_contour(out / fn, fit, fmap[a], fmap[b], region, labels, resp, used, chosen_coded)
-                    pics.append(fn)
+            pairs = [(a, b) for i, a in enumerate(top) for b in top[i + 1 :]]
+            grids = [_grid(fit, a, b, region)[2] for a, b in pairs]
+            levels = _shared_levels(grids)
+            for a, b in pairs:
+                fn = f"contour_{tag}_{_safe(a)}_{_safe(b)}.png"
+                _plot_contour(out / fn, fit, fmap[a], fmap[b], region, labels, resp, used, chosen_coded, levels)
+                pics.append(fn)
             fn = f"surface_{tag}_{_safe(pair0[0])}_{_safe(pair0[1])}.png"
-            _plot_surface(out / fn, fit, fmap[pair0[0]], fmap[pair0[1]], region, labels, resp)
+            _plot_surface(out / fn, fit, fmap[pair0[0]], fmap[pair0[1]], region, labels, resp, used)
             pics.append(fn)
+        if fit.terms:
+            # a two-level design: every run a corner (all factors +-1) or a centre point
+            xs = np.abs(np.round(used[fnames].to_numpy(float), 9))
+            two_level = bool(np.all(np.all(xs == 1.0, axis=1) | np.all(xs == 0.0, axis=1)))
+            fn = f"model_graphs_{tag}.png"
+            panels = _plot_model_graphs(out / fn, fit, eff, two_level, _factor_ranking(fit, eff), resp)
+            files.append(fn)
+            md += ["", "### Model graphs", ""]
+            md.append(
+                "Perturbation plot (each factor alone from -1 to +1 coded about the centre)"
+                + ("; interaction plot of the strongest two-factor term" if "interaction" in panels else "")
+                + ("; half-normal plot of the terms' effects" if "half-normal" in panels else "")
+                + ("; cube plot of the three most significant factors" if "cube" in panels else "")
+                + f" (predictions in {name}'s units):"
+            )
+            md += ["", f"![model graphs of {name}]({fn})", ""]
         files += pics
         if pics:
             md += ["", "### Pictures", ""]
@@ -1214,7 +1327,8 @@ def write_report(
             if len(pics) > 1:
                 md.append(
                     "Fitted model over the design region in actual units; factors off the plot "
-                    "at their centre; black dots: runs projected onto the plane"
+                    "at their centre; one colour scale for all of this response's contour plots, lines labelled; "
+                    "black dots: runs projected onto the plane (on the surface: at their measured values)"
                     + ("; red line: the target" if target is not None else "")
                     + "."
                 )
