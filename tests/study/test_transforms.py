@@ -99,44 +99,41 @@ def test_values_outside_the_domain_and_bad_keys_are_refused():
     assert a.transform_for(ResponseSpec("z", "angle_fit_deg", transform="ln")) == Transform("ln")
 
 
-def test_the_report_fits_the_transform_and_says_so(tmp_path):
-    """write_report with a response's transform: report.md says which scale the model is on, the equation is
-    ln(y)'s, and the target solution predicts the target in y's units."""
+@pytest.fixture(scope="module")
+def ln_report(tmp_path_factory):
+    """write_report of the log-linear response with ln as its transform and a target of 10: (folder, summary)."""
     from warpdem.study.report import write_report
 
-    d = _multiplicative()
+    out = tmp_path_factory.mktemp("ln_report")
     res = write_report(
-        tmp_path,
-        d,
+        out,
+        _multiplicative(),
         title="t",
         factors=[Factor("A", 0.0, 1.0), Factor("B", 0.0, 1.0)],
         labels={},
         responses=[{"name": "y", "unit": "", "target": 10.0, "transform": Transform("ln")}],
         model="linear",
     )
-    md = (tmp_path / "report.md").read_text()
+    return out, res
+
+
+def test_the_report_fits_the_transform_and_says_so(ln_report):
+    """write_report with a response's transform: report.md says which scale the model is on, the equation is
+    ln(y)'s, and the target solution predicts the target in y's units."""
+    out, res = ln_report
+    md = (out / "report.md").read_text()
     assert "**Transform:** the model is fitted to ln(y)" in md and "ln(y) = " in md
     assert res["y"]["predicted"] == pytest.approx(10.0, rel=1e-6)
 
 
-def test_confirmation_runs_are_judged_on_the_models_scale(tmp_path):
+def test_confirmation_runs_are_judged_on_the_models_scale(ln_report):
     """The report entry keeps the model scale's prediction and the transform; the interval for a mean of four
     confirmation runs is exp of the ln scale's interval for four runs (mean_prediction_interval), not an interval
     of mixed scales."""
     from warpdem.study.analysis import mean_prediction_interval
     from warpdem.study.execute import confirmation_runs_interval
-    from warpdem.study.report import write_report
 
-    d = _multiplicative()
-    res = write_report(
-        tmp_path,
-        d,
-        title="t",
-        factors=[Factor("A", 0.0, 1.0), Factor("B", 0.0, 1.0)],
-        labels={},
-        responses=[{"name": "y", "unit": "", "target": 10.0, "transform": Transform("ln")}],
-        model="linear",
-    )
+    _, res = ln_report
     conf = res["y"]["confirmation"]
     assert conf["predicted"] == pytest.approx(np.log(10.0), rel=1e-6) and conf["transform"]["kind"] == "ln"
     lo, hi = mean_prediction_interval(conf["predicted"], conf["mse"], conf["h0"], conf["df"], 4, conf["alpha"])
