@@ -293,6 +293,12 @@ def cmd_study(args) -> int:
     if res["analysis"]:
         _print_analysis(res["out"], res["analysis"])
         print(f"report: {res['out']}/analysis/report.md")
+        if args.json:
+            from .study.execute import _write_records, study_records
+            from .study.spec import load_study
+
+            study = load_study(args.study, check_scene=False)
+            _write_records(args.json, study_records(res["out"], study, res["analysis"]))
     v = res.get("verification")
     if v:
         print(
@@ -351,6 +357,13 @@ def cmd_analyze(args) -> int:
         return 2
     _print_analysis(args.out, summary)
     print(f"report: {args.out}/analysis/report.md")
+    if args.json:
+        from pathlib import Path
+
+        from .study.execute import _write_records, study_records
+
+        study = study or load_study(Path(args.out) / "study.toml", check_scene=False)
+        _write_records(args.json, study_records(args.out, study, summary))
     return 0
 
 
@@ -437,6 +450,9 @@ def main(argv=None) -> int:
         action="store_true",
         help="print the run table (coded and actual, finished or pending), the launches and their cost; run nothing",
     )
+    st.add_argument(
+        "--json", help="write the analysis as records (name, value, expected, unit, pass) to this file ('-': stdout)"
+    )
     _add_wall_time_options(
         st,
         checkpoint="save each launch's state every SECONDS of wall time (0: never); a rerun resumes from it",
@@ -466,6 +482,9 @@ def main(argv=None) -> int:
     )
     an.add_argument(
         "--runs", help="a CSV run table made elsewhere (a column per factor in actual units and per response)"
+    )
+    an.add_argument(
+        "--json", help="write the analysis as records (name, value, expected, unit, pass) to this file ('-': stdout)"
     )
     an.set_defaults(fn=cmd_analyze)
     sc = sub.add_parser("scene", help="author scenes")

@@ -559,3 +559,34 @@ def test_runs_made_elsewhere_are_analysed_from_a_csv(finished, tmp_path, capsys)
         execute.external_runs(bad, study)
     assert main(["analyze", str(tmp_path / "x"), "--runs", str(csv)]) == 2
     assert "give the study file" in capsys.readouterr().err
+
+
+def test_json_records_of_an_analysis(finished, tmp_path):
+    """``warpdem analyze DIR --json FILE``: per response the model's p (expected below alpha), R², adjusted and
+    predicted R², adequate precision (expected above 4) and the prediction at the target, each a record with name,
+    value, expected, unit and pass; each run check a failing record (the tiny study's piles did not settle).
+    ``warpdem study --json`` writes the same after running the study afresh (the engine is deterministic)."""
+    import shutil
+
+    from warpdem.cli import main
+
+    study, out1, _ = finished
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    assert main(["analyze", str(out), "--json", str(tmp_path / "a.json")]) == 0
+    recs = json.loads((tmp_path / "a.json").read_text())
+    assert all(set(r) >= {"name", "value", "expected", "unit", "pass"} for r in recs)
+    by = {r["name"]: r for r in recs}
+    summary = json.loads((out / "analysis" / "summary.json").read_text())["height"]
+    assert by["height.r2"]["value"] == pytest.approx(summary["r2"])
+    p = by["height.model_p"]
+    assert p["expected"] == "< 0.05" and p["pass"] == (p["value"] < 0.05)
+    assert by["height.adeq_precision"]["pass"] == (summary["adeq_precision"] > 4)
+    assert by["height.predicted"]["expected"] == 0.0 and by["height.predicted"]["pass"] == summary["reachable"]
+    assert [r["name"] for r in recs if r["name"].startswith("run ")] == [f"run {k}.unsettled" for k in range(1, 7)]
+    assert not any(r["pass"] for r in recs if r["name"].startswith("run "))
+    # warpdem study --json writes the same records after its analysis
+    argv = ["study", str(study.path), "--out", str(tmp_path / "s"), "--device", "cpu", "--no-progress"]
+    assert main(argv + ["--json", str(tmp_path / "s.json")]) == 0
+    again = {r["name"]: r for r in json.loads((tmp_path / "s.json").read_text())}
+    assert again["height.r2"]["value"] == pytest.approx(by["height.r2"]["value"], rel=1e-12)

@@ -873,6 +873,55 @@ def confirmation_runs_interval(conf: dict, runs: int) -> tuple[float, float]:
     return Transform(**conf.get("transform", {})).interval(lo, hi)
 
 
+ADEQUATE_PRECISION_MIN = 4.0
+"""Design-Expert's bound on adequate precision (signal to noise): above it the model can navigate the design
+space."""
+
+
+def study_records(out, study: sp.StudySpec, summary: dict) -> list[dict]:
+    """The analysis of ``out`` as ``--json`` records (name, value, expected, unit, pass), per response: the model's
+    p (expected below alpha), R², adjusted and predicted R², adequate precision (expected above
+    :data:`ADEQUATE_PRECISION_MIN`) and, with a target, the prediction at the chosen settings (expected: the
+    target; passes when the target is reachable); and one failing record per :func:`run_checks` flag."""
+    alpha = study.analysis.alpha
+    recs: list[dict] = []
+    for r in study.responses:
+        s = summary.get(r.name)
+        if not isinstance(s, dict) or s.get("r2") is None:
+            continue
+
+        def rec(key, value, expected=None, passed=None, unit="", name=r.name):
+            v = None if value is None or (isinstance(value, float) and not math.isfinite(value)) else value
+            recs.append({"name": f"{name}.{key}", "value": v, "expected": expected, "unit": unit, "pass": passed})
+
+        p = s.get("model_p")
+        rec("model_p", p, f"< {alpha:g}", None if p is None else bool(p < alpha))
+        for key in ("r2", "adj_r2", "pred_r2"):
+            rec(key, s.get(key))
+        ap = s.get("adeq_precision")
+        ok = None if ap is None or not math.isfinite(ap) else bool(ap > ADEQUATE_PRECISION_MIN)
+        rec("adeq_precision", ap, f"> {ADEQUATE_PRECISION_MIN:g}", ok)
+        if r.target is not None:
+            pred = s.get("predicted")
+            if pred is None and isinstance(s.get("closest"), dict):
+                pred = s["closest"].get("predicted")
+            rec("predicted", pred, r.target, bool(s.get("reachable")), r.unit)
+    for f in run_checks(out, study):
+        recs.append(
+            {"name": f"run {f['run']}.{f['check']}", "value": f["detail"], "expected": None, "unit": "", "pass": False}
+        )
+    return recs
+
+
+def _write_records(path, records: list[dict]) -> None:
+    """``records`` as JSON to ``path`` ('-': stdout)."""
+    text = json.dumps(records, indent=1, default=_json_default)
+    if str(path) == "-":
+        print(text)
+    else:
+        Path(path).write_text(text + "\n")
+
+
 def _append_settling(out: Path, study: sp.StudySpec) -> None:
     """Add the settling picture of every finished run to the report (see ``report.settling_section``)."""
     from .report import settling_section
