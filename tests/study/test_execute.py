@@ -582,7 +582,9 @@ def test_json_records_of_an_analysis(finished, tmp_path):
     p = by["height.model_p"]
     assert p["expected"] == "< 0.05" and p["pass"] == (p["value"] < 0.05)
     assert by["height.adeq_precision"]["pass"] == (summary["adeq_precision"] > 4)
-    assert by["height.predicted"]["expected"] == 0.0 and by["height.predicted"]["pass"] == summary["reachable"]
+    # the folder's own study file (another test of this module may have rerun it with another target)
+    target = load_study(out / "study.toml", check_scene=False).responses[0].target
+    assert by["height.predicted"]["expected"] == target and by["height.predicted"]["pass"] == summary["reachable"]
     assert [r["name"] for r in recs if r["name"].startswith("run ")] == [f"run {k}.unsettled" for k in range(1, 7)]
     assert not any(r["pass"] for r in recs if r["name"].startswith("run "))
     # warpdem study --json writes the same records after its analysis
