@@ -530,8 +530,9 @@ def plan_study(study, out_dir=None, device: str = "cpu") -> dict:
     pending = [r for r in rows if r["point_id"] not in done]
     launches = []
     devices = parse_devices(device)
+    scene_of = _scene_cache(study)
     for batch in _batches(study, pending, len(devices), merges_scenes(devices)) if pending else []:
-        scenes = [_scene(study, r["overrides"]) for r in batch]
+        scenes = [scene_of(r["overrides"]) for r in batch]
         counts = [f.count for scene in scenes for f in scene.factories]
         particles = None if any(c is None for c in counts) else int(sum(counts)) / len(batch)
         launches.append(
@@ -730,20 +731,33 @@ def run_checks(out, study: sp.StudySpec | None = None) -> list[dict]:
     in some tick)."""
     out = Path(out)
     study = study or sp.load_study(out / "study.toml", check_scene=False)
-    flags, scenes = [], {}
-    for row in _study_rows(study, sp.design_table(study)):
-        f = out / "runs" / f"{row['point_id']}.json"
-        if not f.exists():
-            continue
-        with open(f) as fh:
-            rec = json.load(fh)
-        key = sp.batch_key(study, row["overrides"])
-        if key not in scenes:
-            scenes[key] = _scene(study, row["overrides"])
-        scene = scenes[key]
-        for check, detail in _checks_of(rec, scene, study):
+    flags, scene = [], _scene_cache(study)
+    for row, rec in _finished_records(out, study):
+        for check, detail in _checks_of(rec, scene(row["overrides"]), study):
             flags.append({"run": row["run"], "point_id": row["point_id"], "check": check, "detail": detail})
     return flags
+
+
+def _finished_records(out: Path, study: sp.StudySpec):
+    """(design row, stored run record) of each finished run of ``out``, in run order."""
+    for row in _study_rows(study, sp.design_table(study)):
+        f = out / "runs" / f"{row['point_id']}.json"
+        if f.exists():
+            with open(f) as fh:
+                yield row, json.load(fh)
+
+
+def _scene_cache(study: sp.StudySpec):
+    """:func:`_scene` of a run's overrides, built once per batch key (the runs that share a scene)."""
+    scenes: dict[tuple, object] = {}
+
+    def scene(overrides: dict):
+        key = sp.batch_key(study, overrides)
+        if key not in scenes:
+            scenes[key] = _scene(study, overrides)
+        return scenes[key]
+
+    return scene
 
 
 def check_lines(flags: list[dict]) -> list[str]:
@@ -926,12 +940,7 @@ def _append_settling(out: Path, study: sp.StudySpec) -> None:
     """Add the settling picture of every finished run to the report (see ``report.settling_section``)."""
     from .report import settling_section
 
-    runs = []
-    for row in _study_rows(study, sp.design_table(study)):
-        f = out / "runs" / f"{row['point_id']}.json"
-        if f.exists():
-            with open(f) as fh:
-                runs.append((row["run"], json.load(fh)["metrics"].get("settling")))
+    runs = [(row["run"], rec["metrics"].get("settling")) for row, rec in _finished_records(out, study)]
     lines = settling_section(out / "analysis", runs)
     if lines:
         with open(out / "analysis" / "report.md", "a") as fh:
