@@ -96,3 +96,57 @@ def test_design_levels_of_a_rig_parameter():
     assert U.shape == (12, 2)
     assert np.array_equal(np.sort(np.floor(U[:, 0] * 12)), np.arange(12))  # one point per stratum
     assert set(np.round(U[:, 1], 12)) == {0.0, 0.25, 0.5, 0.75, 1.0} and LAUNCH_LEVELS == 5
+
+
+class _FixedSurrogate:
+    """A surrogate that predicts ``mean`` with SD ``sd`` everywhere."""
+
+    def __init__(self, mean: float, sd: float):
+        self.mean, self.sd = mean, sd
+
+    def predict(self, U):
+        n = np.atleast_2d(U).shape[0]
+        return np.full(n, self.mean), np.full(n, self.sd)
+
+
+def _check(gp_means: dict, values: dict) -> dict:
+    """surrogate_check of a two-condition problem whose confirming runs gave ``values`` ({condition: (seeds,
+    responses)}) and whose surrogates predict ``gp_means`` ({(condition, response): mean}, SD 0.1)."""
+    prob = _problem()
+    prob.spec.alpha = 0.05
+    ev = Evaluator(prob, sims=None, log=print)
+    ev._confirmed = lambda fitted: [(c, fitted["u_map"], v) for c, v in values.items()]
+    gps = {k: _FixedSurrogate(m, 0.1) for k, m in gp_means.items()}
+    return ev.surrogate_check({"u_map": np.array([0.5]), "gps": gps})
+
+
+def test_surrogate_check_against_chi_square_by_hand():
+    """Confirmed means against the surrogates' predictions: z = (mean - prediction) / sqrt(0.1^2 + s_sim^2 / k),
+    summed squares against chi-square with a degree of freedom per (condition, response); a failed run drops
+    out of its mean."""
+    from scipy import stats
+
+    values = {0: np.array([[30.0, 805.0], [31.0, 815.0]]), 1: np.array([[26.0, 830.0], [27.0, np.nan]])}
+    gp = {(0, "angle"): 30.0, (0, "density"): 800.0, (1, "angle"): 25.0, (1, "density"): 820.0}
+    res = _check(gp, values)
+    z = [
+        (30.5 - 30.0) / np.sqrt(0.01 + 1.0 / 2),
+        (810.0 - 800.0) / np.sqrt(0.01 + 25.0 / 2),
+        (26.5 - 25.0) / np.sqrt(0.01 + 1.0 / 2),
+        (830.0 - 820.0) / np.sqrt(0.01 + 25.0 / 1),
+    ]
+    stat = float(np.sum(np.square(z)))
+    assert res["df"] == 4
+    assert res["statistic"] == pytest.approx(stat)
+    assert res["p"] == pytest.approx(stats.chi2.sf(stat, 4))
+    assert res["max_abs_z"] == pytest.approx(max(abs(x) for x in z))
+
+
+def test_surrogate_check_refines_only_a_miss():
+    """Runs within their scatter of the prediction leave the calibration alone; runs 5 seed-SDs off refine it."""
+    values = {0: np.array([[30.2, 801.0], [29.9, 798.0]]), 1: np.array([[25.3, 822.0], [24.8, 818.0]])}
+    gp = {(0, "angle"): 30.0, (0, "density"): 800.0, (1, "angle"): 25.0, (1, "density"): 820.0}
+    assert not _check(gp, values)["refine"]
+    off = {0: values[0] + [5.0, 0.0], 1: values[1]}
+    res = _check(gp, off)
+    assert res["refine"] and res["p"] < 0.05

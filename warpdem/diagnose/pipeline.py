@@ -19,7 +19,10 @@ Stages (every simulated world is stored as it finishes, ``OUT/runs/<id>.json``, 
    Gaussian-process surrogate per (condition, response) (:class:`inference.Surrogate`: smooth, interpolating,
    with its own predictive variance, which the likelihood takes in); the posterior on a flat prior over the
    ranges by MCMC on the surrogates (:func:`inference.calibrate`); the maximum a posteriori point confirmed by
-   :attr:`DiagnosisSpec.confirm_seeds` real simulations at every condition.
+   :attr:`DiagnosisSpec.confirm_seeds` real simulations at every condition. Where those miss the surrogates'
+   prediction by more than its variance and the seed scatter allow (:meth:`Evaluator.surrogate_check`, a
+   chi-square test at alpha), they join the design, the surrogates are refitted and the model is recalibrated
+   and confirmed again, once.
 3. **Adequacy.** Standardised residuals of the confirmed means against the training data; chi-square, per
    experiment and trend tests against the noise budget, Holm-corrected as one family
    (:func:`inference.adequacy`). Nothing significant: ADEQUATE, and the diagnosis stops.
@@ -362,8 +365,9 @@ class Evaluator:
         n = self.spec.points or 4 + 4 * d
         return design_points(model.dims, n, _seed(self.spec, f"design:{model.name}"))
 
-    def surrogates(self, model: Model, stage: str) -> tuple[dict, pd.DataFrame]:
-        """Design simulations at every condition and one surrogate per (condition, response)."""
+    def surrogates(self, model: Model, stage: str, extra: dict | None = None) -> tuple[dict, pd.DataFrame]:
+        """Design simulations at every condition and one surrogate per (condition, response); ``extra``
+        ({condition: (U (m, d), values (m, responses))}, :meth:`confirmed_points`) joins a condition's design."""
         U = self.design(model)
         C = len(self.prob.conditions)
         reqs = [self._request(model, u, c, DESIGN_SEED) for c in range(C) for u in U]
@@ -371,6 +375,9 @@ class Evaluator:
         vals = self._values(mets).reshape(C, len(U), len(self.responses))
         gps, acc = {}, []
         for c in range(C):
+            Uc, vc = U, vals[c]
+            if extra and c in extra:
+                Uc, vc = np.vstack([U, extra[c][0]]), np.vstack([vals[c], extra[c][1]])
             for j, r in enumerate(self.responses):
                 ok = int(np.isfinite(vals[c, :, j]).sum())
                 if ok < len(model.dims) + 2:
@@ -388,7 +395,7 @@ class Evaluator:
                         f"of {len(U)} worlds at conditions {self.prob.conditions[c]}; at least {len(model.dims) + 2} are "
                         f"needed for a surrogate. The runs said: {'; '.join(errs) or 'nothing (no *_error metric)'}"
                     )
-                gp = inf.Surrogate(seed=_seed(self.spec, f"gp:{model.name}:{c}:{r}")).fit(U, vals[c, :, j])
+                gp = inf.Surrogate(seed=_seed(self.spec, f"gp:{model.name}:{c}:{r}")).fit(Uc, vc[:, j])
                 gps[(c, r)] = gp
                 acc.append({"model": model.name, "condition": c, "response": r, **gp.cv(), "noise_sd": gp.noise_sd})
         return gps, pd.DataFrame(acc)
@@ -455,12 +462,13 @@ class Evaluator:
         k_all[mask] = np.maximum(k, 1)
         return r, self.prob.budget(k_all)[mask]
 
-    def fit(self, model: Model) -> dict:
+    def fit(self, model: Model, extra: dict | None = None) -> dict:
         """The first half of :meth:`evaluate`, which needs only the design simulations: surrogates and their
         accuracy, the calibration on the training data and on each held-out fold's, and the ``requests`` of
-        every confirming simulation those calibrations need (run them together, then :meth:`finish`)."""
+        every confirming simulation those calibrations need (run them together, then :meth:`finish`).
+        ``extra``: simulations that join the design (:meth:`surrogates`)."""
         prob = self.prob
-        gps, acc = self.surrogates(model, f"{model.name}: design")
+        gps, acc = self.surrogates(model, f"{model.name}: design", extra)
         if model.candidate is None:
             # the world seeds measure the scatter a factory's placement gives; a model whose response is not
             # smooth in its parameters (contact networks rearrange) scatters over them too, which the surrogates'
@@ -515,6 +523,7 @@ class Evaluator:
         adequacy = inf.adequacy(r, var, len(model.dims), cond_df, labels, self.spec.alpha)
         loglik = float(-np.sum(inf.gaussian_nll(r[ok], var[ok])))
         out = {k: fitted[k] for k in ("model", "gps", "surrogate_accuracy", "calibration", "u_map")}
+        out["surrogate_check"] = fitted.get("surrogate_check")
         out.update(
             theta={d.name: d.value(x) for d, x in zip(model.dims, u_map)},
             interval={
@@ -530,12 +539,98 @@ class Evaluator:
         )
         return out
 
-    def evaluate(self, models: list[Model], stage: str) -> list[dict]:
+    def evaluate(self, models: list[Model], stage: str, dropped: dict | None = None) -> list[dict]:
         """Everything about each of ``models`` (:meth:`fit`, then :meth:`finish`); their confirming simulations
-        go in one request, so that models that can share launches do."""
-        fitted = [self.fit(m) for m in models]
+        go in one request, so that models that can share launches do. A model whose confirming simulations
+        miss its surrogates (:meth:`surrogate_check`) is refitted once with them joining its design, and
+        confirmed again at the new calibration. With ``dropped`` (a dict), a model whose simulations cannot
+        measure a response at its calibration is left out, its reason recorded there, instead of stopping
+        the diagnosis (a candidate at the edge of its range may pack no measurable core)."""
+        if dropped is not None:
+            kept = []
+            for m in models:
+                try:
+                    kept.append(self.fit(m))
+                except DiagnoseError as e:
+                    dropped[m.name] = str(e)
+            return self._evaluate_fitted(kept, stage, dropped)
+        return self._evaluate_fitted([self.fit(m) for m in models], stage, None)
+
+    def _evaluate_fitted(self, fitted: list[dict], stage: str, dropped: dict | None) -> list[dict]:
         self.sims.run([q for f in fitted for q in f["requests"]], stage)
-        return [self.finish(f) for f in fitted]
+        again = []
+        for i, f in enumerate(fitted):
+            check = self.surrogate_check(f)
+            if check["refine"]:
+                fitted[i] = self.fit(f["model"], extra=self.confirmed_points(f))
+                again.append(fitted[i])
+            fitted[i]["surrogate_check"] = check
+        if again:
+            self.sims.run([q for f in again for q in f["requests"]], f"{stage} (refined)")
+        if dropped is None:
+            return [self.finish(f) for f in fitted]
+        out = []
+        for f in fitted:
+            try:
+                out.append(self.finish(f))
+            except DiagnoseError as e:
+                dropped[f["model"].name] = str(e)
+        return out
+
+    def _confirmed(self, fitted: dict) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """(condition, u (d,), values (seeds, responses)) of every confirming simulation of ``fitted``: the
+        calibration at every condition, each fold's at its held-out condition (already run)."""
+        C = range(len(self.prob.conditions))
+        conf = self.confirm(fitted["model"], fitted["u_map"], C, f"{fitted['model'].name}: confirm")
+        out = [(c, fitted["u_map"], conf[c]["values"]) for c in C]
+        for (_, _, c), u in zip(fitted["folds"], fitted["fold_maps"]):
+            if c is not None:
+                fconf = self.confirm(fitted["model"], u, [c], f"{fitted['model'].name}: held-out")
+                out.append((c, u, fconf[c]["values"]))
+        return out
+
+    def confirmed_points(self, fitted: dict) -> dict:
+        """Every confirming simulation of ``fitted`` as extra design points: {condition: (U (m, d), values
+        (m, responses))}."""
+        out: dict = {}
+        for c, u, v in self._confirmed(fitted):
+            U = np.repeat(np.asarray(u, dtype=float)[None], len(v), axis=0)
+            if c in out:
+                U, v = np.vstack([out[c][0], U]), np.vstack([out[c][1], v])
+            out[c] = (U, v)
+        return out
+
+    def surrogate_check(self, fitted: dict) -> dict:
+        """Do the real simulations at the calibrated point agree with the surrogates' prediction there? Over every
+        (condition, response) with a finite confirmed mean of k runs: z = (mean - prediction) / sqrt(surrogate
+        variance + s_sim^2 / k), and sum z^2 against chi-square with one degree of freedom per pair. ``refine``
+        when p < alpha: a space-filling design of tens of points can miss a step (a rod's sphere count changes
+        with its aspect ratio) or a narrow valley by more than its own predictive variance says, and the MAP
+        then sits where the surrogate, not the model, fits the data. Returns statistic, df, p, refine and the
+        largest |z|."""
+        from scipy import stats
+
+        u = fitted["u_map"]
+        sim_var = self.prob.sim_var
+        zs = []
+        for c, uc, v in self._confirmed(fitted)[: len(self.prob.conditions)]:
+            for j, r in enumerate(self.responses):
+                x = v[:, j][np.isfinite(v[:, j])]
+                if not len(x):
+                    continue
+                m, sd = fitted["gps"][(c, r)].predict(np.asarray(uc)[None])
+                zs.append((x.mean() - m[0]) / math.sqrt(sd[0] ** 2 + sim_var.get(r, 0.0) / len(x)))
+        zs = np.asarray(zs, dtype=float)
+        stat = float(np.sum(zs**2))
+        p = float(stats.chi2.sf(stat, len(zs))) if len(zs) else 1.0
+        return {
+            "statistic": stat,
+            "df": int(len(zs)),
+            "p": p,
+            "refine": bool(p < self.spec.alpha),
+            "max_abs_z": float(np.max(np.abs(zs))) if len(zs) else math.nan,
+            "u_map": np.asarray(u, dtype=float).tolist(),
+        }
 
     def folds(self) -> list[tuple[np.ndarray, np.ndarray, int | None]]:
         """(fit mask, held-out mask, held-out condition or None) per fold: the data's split, or each training
@@ -854,7 +949,11 @@ def diagnose(
                 models.append(Model(c.name, [*base.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c))
             if models:
                 sims.run(ev.design_requests(models), "candidates: design")
-                results = ev.evaluate(models, "candidates: confirm")
+                failed: dict = {}
+                results = ev.evaluate(models, "candidates: confirm", dropped=failed)
+                for name, why in failed.items():
+                    log(f"{spec.name}: candidate {name} left out: {why}")
+                    skipped[name] = f"recalibrated, then left out: {why}"
                 evals.update({r["model"].name: r for r in results})
             decision = verdict(base_eval, results, spec.alpha, _seed(spec, "bootstrap"))
         separating = []

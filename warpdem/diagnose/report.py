@@ -58,6 +58,7 @@ def _model_json(ev: dict) -> dict:
         "loglik_train": ev["loglik"],
         "n_train": ev["n_train"],
         "surrogate_accuracy": ev["surrogate_accuracy"].to_dict(orient="records"),
+        "surrogate_check": ev.get("surrogate_check"),
     }
     if ev["held_out"] is not None:
         h = ev["held_out"]
@@ -354,10 +355,24 @@ def _surrogate_line(ev: dict) -> str:
     cal = ev["calibration"]
     q2 = acc["q2"].to_numpy(dtype=float) if "q2" in acc else np.array([np.nan])
     rmse = acc["rmse"].to_numpy(dtype=float) if "rmse" in acc else np.array([np.nan])
+    chk = ev.get("surrogate_check")
+    check = ""
+    if chk:
+        check = (
+            f" The confirming simulations against the surrogates at the calibrated point: chi-square "
+            f"{_f(chk['statistic'], 3)} on {chk['df']} df, p = {_f(chk['p'], 3)}, largest |z| {_f(chk['max_abs_z'], 3)}"
+            + (
+                "; they missed, so they joined the design, the surrogates were refitted and the model recalibrated "
+                "and confirmed again (the figures above are the refitted ones)."
+                if chk["refine"]
+                else "; they agree."
+            )
+        )
     return (
         f"Surrogates: Gaussian processes (Matern 5/2, one length scale per parameter, white noise), one per condition "
         f"and response, {len(acc)} in all; leave-one-out Q^2 from {_f(np.nanmin(q2), 3)} to {_f(np.nanmax(q2), 3)}, "
         f"RMSE up to {_f(np.nanmax(rmse), 3)}. Posterior by MCMC (emcee), acceptance "
         f"{_f(cal.get('acceptance'), 2)}, {cal.get('steps', 0)} steps per walker (doubled until the kept half spans "
         f"{inf.TAU_SPAN} autocorrelation times), about {_f(cal.get('effective_samples'), 3)} independent samples."
+        + check
     )
