@@ -19,12 +19,14 @@ from warpdem.scene.measure import (
     discharge_rate,
     drum_metrics,
     drum_surface,
+    flank_lines,
     hopper_angle_factor,
     impact_summary,
     packing_core,
     packing_fraction,
     plot_angles,
     plot_drum,
+    plot_impacts,
     plot_press,
     press_curve,
     press_summary,
@@ -100,6 +102,36 @@ def test_surface_fit_within_half_degree(angle, pd, base_z, center):
     assert res["mean_deg"] == pytest.approx(angle, abs=0.5)
     assert res["sd_deg"] == pytest.approx(np.std(res["per_slice_deg"], ddof=1))
     assert res["bin_width_m"] >= 2.5 * 2 * r.mean() - 1e-12
+
+
+@pytest.mark.parametrize("angle", ANGLES)
+@pytest.mark.parametrize("pd,base_z,center", PILES)
+@pytest.mark.parametrize("axis", ["y", "x"])
+def test_flank_lines_lie_on_the_cone(angle, pd, base_z, center, axis):
+    """flank_lines (the gallery's protractor) on a synthetic cone: a right and a left flank, each at the cone's
+    angle within the surface fit's own 0.5 deg, on its side of the axis, apex end first, and lying under the cone
+    surface by less than one sphere radius at both ends (the fitted sphere tops sit below the surface by at most
+    r (1 / cos(angle) - 1) plus the 0.3 r gap the synthetic cone allows, 0.72 r at 45 deg)."""
+    x, r = _cone(angle, pd, base_z, center)
+    fit = angle_surface_fit(x, r, base_z=base_z, center=center)
+    flanks = flank_lines(fit, base_z, axis)
+    assert [f["side"] for f in flanks] == ["right", "left"]
+    h0 = center[0] if axis == "y" else center[1]
+    tan_a = math.tan(math.radians(angle))
+    for f, sign in zip(flanks, (1.0, -1.0)):
+        assert f["angle_deg"] == pytest.approx(angle, abs=0.5)
+        (ha, za), (hb, zb) = f["points"]
+        assert sign * (hb - ha) > 0 and sign * (ha - h0) >= 0 and za > zb
+        for h, z in ((ha, za), (hb, zb)):
+            surface = base_z + (R_BASE - abs(h - h0)) * tan_a
+            assert 0.0 <= surface - z < R_SPHERE
+
+
+def test_flank_lines_refuses_a_vertical_view():
+    """A top view has no flanks: axis "z" is refused, naming the argument and what is allowed."""
+    x, r = _cone(30.0)
+    with pytest.raises(ValueError, match=r"flank_lines: axis = 'z' is not allowed; expected \"x\" or \"y\""):
+        flank_lines(angle_surface_fit(x, r), 0.0, "z")
 
 
 @pytest.mark.parametrize("angle", ANGLES)
@@ -816,3 +848,15 @@ def test_drum_bad_input_names_argument(call, names):
     with pytest.raises(ValueError, match=names) as err:
         call()
     assert "expected" in str(err.value)
+
+
+def test_plot_impacts_draws_and_refuses_mismatched_faces(tmp_path):
+    """plot_impacts writes the heat map of two walls (one with no impact: grey, no colour scale from it) and
+    refuses an energy array that is not one value per face, naming the wall."""
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    t = np.array([[0, 1, 2], [0, 2, 3]])
+    walls = [("Body", v, t, np.array([2.0, 0.0]), np.array([3, 0])), ("Gate", v, t, np.zeros(2), np.zeros(2))]
+    path = plot_impacts(walls, tmp_path / "impacts.png", title="two walls")
+    assert path.endswith("impacts.png") and (tmp_path / "impacts.png").stat().st_size > 5000
+    with pytest.raises(ValueError, match=r"walls\[0\] \(Body\) energy / count"):
+        plot_impacts([("Body", v, t, np.ones(3), np.ones(2))], tmp_path / "bad.png")

@@ -910,6 +910,8 @@ def side_view_png(
     figsize: tuple[float, float] = (8.0, 6.0),
     dpi: int = 150,
     colour_label: str | None = None,
+    lines=None,
+    frame=None,
 ) -> str:
     """Orthographic side view of a sphere pile, saved as a PNG (the seeds' photo of the pile).
 
@@ -931,6 +933,10 @@ def side_view_png(
             for one sand colour; depth shading applies either way.
         figsize: figure size [inch]. dpi: resolution [pixels per inch].
         colour_label: colour bar label when ``colour_by`` is given.
+        lines: segments drawn over the spheres (a measurement's fitted lines), each ((h0, v0), (h1, v1), label)
+            [m] in the view's horizontal and vertical coordinates, the label written at the first end; or None.
+        frame: ((h_min, v_min), (h_max, v_max)) [m], the part of the scene to show (e.g. a dump body, when the
+            walls span the whole site); None frames the walls and spheres.
 
     Returns:
         ``str(path)``.
@@ -966,6 +972,10 @@ def side_view_png(
             walls.append((v, t))
     if not isinstance(dpi, (int, np.integer)) or isinstance(dpi, bool) or not 10 <= dpi <= 2000:
         fail(where, "dpi", dpi, "an integer in [10, 2000]")
+    if frame is not None:
+        f = np.asarray(frame, dtype=float) if np.shape(frame) == (2, 2) else None
+        if f is None or not np.all(np.isfinite(f)) or not np.all(f[1] > f[0]):
+            fail(where, "frame", frame, "None or ((h_min, v_min), (h_max, v_max)) in m, finite, min < max")
 
     import matplotlib
 
@@ -1024,6 +1034,23 @@ def side_view_png(
             if values is not None:
                 sm = matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap)
                 fig.colorbar(sm, ax=ax, label=colour_label or "", shrink=0.8)
+        for a, b, label in lines or ():
+            seg = np.array([a, b], dtype=float) * mm
+            ax.plot(seg[:, 0], seg[:, 1], color="tab:red", linewidth=1.6, zorder=3)
+            if label:
+                ax.annotate(
+                    label,
+                    seg[0],
+                    color="tab:red",
+                    fontsize=9,
+                    ha="center",
+                    va="bottom",
+                    zorder=4,
+                    xytext=(0, 6),
+                    textcoords="offset points",
+                )
+        if frame is not None:
+            lo, hi = np.asarray(frame[0], dtype=float) * mm, np.asarray(frame[1], dtype=float) * mm
         if not np.all(np.isfinite(lo)):
             lo, hi = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
         pad = 0.03 * max(float(np.max(hi - lo)), 1e-6)

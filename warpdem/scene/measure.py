@@ -252,7 +252,9 @@ def angle_surface_fit(
     Returns:
         dict with ``mean_deg`` (mean over the sectors used), ``sd_deg`` (sample SD, ddof=1),
         ``per_slice_deg`` (list, one angle per sector used), ``slices`` (number of sectors used),
-        ``extent_m``, ``bin_width_m`` and ``center`` (the axis used, m).
+        ``extent_m``, ``bin_width_m``, ``center`` (the axis used, m), ``lines`` (per sector used: its middle
+        ``azimuth_deg`` as atan2(dy, dx) gives it, and the fitted sphere tops z - base_z = ``intercept_m`` +
+        ``slope`` * rho) and ``fit_range_m`` (the rho range the points came from, m).
 
     Raises:
         ValueError: bad arguments, or fewer than 2 sectors with 3 or more surface points (the pile is
@@ -285,13 +287,15 @@ def angle_surface_fit(
     best = np.unique(np.concatenate(picks))
     best_sector = sector[best]
 
-    angles = []
+    angles, lines = [], []
     for s in range(slices):
         pick = best[best_sector == s]
         if len(pick) < 3:
             continue
-        slope = np.polyfit(rho[pick], top[pick], 1)[0]
+        slope, intercept = np.polyfit(rho[pick], top[pick], 1)
         angles.append(math.degrees(math.atan(-slope)))
+        azimuth = -180.0 + (s + 0.5) * 360.0 / slices  # the sector's middle, as atan2 measures it
+        lines.append({"azimuth_deg": azimuth, "slope": float(slope), "intercept_m": float(intercept)})
     if len(angles) < 2:
         raise ValueError(
             f"angle_surface_fit: only {len(angles)} of slices = {slices} sectors have >= 3 surface points "
@@ -308,6 +312,8 @@ def angle_surface_fit(
         "extent_m": extent,
         "bin_width_m": width,
         "center": (cx, cy),
+        "lines": lines,
+        "fit_range_m": (inner * extent, outer * extent),
     }
 
 
@@ -345,6 +351,44 @@ def _cell_maxima(rho, frac, sector, top, width, extent, inner, outer, slices, sh
     order = np.lexsort((top[idx], key))
     k = key[order]
     return idx[order[np.flatnonzero(np.r_[k[1:] != k[:-1], True])]]
+
+
+def flank_lines(fit: dict, base_z: float = 0.0, axis: str = "y") -> list[dict]:
+    """The pile's two flanks as a side view along ``axis`` ("y": x to the right, "x": y to the right) sees them,
+    from :func:`angle_surface_fit`'s per-sector lines: the sectors facing each way (middle within 90 deg of the
+    view plane's +h or -h direction), weighted by how squarely they face it (the cosine), over the rho range the
+    fit used. The protractor of a gallery picture: what was measured, drawn where it was measured.
+
+    Args:
+        fit: :func:`angle_surface_fit`'s result.
+        base_z: height of the base plane [m] (as given to the fit).
+        axis: "y" or "x".
+
+    Returns:
+        list (one per side with a facing sector, "right" then "left") of dicts with ``side``, ``angle_deg`` (the
+        weighted line's) and ``points`` ((h0, z0), (h1, z1)) [m] in the view plane, apex end first.
+    """
+    if axis not in ("x", "y"):
+        raise ValueError(f'flank_lines: axis = {axis!r} is not allowed; expected "x" or "y"')
+    cx, cy = fit["center"]
+    h0 = cx if axis == "y" else cy
+    facing = 0.0 if axis == "y" else 90.0  # the azimuth of +h
+    lo, hi = fit["fit_range_m"]
+    out = []
+    for side, sign in (("right", 1.0), ("left", -1.0)):
+        w, slope, icpt = [], [], []
+        for line in fit["lines"]:
+            c = sign * math.cos(math.radians(line["azimuth_deg"] - facing))
+            if c > 1e-9:
+                w.append(c)
+                slope.append(line["slope"])
+                icpt.append(line["intercept_m"])
+        if not w:
+            continue
+        b, a = float(np.average(slope, weights=w)), float(np.average(icpt, weights=w))
+        pts = tuple((h0 + sign * rho, base_z + a + b * rho) for rho in (lo, hi))
+        out.append({"side": side, "angle_deg": math.degrees(math.atan(-b)), "points": pts})
+    return out
 
 
 def angle_cone(x, r, base_z: float = 0.0, center=(0.0, 0.0), toe_correction: bool = False) -> float:
@@ -1697,6 +1741,66 @@ def plot_angles(result: dict, path) -> str:
     ax.legend(loc="lower right")
     fig.tight_layout()
     fig.savefig(path)
+    plt.close(fig)
+    return str(path)
+
+
+def plot_impacts(walls, path, title: str | None = None) -> str:
+    """Write a heat map of wall impacts as a PNG to ``path``: one 3-D panel per wall, each face coloured by the
+    impact energy it took per unit area [J/m^2] on one logarithmic scale shared by every panel (faces with no
+    impact light grey), the wall as built (before it moved), with its impact count and energy in the panel's
+    title. ``walls``: a list of (name, vertices (V, 3) [m], triangles (F, 3), energy (F,) [J], count (F,)), e.g.
+    one world's faces summed over the phases (``impacts.npz``)."""
+    from matplotlib.colors import LogNorm
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from warpdem.engine.geometry import face_areas
+
+    if not isinstance(walls, (list, tuple)) or not walls:
+        _bad("walls", walls, "a non-empty list of (name, vertices (V, 3), triangles (F, 3), energy (F,), count (F,))")
+    panels = []
+    for i, item in enumerate(walls):
+        if not isinstance(item, (list, tuple)) or len(item) != 5:
+            _bad(f"walls[{i}]", item, "(name, vertices (V, 3), triangles (F, 3), energy (F,), count (F,))")
+        name, v, t, e, c = item
+        v = np.asarray(v, dtype=float)
+        t = np.asarray(t)
+        if v.ndim != 2 or v.shape[1] != 3 or not np.all(np.isfinite(v)):
+            _bad(f"walls[{i}] ({name}) vertices", v.shape, "a finite (V, 3) array [m]")
+        if t.ndim != 2 or t.shape[1] != 3 or t.size == 0 or t.min() < 0 or t.max() >= len(v):
+            _bad(f"walls[{i}] ({name}) triangles", t.shape, f"an (F, 3) array of vertex indices in [0, {len(v)})")
+        e, c = np.asarray(e, dtype=float), np.asarray(c, dtype=float)
+        if e.shape != (len(t),) or c.shape != (len(t),) or np.any(e < 0) or np.any(c < 0):
+            _bad(
+                f"walls[{i}] ({name}) energy / count", (e.shape, c.shape), f"two ({len(t)},) arrays >= 0, one per face"
+            )
+        area = face_areas(v, t.astype(np.int64))
+        panels.append((str(name), v, t, np.divide(e, area, out=np.zeros_like(e), where=area > 0), e, c))
+    hot = np.concatenate([p[3][p[3] > 0] for p in panels])
+    plt = _pyplot()
+    fig = plt.figure(figsize=(5.0 * len(panels), 4.6), dpi=110)
+    norm = LogNorm(hot.min(), max(hot.max(), hot.min() * 10)) if hot.size else None
+    cmap = plt.get_cmap("inferno")
+    for k, (name, v, t, density, e, c) in enumerate(panels):
+        ax = fig.add_subplot(1, len(panels), k + 1, projection="3d")
+        colours = np.tile([0.85, 0.85, 0.85, 1.0], (len(t), 1))
+        if norm is not None:
+            colours[density > 0] = cmap(norm(density[density > 0]))
+        ax.add_collection3d(Poly3DCollection(v[t], facecolors=colours, edgecolors=(0, 0, 0, 0.15), linewidths=0.2))
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        mid, half = 0.5 * (lo + hi), 0.5 * float(np.max(hi - lo))
+        for setter, m_ in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid):
+            setter(m_ - half, m_ + half)
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_zlabel("z [m]")
+        ax.set_title(f"{name}: {int(c.sum())} impacts, {e.sum():.3g} J", fontsize=10)
+    if norm is not None:
+        sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
+        fig.colorbar(sm, ax=fig.axes, shrink=0.7, label="impact energy per area [J/m²]")
+    if title:
+        fig.suptitle(title)
+    fig.savefig(str(path))
     plt.close(fig)
     return str(path)
 
