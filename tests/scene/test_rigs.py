@@ -400,6 +400,30 @@ def test_truck_tipper_impacts(rig_run):
     assert body["total_count"] > 0
 
 
+def test_truck_tipper_pictures(rig_run):
+    """#20's pictures that do not mislead: the tipper's impacts.png (a heat map per measured wall) is drawn, and
+    pile.png is framed on the body and the material, not on the whole site: the frame holds the body and is
+    narrower than the ground, which spans the site."""
+    from warpdem.scene.runner import _impact_frame
+
+    run = rig_run("truck_tipper")
+    out = run["out"]
+    assert (out / "impacts.png").stat().st_size > 10_000
+    assert run["metrics"]["info"]["files"]["impacts_png"].endswith("impacts.png")
+    final = np.load(out / "final.npz")
+    names = list(final["wall_names"])
+    walls = [(final[f"wall{k}_vertices"], final[f"wall{k}_triangles"]) for k in range(len(names))]
+
+    class Model:
+        wall_names = names
+
+    (x0, z0), (x1, z1) = _impact_frame(Model, walls, ["Body", "Tailgate"], final["sphere_x"])
+    body = walls[names.index("Body")][0]
+    ground = walls[names.index("Ground")][0]
+    assert x0 <= body[:, 0].min() and body[:, 0].max() <= x1 and z0 <= body[:, 2].min() and body[:, 2].max() <= z1
+    assert x1 - x0 < np.ptp(ground[:, 0])
+
+
 def test_rotating_drum_rolls(rig_run):
     """Rotating drum: the bed poured level (a centred pour: angle ~0) turns with the drum and rolls, its surface
     rising on the side the wall lifts (-x for a drum turning about +y): a dynamic angle well above the level

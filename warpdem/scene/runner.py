@@ -83,6 +83,62 @@ def _mean_diameter(h, world: int) -> float:
     return 2.0 * float(np.mean(h["radius"][(h["world"] == world) & h["free"]]))
 
 
+PILE_METRICS = (
+    "detached",
+    "particles",
+    "pile_height_m",
+    "angle_fit_deg",
+    "angle_fit_sd_deg",
+    "angle_fit_slices_deg",
+    "angle_image_deg",
+    "angle_image_sd_deg",
+    "angle_cone_deg",
+    "angle_error",
+)
+"""The metrics :func:`measure_pile` writes: what a stored final state can be measured for again."""
+
+
+def pile(x, r, m) -> tuple[dict, dict | None, np.ndarray, np.ndarray]:
+    """:func:`measure_pile`'s metrics, the surface fit (``measure.angle_surface_fit``'s result, None when it
+    failed) and the pile's own spheres: centres (k, 3) [m] and radii (k,) [m]."""
+    x, r = np.asarray(x, dtype=np.float64).reshape(-1, 3), np.asarray(r, dtype=np.float64).reshape(-1)
+    mw: dict = {}
+    # what rolled off the base is not part of the pile
+    keep = x[:, 2] - r > m.base_height - 2 * r.max(initial=0.0)
+    x, r = x[keep], r[keep]
+    # nor is what sticks to a lifted wall or is still in the air
+    on = ms.pile_spheres(x, r, base_z=m.base_height) if len(r) else np.zeros(0, bool)
+    mw["detached"] = int(len(r) - on.sum())
+    x, r = x[on], r[on]
+    mw["particles"] = int(len(r))
+    mw["pile_height_m"] = float((x[:, 2] + r).max() - m.base_height) if len(r) else 0.0
+    fit = None
+    try:
+        fit = ms.angle_surface_fit(x, r, base_z=m.base_height, center=m.center)
+        img = ms.angle_image(x, r, base_z=m.base_height, center=m.center)
+        mw.update(
+            angle_fit_deg=fit["mean_deg"],
+            angle_fit_sd_deg=fit["sd_deg"],
+            angle_fit_slices_deg=list(map(float, fit["per_slice_deg"])),
+            angle_image_deg=img["mean_deg"],
+            angle_image_sd_deg=img["sd_deg"],
+            angle_cone_deg=float(ms.angle_cone(x, r, base_z=m.base_height, center=m.center)),
+        )
+    except ValueError as e:
+        fit = None
+        mw["angle_error"] = str(e)
+    return mw, fit, x, r
+
+
+def measure_pile(x, r, m) -> dict:
+    """The pile metrics of one world (:data:`PILE_METRICS`) from its free particle spheres at the end of a run:
+    centres ``x`` (n, 3) [m] and radii ``r`` (n,) [m] (glued spheres excluded), under the angle-of-repose measure
+    settings ``m`` (a ``MeasureSpec``: base_height, center). Spheres below the base (rolled off the plate) and
+    those not connected to it (stuck to a lifted wall, in the air) are not the pile. Used at the end of a run and
+    on a stored final state (a study's ``runs/<point_id>.npz``), so both give the same numbers."""
+    return pile(x, r, m)[0]
+
+
 def _particles(model, state, h, world: int):
     """Centres (n, 3) and radii (n,) of the active particle spheres (glued ones excluded) of ``world``."""
     sel = _particle_mask(state, h, world)
@@ -647,29 +703,7 @@ def run_scene_iter(
             "threshold_j": float(thresholds[w]),
         }
         if m.kind == "angle_of_repose":
-            x, r = _particles(model, state, h, w)
-            # what rolled off the base is not part of the pile
-            keep = x[:, 2] - r > m.base_height - 2 * r.max(initial=0.0)
-            x, r = x[keep], r[keep]
-            # nor is what sticks to a lifted wall or is still in the air
-            on = ms.pile_spheres(x, r, base_z=m.base_height) if len(r) else np.zeros(0, bool)
-            mw["detached"] = int(len(r) - on.sum())
-            x, r = x[on], r[on]
-            mw["particles"] = int(len(r))
-            mw["pile_height_m"] = float((x[:, 2] + r).max() - m.base_height) if len(r) else 0.0
-            try:
-                fit = ms.angle_surface_fit(x, r, base_z=m.base_height, center=m.center)
-                img = ms.angle_image(x, r, base_z=m.base_height, center=m.center)
-                mw.update(
-                    angle_fit_deg=fit["mean_deg"],
-                    angle_fit_sd_deg=fit["sd_deg"],
-                    angle_fit_slices_deg=list(map(float, fit["per_slice_deg"])),
-                    angle_image_deg=img["mean_deg"],
-                    angle_image_sd_deg=img["sd_deg"],
-                    angle_cone_deg=float(ms.angle_cone(x, r, base_z=m.base_height, center=m.center)),
-                )
-            except ValueError as e:
-                mw["angle_error"] = str(e)
+            mw.update(measure_pile(*_particles(model, state, h, w), m))
             if m.outlet_height is not None:
                 mw.update(_discharge_metrics(series, w))
             if packing_time is not None:
@@ -1041,12 +1075,17 @@ def _impact_metrics(model, names, m, snaps, w) -> dict:
 
 
 def _final_npz(out: Path, model, state, h) -> dict:
-    """final.npz: world 0's particle spheres (glued ones flagged) and the walls at the end, enough to redraw
-    the pile and re-measure it without rerunning."""
+    """final.npz: every world's active spheres at the end (``sphere_world`` says whose; glued ones flagged by
+    ``sphere_glued``, the wall index, or -1) and the walls, enough to redraw each world and re-measure it without
+    rerunning (:func:`world_state` cuts one world out; a study keeps each run's as ``runs/<point_id>.npz``)."""
     act = host(state.sphere_active).astype(bool)
-    sel = act & (h["world"] == 0)
     walls = _world_walls(model, state)
-    arrays = {"sphere_x": host(state.sphere_x)[sel], "sphere_r": h["radius"][sel], "sphere_glued": h["glued"][sel]}
+    arrays = {
+        "sphere_x": host(state.sphere_x)[act],
+        "sphere_r": h["radius"][act],
+        "sphere_glued": h["glued"][act],
+        "sphere_world": h["world"][act],
+    }
     for k, (v, t) in enumerate(walls):
         arrays[f"wall{k}_vertices"] = v
         arrays[f"wall{k}_triangles"] = t
@@ -1054,6 +1093,55 @@ def _final_npz(out: Path, model, state, h) -> dict:
     arrays["wall_pose"] = host(state.wall_pose)
     np.savez_compressed(out / "final.npz", **arrays)
     return {"final_npz": str(out / "final.npz")}
+
+
+def world_state(final, world: int) -> dict:
+    """One world of a ``final.npz`` (a path or its loaded arrays): its spheres (``sphere_x`` (n, 3) [m],
+    ``sphere_r`` (n,) [m], ``sphere_glued`` (n,)) and every wall (``wall<k>_vertices``, ``wall<k>_triangles``,
+    ``wall_names``, ``wall_pose``), as arrays to save or measure. A file written before ``sphere_world`` existed
+    holds world 0 only."""
+    data = np.load(final) if isinstance(final, (str, Path)) else final
+    sel = data["sphere_world"] == world if "sphere_world" in data else np.full(len(data["sphere_r"]), world == 0)
+    out = {k: np.asarray(data[k])[sel] for k in ("sphere_x", "sphere_r", "sphere_glued")}
+    out.update({k: np.asarray(data[k]) for k in data.keys() if k.startswith("wall")})
+    return out
+
+
+def state_walls(state: dict) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The walls of a :func:`world_state` as (vertices (V, 3) [m], triangles (F, 3)), in wall order."""
+    return [(state[f"wall{k}_vertices"], state[f"wall{k}_triangles"]) for k in range(len(state["wall_names"]))]
+
+
+def _impact_frame(model, walls, measured, x) -> tuple | None:
+    """The part of an impact scene's side view (x, z) worth showing [m]: the measured walls (a dump body and its
+    tailgate) where they are, and the middle 98 % of the particles, with a margin; the site's ground and the
+    loader otherwise shrink a 5 m body to a few specks on a 12 m axis."""
+    boxes = [v[:, [0, 2]] for name, (v, _) in zip(model.wall_names, walls) if name in measured]
+    if len(x):
+        boxes.append(np.percentile(x[:, [0, 2]], [1, 99], axis=0))
+    if not boxes:
+        return None
+    pts = np.concatenate(boxes)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = 0.08 * float(np.max(hi - lo))
+    return ((lo[0] - pad, lo[1] - pad), (hi[0] + pad, hi[1] + pad))
+
+
+def _plot_impacts(out: Path, model, spec, m0) -> str:
+    """impacts.png: world 0's impact energy per area on each measured wall, summed over the phases
+    (``measure.plot_impacts``)."""
+    walls = []
+    for name in spec.measure.walls:
+        k = model.wall_names.index(name)
+        mesh = model.wall_meshes[k]
+        faces = [m0["phases"][ph][name]["faces"] for ph in m0["phases"] if name in m0["phases"][ph]]
+        energy = np.sum([np.asarray(f["energy_j"], dtype=float) for f in faces], axis=0)
+        count = np.sum([np.asarray(f["count"], dtype=float) for f in faces], axis=0)
+        walls.append((name, host(mesh.points).astype(np.float64), host(mesh.indices).reshape(-1, 3), energy, count))
+    phases = ", ".join(m0["phases"])
+    return ms.plot_impacts(
+        walls, out / "impacts.png", title=f"{spec.rig.replace('_', ' ')}: impacts of world 0 ({phases})"
+    )
 
 
 def _pictures(out: Path, spec, model, state, h, result) -> dict:
@@ -1075,7 +1163,15 @@ def _pictures(out: Path, spec, model, state, h, result) -> dict:
     title = spec.rig.replace("_", " ")
     if "angle_fit_deg" in m0:
         title += f": angle of repose {m0['angle_fit_deg']:.1f} deg (fit), {m0['angle_image_deg']:.1f} deg (image)"
-    files["pile_png"] = side_view_png(str(out / "pile.png"), xs, rs, walls_world=walls, axis="y", title=title)
+    frame = None
+    if spec.measure.kind == "impacts":
+        frame = _impact_frame(model, walls, spec.measure.walls, xs)
+        title = f"{title}: world 0 at {state.time:.2f} s"
+    files["pile_png"] = side_view_png(
+        str(out / "pile.png"), xs, rs, walls_world=walls, axis="y", title=title, frame=frame
+    )
+    if spec.measure.kind == "impacts" and "phases" in m0:
+        files["impacts_png"] = _plot_impacts(out, model, spec, m0)
     frames = [tick[0] for tick in result.series.get("drum", []) if "angle_deg" in tick[0]]
     if spec.measure.kind == "drum" and frames:
         m = spec.measure
