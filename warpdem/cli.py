@@ -351,7 +351,10 @@ def cmd_analyze(args) -> int:
         if args.runs and not args.study:
             raise StudyError(f"--runs {args.runs}: give the study file its runs follow (--study STUDY.toml)")
         study = load_study(args.study, check_scene=False) if args.study else None
-        summary = analyze(args.out, study, runs=args.runs)
+        if args.measure and not args.remeasure:
+            raise StudyError(f"--measure {args.measure[0]}: give --remeasure too (the settings to measure again under)")
+        measure = _sets(args.measure) if args.remeasure else None
+        summary = analyze(args.out, study, runs=args.runs, measure=measure)
     except (StudyError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -485,6 +488,17 @@ def main(argv=None) -> int:
     )
     an.add_argument(
         "--json", help="write the analysis as records (name, value, expected, unit, pass) to this file ('-': stdout)"
+    )
+    an.add_argument(
+        "--remeasure",
+        action="store_true",
+        help="measure every run again from its stored final state (a pile's angles and height) before the analysis",
+    )
+    an.add_argument(
+        "--measure",
+        action="append",
+        metavar="measure.FIELD=VALUE",
+        help="with --remeasure: a measure setting to measure under (e.g. measure.base_height=0.001); repeatable",
     )
     an.set_defaults(fn=cmd_analyze)
     sc = sub.add_parser("scene", help="author scenes")

@@ -529,6 +529,98 @@ def test_a_response_added_later_comes_from_the_stored_metrics(finished, tmp_path
     assert "## Response angle" in (out / "analysis" / "report.md").read_text()
 
 
+PILE_KEYS = ("particles", "detached", "pile_height_m", "angle_fit_deg", "angle_image_deg", "angle_cone_deg")
+
+
+def test_every_run_keeps_its_state_and_measures_again_to_its_numbers(finished):
+    """#20's stored states: each finished run keeps its own world's final state (runs/<point_id>.npz, cut from its
+    launch's final.npz, which holds all six worlds), and measuring that state again gives the run's stored pile
+    metrics exactly (the same function on the same spheres; another world's state would give another pile)."""
+    study, out, _ = finished
+    again = execute.remeasure(out, study)
+    assert len(again) == 6
+    counts = set()
+    for f in (out / "runs").glob("*.json"):
+        rec = json.loads(f.read_text())
+        state = np.load(out / "runs" / f"{rec['point_id']}.npz")
+        assert state["sphere_x"].shape == (len(state["sphere_r"]), 3) and len(state["sphere_r"]) == 40
+        counts.add(float(state["sphere_x"][:, 2].sum()))
+        for k in PILE_KEYS:
+            assert again[rec["point_id"]][k] == rec["metrics"][k], (rec["run"], k)
+    assert len(counts) == 6  # six different piles, not one world six times
+    launch = np.load(next((out / "launches").glob("*/final.npz")))
+    assert sorted(set(launch["sphere_world"].tolist())) == list(range(6))
+
+
+def test_measured_again_under_other_settings_equals_a_fresh_run(finished, tmp_path):
+    """Measuring the stored states again with measure.base_height raised by 2 mm gives, run by run, exactly what a
+    fresh run of the study with that setting in [fixed] records (the setting does not touch the dynamics); the
+    pile heights fall, and the report says how the runs were measured."""
+    import shutil
+
+    study, out1, _ = finished
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    raised = {"measure.base_height": 0.002}
+    again = execute.remeasure(out, study, raised)
+    text = STUDY.format(batch=0, target=0.0, verify=0).replace(
+        '"run.dt_levels" = 0', '"run.dt_levels" = 0\n"measure.base_height" = 0.002'
+    )
+    path = tmp_path / "raised.toml"
+    path.write_text(text)
+    fresh_study = load_study(path)
+    _run(fresh_study, tmp_path / "fresh", analyze_after=False)
+    fresh = {r["run"]: r for r in (json.loads(f.read_text()) for f in (tmp_path / "fresh" / "runs").glob("*.json"))}
+    stored = {r["run"]: r for r in (json.loads(f.read_text()) for f in (out / "runs").glob("*.json"))}
+    for run, rec in stored.items():
+        for k in PILE_KEYS:
+            assert again[rec["point_id"]][k] == fresh[run]["metrics"][k], (run, k)
+        assert again[rec["point_id"]]["pile_height_m"] < rec["metrics"]["pile_height_m"]
+    execute.analyze(out, study, measure=raised)
+    table = execute.load_results(out, study, again)
+    assert list(table["height"]) == [fresh[run]["metrics"]["pile_height_m"] for run in table["run"]]
+    assert (
+        "Measured again from each run's stored final state (6 runs) with measure.base_height = 0.002"
+        in (out / "analysis" / "report.md").read_text()
+    )
+
+
+def test_measuring_again_refuses_what_it_cannot_do(finished, tmp_path):
+    """A key that is not a measure setting, and a run without a stored state (one made before the states were
+    kept), are refused naming the key or the run and what to do."""
+    import shutil
+
+    study, out1, _ = finished
+    with pytest.raises(
+        StudyError, match=r"interaction.grain.grain.static_friction = 0.5 is not allowed; expected measure"
+    ):
+        execute.remeasure(out1, study, {"interaction.grain.grain.static_friction": 0.5})
+    out = tmp_path / "old"
+    shutil.copytree(out1, out)
+    victim = sorted((out / "runs").glob("*.npz"))[0]
+    victim.unlink()
+    with pytest.raises(StudyError, match=rf"has no stored final state \(runs/{victim.stem}.npz\)"):
+        execute.remeasure(out, study)
+
+
+def test_the_gallery_has_a_picture_per_run(finished, tmp_path):
+    """The report gathers a side view per finished run, named by run number (analysis/gallery/run_NN.png), with the
+    surface fit's flanks drawn; six runs, six pictures, in rows of three."""
+    import shutil
+
+    study, out1, _ = finished
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    execute.analyze(out, study)
+    md = (out / "analysis" / "report.md").read_text()
+    gallery = md.split("## Gallery")[1]
+    runs = sorted(json.loads(f.read_text())["run"] for f in (out / "runs").glob("*.json"))
+    for run in runs:
+        assert f"![run {run}](gallery/run_{run:02d}.png)" in gallery
+        assert (out / "analysis" / "gallery" / f"run_{run:02d}.png").stat().st_size > 1000
+    assert gallery.count("|---|---|---|") == 2
+
+
 def test_runs_made_elsewhere_are_analysed_from_a_csv(finished, tmp_path, capsys):
     """``warpdem analyze OUT --study S --runs runs.csv``: the finished runs written out as a table in actual units
     (as an EDEM run table would be) give the same fit as the study folder; a missing column, a cell that is not a

@@ -5,6 +5,7 @@ Layout of a study's output folder ``OUT``::
     OUT/study.toml          copy of the study file the runs came from
     OUT/design.csv          the design table (run order, coded and actual values, world seeds, point ids)
     OUT/runs/<point_id>.json one file per finished run: its design row, overrides, responses, metrics
+    OUT/runs/<point_id>.npz  its world's final state (spheres and walls), to draw and measure again
     OUT/launches/<id>/      each launch's metrics.json, final.npz, pile.png and, while it runs, checkpoint.npz
     OUT/results.csv         the design table with the responses of the finished runs (rewritten per batch)
     OUT/analysis/           report.md, ANOVA tables, plots (:func:`analyze`)
@@ -35,6 +36,7 @@ import math
 import os
 import shutil
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -259,8 +261,27 @@ def _check_folder(out: Path, study: sp.StudySpec) -> None:
             raise sp.StudyError(f"{out}: holds study {name!r}, not {study.name!r}; choose another --out")
 
 
+def _save_state(runs_dir: Path, point_id: str, rec: dict, finals: dict) -> None:
+    """``runs/<point_id>.npz``: the run's own world cut out of its launch's final.npz (every world's final state
+    is kept, so a run can be drawn and measured again without rerunning); ``finals`` caches the loaded files."""
+    from warpdem.scene.runner import world_state
+
+    path = rec["info"].get("files", {}).get("final_npz")
+    if not path or not Path(path).exists():
+        return
+    if path not in finals:
+        with np.load(path) as data:
+            finals[path] = {k: data[k] for k in data.keys()}
+    tmp = runs_dir / f"{point_id}.tmp.npz"
+    np.savez_compressed(tmp, **world_state(finals[path], int(rec["metrics"]["world"])))
+    os.replace(tmp, runs_dir / f"{point_id}.npz")
+
+
 def _save_batch(study, runs_dir: Path, batch: list[dict], records: list[dict], wall: float, device: str) -> None:
+    finals: dict = {}
     for row, rec in zip(batch, records):
+        # the state before the record: a run is finished when its JSON exists, and then its state does too
+        _save_state(runs_dir, row["point_id"], rec, finals)
         _write_json(
             runs_dir / f"{row['point_id']}.json",
             {
@@ -663,9 +684,10 @@ def run_study(
     return result
 
 
-def load_results(out, study: sp.StudySpec | None = None) -> pd.DataFrame:
+def load_results(out, study: sp.StudySpec | None = None, metrics: dict | None = None) -> pd.DataFrame:
     """The design table of ``out`` with one column per response (NaN where a run has not finished); a response
-    its runs did not record (one added to the study file since) is read from each run's stored metrics."""
+    its runs did not record (one added to the study file since) is read from each run's stored metrics. With
+    ``metrics`` ({point_id: metrics}, :func:`remeasure`) every response of those runs is read from them instead."""
     out = Path(out)
     study = study or sp.load_study(out / "study.toml", check_scene=False)
     table = pd.read_csv(out / "design.csv")
@@ -679,7 +701,12 @@ def load_results(out, study: sp.StudySpec | None = None) -> pd.DataFrame:
                 rec = json.load(fh)
             for r in study.responses:
                 # a response added to the study after its runs is read from their stored metrics
-                v = rec["responses"][r.name] if r.name in rec["responses"] else _response(rec["metrics"], r.measure)
+                if metrics is not None and pid in metrics:
+                    v = _response(metrics[pid], r.measure)
+                elif r.name in rec["responses"]:
+                    v = rec["responses"][r.name]
+                else:
+                    v = _response(rec["metrics"], r.measure)
                 table.loc[i, r.name] = math.nan if v is None else v
             table.loc[i, "wall_s"] = rec["info"].get("batch_wall_s", math.nan)
     return table
@@ -824,17 +851,26 @@ def external_runs(path, study: sp.StudySpec) -> pd.DataFrame:
     return out
 
 
-def analyze(out, study: sp.StudySpec | None = None, runs=None) -> dict:
+def analyze(out, study: sp.StudySpec | None = None, runs=None, measure: Mapping | None = None) -> dict:
     """Fit the study's model to the finished runs of ``out`` and write ``out/analysis`` (report.md, ANOVA
-    tables, Pareto and contour plots, target solutions). With ``runs`` (a CSV run table, :func:`external_runs`)
-    analyse those instead, into ``out``. Returns :func:`report.write_report`'s summary."""
+    tables, Pareto and contour plots, target solutions, the gallery of the runs). With ``runs`` (a CSV run table,
+    :func:`external_runs`) analyse those instead, into ``out``. With ``measure`` ({``measure.FIELD``: value},
+    possibly empty) every run is measured again from its stored final state under those settings
+    (:func:`remeasure`) and analysed so. Returns :func:`report.write_report`'s summary."""
     from .report import write_report
 
     out = Path(out)
     study = study or sp.load_study(out / "study.toml", check_scene=False)
-    data = load_results(out, study) if runs is None else external_runs(runs, study)
-    finished = data[[r.name for r in study.responses]].notna().any(axis=1)
     notes = []
+    remeasured = None
+    if measure is not None:
+        if runs is not None:
+            raise sp.StudyError(f"--runs {runs}: runs made elsewhere have no stored state to measure again")
+        remeasured = remeasure(out, study, measure)
+        told = ", ".join(f"{k} = {v}" for k, v in measure.items()) or "the study's own measure settings"
+        notes.append(f"Measured again from each run's stored final state ({len(remeasured)} runs) with {told}.")
+    data = load_results(out, study, remeasured) if runs is None else external_runs(runs, study)
+    finished = data[[r.name for r in study.responses]].notna().any(axis=1)
     if not finished.all():
         notes.append(f"{int((~finished).sum())} of {len(data)} runs have not finished; they are left out.")
     if runs is None:
@@ -869,6 +905,7 @@ def analyze(out, study: sp.StudySpec | None = None, runs=None) -> dict:
     if runs is not None:
         return summary
     _append_settling(out, study)
+    _append_gallery(out, study, measure)
     vfile = out / "verification" / "verification.json"
     if vfile.exists():
         with open(vfile) as fh:
@@ -934,6 +971,131 @@ def _write_records(path, records: list[dict]) -> None:
         print(text)
     else:
         Path(path).write_text(text + "\n")
+
+
+def _measure_overrides(measure: Mapping, where: str) -> dict:
+    """``measure`` checked: keys ``measure.FIELD`` (the settings a stored state can be measured under again)."""
+    out = {}
+    for k, v in measure.items():
+        if not str(k).startswith("measure."):
+            raise sp.StudyError(
+                f"{where}: {k} = {v!r} is not allowed; expected measure.FIELD keys (e.g. measure.center)"
+            )
+        out[str(k)] = v
+    return out
+
+
+def _run_state(out: Path, point_id: str) -> dict | None:
+    """The stored final state of run ``point_id`` (``runs/<point_id>.npz``, :func:`_save_state`), or None."""
+    f = out / "runs" / f"{point_id}.npz"
+    if not f.exists():
+        return None
+    with np.load(f) as data:
+        return {k: data[k] for k in data.keys()}
+
+
+def _free_spheres(state: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (n, 3) and radii (n,) of a stored state's free particle spheres (glued ones excluded)."""
+    free = state["sphere_glued"] < 0
+    return state["sphere_x"][free].astype(np.float64), state["sphere_r"][free].astype(np.float64)
+
+
+def remeasure(out, study: sp.StudySpec | None = None, measure: Mapping | None = None) -> dict[str, dict]:
+    """Every finished run of ``out`` measured again from its stored final state (``runs/<point_id>.npz``): the
+    pile metrics (``runner.PILE_METRICS``) under the run's own measure settings with ``measure``
+    ({``measure.FIELD``: value}, e.g. ``measure.center``, ``measure.base_height``) applied, the run's other
+    metrics as stored. Same function as at the end of a run (``runner.measure_pile``), so with no ``measure``
+    the numbers are the stored ones. Returns {point_id: metrics}. Raises StudyError for a scene that is not an
+    angle of repose, a key that is not a measure setting, or a run stored without its state (made before the
+    states were kept: run it again)."""
+    from warpdem.scene.runner import PILE_METRICS, measure_pile
+    from warpdem.scene.stage import StageError, apply_overrides
+
+    out = Path(out)
+    study = study or sp.load_study(out / "study.toml", check_scene=False)
+    ov = _measure_overrides(measure or {}, f"{out}: measure again")
+    scene, result = _scene_cache(study), {}
+    for row, rec in _finished_records(out, study):
+        try:
+            sc = apply_overrides(scene(row["overrides"]), ov) if ov else scene(row["overrides"])
+        except (StageError, ValueError) as e:
+            raise sp.StudyError(f"{out}: measure again: {e}") from None
+        if sc.measure.kind != "angle_of_repose":
+            raise sp.StudyError(
+                f"{out}: measure again: the scene measures {sc.measure.kind!r}; only an angle_of_repose pile is "
+                "measured from its final state (a press curve or a drum's frames need the run itself)"
+            )
+        state = _run_state(out, row["point_id"])
+        if state is None:
+            raise sp.StudyError(
+                f"{out}: run {row['run']} ({row['point_id']}) has no stored final state (runs/{row['point_id']}.npz); "
+                "it was made before every run's state was kept: delete its runs/ JSON and run the study again"
+            )
+        m = {k: v for k, v in rec["metrics"].items() if k not in PILE_METRICS}
+        m.update(measure_pile(*_free_spheres(state), sc.measure))
+        result[row["point_id"]] = m
+    return result
+
+
+GALLERY_RUNS_PER_ROW = 3
+"""Pictures per row of the report's gallery."""
+
+
+def _append_gallery(out: Path, study: sp.StudySpec, measure: Mapping | None) -> None:
+    """A side view per finished run of a pile (``analysis/gallery/run_NN.png``, named by run number) with the
+    fitted flanks drawn on it (``measure.flank_lines``: the protractor), gathered in report.md."""
+    from warpdem.scene.export import side_view_png
+    from warpdem.scene.measure import flank_lines
+    from warpdem.scene.runner import pile, state_walls
+    from warpdem.scene.stage import apply_overrides
+
+    ov = _measure_overrides(measure or {}, f"{out}: gallery")
+    scene, shots = _scene_cache(study), []
+    folder = out / "analysis" / "gallery"
+    for row, _ in _finished_records(out, study):
+        sc = scene(row["overrides"])
+        state = _run_state(out, row["point_id"]) if sc.measure.kind == "angle_of_repose" else None
+        if state is None:
+            continue
+        m = apply_overrides(sc, ov).measure if ov else sc.measure
+        mw, fit, x, r = pile(*_free_spheres(state), m)
+        lines, frame, title = [], None, f"run {row['run']}: {mw['particles']} particles in the pile"
+        if fit is not None:
+            flanks = flank_lines(fit, m.base_height, "y")
+            lines = [(f["points"][0], f["points"][1], f"{f['angle_deg']:.1f}°") for f in flanks]
+            title = f"run {row['run']}: {mw['angle_fit_deg']:.1f}° (fit, mean of {len(fit['lines'])} sectors)"
+            reach = 1.15 * fit["extent_m"]
+            top = m.base_height + max(mw["pile_height_m"], 0.3 * fit["extent_m"])
+            frame = (
+                (fit["center"][0] - reach, m.base_height - 0.1 * reach),
+                (fit["center"][0] + reach, top + 0.15 * reach),
+            )
+        folder.mkdir(parents=True, exist_ok=True)
+        name = f"run_{int(row['run']):02d}.png"
+        xs = np.concatenate([x, state["sphere_x"][state["sphere_glued"] >= 0]])
+        rs = np.concatenate([r, state["sphere_r"][state["sphere_glued"] >= 0]])
+        side_view_png(
+            folder / name, xs, rs, state_walls(state), "y", title, figsize=(4.5, 3.0), dpi=90, lines=lines, frame=frame
+        )
+        shots.append((int(row["run"]), name))
+    if not shots:
+        return
+    lines = [
+        "",
+        "## Gallery",
+        "",
+        "Each run's pile at its end, seen from -y, with the flanks the surface fit measured (red; the sectors facing "
+        "each way, weighted; labelled with their angle). Named by run number.",
+        "",
+    ]
+    for i in range(0, len(shots), GALLERY_RUNS_PER_ROW):
+        part = shots[i : i + GALLERY_RUNS_PER_ROW]
+        lines.append("| " + " | ".join(f"run {k}" for k, _ in part) + " |")
+        lines.append("|" + "---|" * len(part))
+        lines.append("| " + " | ".join(f"![run {k}](gallery/{n})" for k, n in part) + " |")
+        lines.append("")
+    with open(out / "analysis" / "report.md", "a") as fh:
+        fh.write("\n".join(lines) + "\n")
 
 
 def _append_settling(out: Path, study: sp.StudySpec) -> None:
