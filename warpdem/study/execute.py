@@ -979,7 +979,7 @@ def _measure_overrides(measure: Mapping, where: str) -> dict:
     for k, v in measure.items():
         if not str(k).startswith("measure."):
             raise sp.StudyError(
-                f"{where}: {k} = {v!r} is not allowed; expected measure.FIELD keys (e.g. measure.center)"
+                f"{where}: {k} = {v!r} is not allowed; expected measure.FIELD keys (e.g. measure.base_height)"
             )
         out[str(k)] = v
     return out
@@ -1003,7 +1003,7 @@ def _free_spheres(state: dict) -> tuple[np.ndarray, np.ndarray]:
 def remeasure(out, study: sp.StudySpec | None = None, measure: Mapping | None = None) -> dict[str, dict]:
     """Every finished run of ``out`` measured again from its stored final state (``runs/<point_id>.npz``): the
     pile metrics (``runner.PILE_METRICS``) under the run's own measure settings with ``measure``
-    ({``measure.FIELD``: value}, e.g. ``measure.center``, ``measure.base_height``) applied, the run's other
+    ({``measure.FIELD``: value}, e.g. ``measure.base_height``) applied, the run's other
     metrics as stored. Same function as at the end of a run (``runner.measure_pile``), so with no ``measure``
     the numbers are the stored ones. Returns {point_id: metrics}. Raises StudyError for a scene that is not an
     angle of repose, a key that is not a measure setting, or a run stored without its state (made before the
