@@ -80,25 +80,8 @@ def test_press_plasticity_is_named(tmp_path, press_runs):
 # the lifting cylinder: cohesion hidden
 # --------------------------------------------------------------------------------------------------
 
-LIFT_RIG = {
-    "law": "hertz_mindlin",
-    "coated": False,
-    "count": 500,
-    "radius_spread": 0.05,
-    "pour_speed": 1.0,
-    "settle_time": 0.1,
-    "lift_speed": 0.5,
-    "after_lift": 0.25,
-    "plate_static_friction": 0.8,
-    "plate_rolling_friction": 0.3,
-}
-LIFT_SOFT = {
-    "material.ore.shear_modulus": 2.5e5,
-    "interaction.ore.ore.restitution": 0.5,
-    "interaction.ore.steel.restitution": 0.5,
-    "interaction.ore.plate.restitution": 0.5,
-}
-RADII = (0.005, 0.0075, 0.01125)
+LIFT_RIG, LIFT_SOFT = syn.LIFT_RIG, syn.LIFT_SOFT
+RADII = syn.LIFT_RADII
 """Grain radii [m] of the cohesion case (the condition): x 1.5 apart, so the Bond number spans a factor 5. The
 smallest is 5 mm because the cohesion candidate's range ends at Bond number candidates.BOND_MAX = 5 for the
 smoke rig's 2.5 mm grains, which is 1.25 at 5 mm: about where these piles start to stand as columns."""
@@ -149,18 +132,7 @@ ranges = {{ cohesion = [0.0, {gamma_max}] }}
 """
 
 
-def _cylinder(radius: float) -> dict:
-    """The smoke lifting cylinder scaled with the grain from its 2.5 mm original (the cylinder 22 radii wide and
-    14 high, a base 56 radii square, a pour region 12 radii tall), so that every pile of 500 grains is the same in
-    grain diameters and the base model's angle does not depend on the size; what does is the Bond number."""
-    s = radius / 0.0025
-    return {
-        "particle_radius": radius,
-        "inner_diameter": round(0.055 * s, 6),
-        "height": round(0.035 * s, 6),
-        "base_size": round(0.14 * s, 6),
-        "pour_height": round(0.03 * s, 6),
-    }
+_cylinder = syn.lift_geometry
 
 
 def _bond_gamma(bond: float, radius: float, density: float = rigs.ORE.density) -> float:

@@ -225,3 +225,49 @@ def press_rows(law: str, plasticity: float, mu_s: float, sd: float, rng, seeds=D
             )
         )
     return noisy_rows(experiments, metrics, {"residual_set_ratio": sd}, rng)
+
+
+# --------------------------------------------------------------------------------------------------
+# the smoke lifting cylinder at three grain sizes (tests/diagnose: the cohesion and the confounded cases)
+# --------------------------------------------------------------------------------------------------
+
+LIFT_RIG = {
+    "law": "hertz_mindlin",
+    "coated": False,
+    "count": 500,
+    "radius_spread": 0.05,
+    "pour_speed": 1.0,
+    "settle_time": 0.1,
+    "lift_speed": 0.5,
+    "after_lift": 0.25,
+    "plate_static_friction": 0.8,
+    "plate_rolling_friction": 0.3,
+}
+"""Rig parameters of the lifting-cylinder cases: the smoke rig with Hertz-Mindlin ore spheres, no coating, a rough
+base plate, a short settle and a fast lift (a few seconds of one CPU core per world)."""
+
+LIFT_SOFT = {
+    "material.ore.shear_modulus": 2.5e5,
+    "interaction.ore.ore.restitution": 0.5,
+    "interaction.ore.steel.restitution": 0.5,
+    "interaction.ore.plate.restitution": 0.5,
+}
+"""Soft ore (a long step) with restitution 0.5 against everything."""
+
+LIFT_RADII = (0.005, 0.0075, 0.01125)
+"""Grain radii [m] of the lifting-cylinder cases (their condition), x 1.5 apart."""
+
+
+def lift_geometry(radius: float) -> dict:
+    """The smoke lifting cylinder scaled with the grain from its 2.5 mm original (the cylinder 22 radii wide and
+    14 high, a base 56 radii square, a pour region 12 radii tall), so that a pile of a given count is the same in
+    grain diameters at every size: what a size series then shows comes from what does not scale (cohesion's Bond
+    number), not from the rig."""
+    s = radius / 0.0025
+    return {
+        "particle_radius": radius,
+        "inner_diameter": round(0.055 * s, 6),
+        "height": round(0.035 * s, 6),
+        "base_size": round(0.14 * s, 6),
+        "pour_height": round(0.03 * s, 6),
+    }
