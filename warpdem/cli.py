@@ -355,6 +355,10 @@ def cmd_analyze(args) -> int:
             raise StudyError(f"--measure {args.measure[0]}: give --remeasure too (the settings to measure again under)")
         measure = _sets(args.measure) if args.remeasure else None
         summary = analyze(args.out, study, runs=args.runs, measure=measure)
+        if args.excel:
+            from .study.execute import export_excel
+
+            print(f"workbook: {export_excel(args.out, args.excel)}")
     except (StudyError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
@@ -488,6 +492,9 @@ def main(argv=None) -> int:
     )
     an.add_argument(
         "--json", help="write the analysis as records (name, value, expected, unit, pass) to this file ('-': stdout)"
+    )
+    an.add_argument(
+        "--excel", metavar="FILE.xlsx", help="also write the analysis as an Excel workbook (needs openpyxl)"
     )
     an.add_argument(
         "--remeasure",

@@ -35,6 +35,28 @@ def test_influence_matches_statsmodels_on_a_design_matrix_built_by_hand():
     np.testing.assert_allclose(got["actual"] - got["predicted"], got["residual"], atol=1e-12)
 
 
+def test_influence_on_seed_000s_published_box_behnken_matches_statsmodels():
+    """#20's diagnostics on a published data set: seed 000's Box-Behnken (17 runs of angle of repose, the paper's
+    own table). Leverage, externally studentized residuals, Cook's distance and DFFITS of its quadratic equal
+    statsmodels' OLSInfluence on the design matrix written out here; and, as the design's symmetry requires, the 5
+    centre points share one leverage and the 12 edge midpoints another, larger one."""
+    from pathlib import Path
+
+    runs = pd.read_csv(Path(__file__).parents[2] / "studies" / "reference" / "pellets_bbd_runs.csv")
+    c, d, e = (runs[f].to_numpy(dtype=float) for f in "CDE")
+    X = np.column_stack([np.ones(len(c)), c, d, e, c * d, c * e, d * e, c * c, d * d, e * e])
+    ref = sm.OLS(runs["aor_deg"].to_numpy(dtype=float), X).fit().get_influence()
+    got = influence(fit_model(runs, "aor_deg", ["C", "D", "E"], "quadratic"))
+    np.testing.assert_allclose(got["leverage"], ref.hat_matrix_diag, rtol=1e-10)
+    np.testing.assert_allclose(got["externally_studentized"], ref.resid_studentized_external, rtol=1e-8)
+    np.testing.assert_allclose(got["cooks_distance"], ref.cooks_distance[0], rtol=1e-8)
+    np.testing.assert_allclose(got["dffits"], ref.dffits[0], rtol=1e-8)
+    centre = (c == 0) & (d == 0) & (e == 0)
+    lev = np.asarray(got["leverage"])
+    assert centre.sum() == 5 and np.allclose(lev[centre], lev[centre][0]) and np.allclose(lev[~centre], lev[~centre][0])
+    assert lev[centre][0] < lev[~centre][0]
+
+
 def test_box_cox_of_the_mean_model_is_scipys_maximum_likelihood_lambda():
     """With no terms the Box-Cox profile is SciPy's: the same lambda (the residual sum of squares of the
     geometric-mean-scaled transform is minimal where the Box-Cox likelihood is maximal)."""

@@ -621,6 +621,31 @@ def test_the_gallery_has_a_picture_per_run(finished, tmp_path):
     assert gallery.count("|---|---|---|") == 2
 
 
+def test_the_analysis_as_an_excel_workbook(finished, tmp_path):
+    """#20's optional Excel export: a Summary sheet with each response's fit statistics as summary.json has them,
+    then one sheet per table the analysis wrote, each reading back equal to its CSV (the runs the model was
+    fitted to, the ANOVA, the coefficients); a folder with no analysis is refused, naming what to run."""
+    import shutil
+
+    pytest.importorskip("openpyxl")
+    study, out1, _ = finished
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    with pytest.raises(StudyError, match="no analysis to export"):
+        execute.export_excel(out, tmp_path / "none.xlsx")
+    execute.analyze(out, study)
+    path = execute.export_excel(out, tmp_path / "tiny.xlsx")
+    book = pd.read_excel(path, sheet_name=None)
+    summary = json.loads((out / "analysis" / "summary.json").read_text())["height"]
+    row = book["Summary"].set_index("response").loc["height"]
+    for k in ("r2", "adj_r2", "pred_r2", "model_p", "adeq_precision"):
+        assert row[k] == pytest.approx(summary[k], rel=1e-12), k
+    for name in ("runs", "anova_height", "coefficients_height"):
+        want = pd.read_csv(out / "analysis" / f"{name}.csv")
+        pd.testing.assert_frame_equal(book[name], want, check_dtype=False)
+    assert len(book["runs"]) == 6
+
+
 def test_runs_made_elsewhere_are_analysed_from_a_csv(finished, tmp_path, capsys):
     """``warpdem analyze OUT --study S --runs runs.csv``: the finished runs written out as a table in actual units
     (as an EDEM run table would be) give the same fit as the study folder; a missing column, a cell that is not a

@@ -902,6 +902,7 @@ def analyze(out, study: sp.StudySpec | None = None, runs=None, measure: Mapping 
     )
     with open(out / "analysis" / "summary.json", "w") as fh:
         json.dump(summary, fh, indent=1, default=_json_default)
+    data[finished].to_csv(out / "analysis" / "runs.csv", index=False)  # the table the model was fitted to
     if runs is not None:
         return summary
     _append_settling(out, study)
@@ -911,6 +912,50 @@ def analyze(out, study: sp.StudySpec | None = None, runs=None, measure: Mapping 
         with open(vfile) as fh:
             _append_verification(out, json.load(fh))
     return summary
+
+
+EXCEL_FIT_KEYS = ("model", "n_used", "model_p", "r2", "adj_r2", "pred_r2", "adeq_precision", "suggested_model")
+"""The fit statistics the workbook's Summary sheet gives per response (from summary.json)."""
+
+
+def export_excel(out, path) -> Path:
+    """The analysis of study folder ``out`` as an Excel workbook at ``path`` (pandas with openpyxl): a Summary
+    sheet (per response: model, runs used, model p, R², adjusted and predicted R², adequate precision, the
+    suggested model order, the equations), then one sheet per table the analysis wrote (``analysis/*.csv``: the
+    runs it fitted, ANOVA, coefficients, target solutions, desirability), named after the file (cut to Excel's 31
+    characters). Run :func:`analyze` first. Raises StudyError without an analysis or without openpyxl."""
+    out, path = Path(out), Path(path)
+    folder = out / "analysis"
+    if not (folder / "summary.json").exists():
+        raise sp.StudyError(f"{out}: no analysis to export (analysis/summary.json); run warpdem analyze {out} first")
+    try:
+        import openpyxl  # noqa: F401
+    except ImportError:
+        raise sp.StudyError(
+            f"--excel {path}: writing a workbook needs openpyxl: python3 -m pip install 'warpdem[excel]'"
+        ) from None
+    with open(folder / "summary.json") as fh:
+        summary = json.load(fh)
+    rows = []
+    for name, s in summary.items():
+        if isinstance(s, dict) and "r2" in s:
+            row = {"response": name} | {k: s.get(k) for k in EXCEL_FIT_KEYS}
+            row.update(equation_coded=s.get("equation_coded"), equation_actual=s.get("equation_actual"))
+            rows.append(row)
+    sheets, used = {"Summary": pd.DataFrame(rows)}, {"Summary"}
+    for csv in sorted(folder.glob("*.csv")):
+        name = csv.stem[:31]
+        k = 2
+        while name in used:  # two long names cut to one
+            name = f"{csv.stem[: 31 - len(str(k)) - 1]}~{k}"
+            k += 1
+        used.add(name)
+        sheets[name] = pd.read_csv(csv)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with pd.ExcelWriter(path, engine="openpyxl") as xl:
+        for name, table in sheets.items():
+            table.to_excel(xl, sheet_name=name, index=False)
+    return path
 
 
 def confirmation_runs_interval(conf: dict, runs: int) -> tuple[float, float]:
