@@ -94,20 +94,7 @@ smoke = true
 seed = 1
 
 [fixed]
-law = "hertz_mindlin"
-coated = false
-count = 500
-radius_spread = 0.05
-pour_speed = 1.0
-settle_time = 0.1
-lift_speed = 0.5
-after_lift = 0.25
-plate_static_friction = 0.8
-plate_rolling_friction = 0.3
-"material.ore.shear_modulus" = 2.5e5
-"interaction.ore.ore.restitution" = 0.5
-"interaction.ore.steel.restitution" = 0.5
-"interaction.ore.plate.restitution" = 0.5
+FIXED
 
 [[parameters]]
 name = "mu_r"
@@ -129,7 +116,7 @@ mcmc_steps = 400
 [candidates]
 use = ["cohesion", "plasticity", "wall_friction"]
 ranges = {{ cohesion = [0.0, {gamma_max}] }}
-"""
+""".replace("FIXED", syn.toml_lines({**LIFT_RIG, **LIFT_SOFT}))
 
 
 _cylinder = syn.lift_geometry

@@ -258,6 +258,18 @@ LIFT_RADII = (0.005, 0.0075, 0.01125)
 """Grain radii [m] of the lifting-cylinder cases (their condition), x 1.5 apart."""
 
 
+def toml_lines(values: dict) -> str:
+    """``values`` ({key: number, bool or text}) as TOML key = value lines, a dotted key quoted (e.g. a data file's
+    ``[fixed]`` table from :data:`LIFT_RIG` and :data:`LIFT_SOFT`)."""
+
+    def lit(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        return f'"{v}"' if isinstance(v, str) else repr(v)
+
+    return "\n".join(f'"{k}" = {lit(v)}' if "." in k else f"{k} = {lit(v)}" for k, v in values.items())
+
+
 def lift_geometry(radius: float) -> dict:
     """The smoke lifting cylinder scaled with the grain from its 2.5 mm original (the cylinder 22 radii wide and
     14 high, a base 56 radii square, a pour region 12 radii tall), so that a pile of a given count is the same in
