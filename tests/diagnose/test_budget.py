@@ -150,3 +150,24 @@ def test_surrogate_check_refines_only_a_miss():
     off = {0: values[0] + [5.0, 0.0], 1: values[1]}
     res = _check(gp, off)
     assert res["refine"] and res["p"] < 0.05
+
+
+def test_step_checks_count_the_worlds_past_the_stable_step(tmp_path):
+    """step_checks reads every stored world's info: those with a step warning are counted, with the largest margin
+    among them; a world without one (or with no info) is counted as a world only."""
+    import json
+
+    from warpdem.diagnose.pipeline import step_checks
+
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    infos = [
+        {"step_warning": "the step reached 1.35 ...", "step_margin_max": 1.35},
+        {"step_warning": "the step reached 1.10 ...", "step_margin_max": 1.1},
+        {"step_margin_max": 0.6},
+        {},
+    ]
+    for k, info in enumerate(infos):
+        (runs / f"w{k}.json").write_text(json.dumps({"metrics": {}, "info": info}))
+    assert step_checks(runs) == {"worlds": 4, "over_stable_step": 2, "worst_step_margin": 1.35}
+    assert step_checks(tmp_path / "none") == {"worlds": 0, "over_stable_step": 0, "worst_step_margin": None}

@@ -67,6 +67,10 @@ def test_press_plasticity_is_named(tmp_path, press_runs):
     assert res["gain"]["rmse"]["residual_set_ratio"]["reduction"] >= 0.5
     saved = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
     assert saved["verdict"] == "cause" and (tmp_path / "out" / "report.md").exists()
+    # every stored world is checked for a step past the stable one, and the report says so when any did
+    assert saved["checks"]["worlds"] == res["worlds"]
+    told = "simulated worlds stepped past the stable step" in (tmp_path / "out" / "report.md").read_text()
+    assert told == (saved["checks"]["over_stable_step"] > 0)
     # every extended model shows its own misfit, and why it is or is not adequate
     assert saved["extended"]["plasticity"]["failed_tests"] == []
     report = (tmp_path / "out" / "report.md").read_text()

@@ -899,6 +899,24 @@ def gain(prob: Problem, base: dict, ext: dict, seed: int) -> dict:
     return out
 
 
+def step_checks(runs_dir) -> dict:
+    """How many of the stored worlds under ``runs_dir`` stepped past the stable step of their stiffest contact in
+    some tick (``info.step_warning``, as a study's run checks flag it): {"worlds", "over_stable_step",
+    "worst_step_margin"} (the largest ``step_margin_max`` among those, or None). Leapfrog beyond its stability
+    limit makes a world's figures less trustworthy; a diagnosis built on them must say so."""
+    worlds = over = 0
+    worst = None
+    for f in sorted(Path(runs_dir).glob("*.json")):
+        with open(f) as fh:
+            info = json.load(fh).get("info", {})
+        worlds += 1
+        if info.get("step_warning"):
+            over += 1
+            m = float(info.get("step_margin_max", math.nan))
+            worst = m if worst is None or m > worst else worst
+    return {"worlds": worlds, "over_stable_step": over, "worst_step_margin": worst}
+
+
 def diagnose(
     source,
     out_dir=None,
@@ -971,6 +989,7 @@ def diagnose(
                 skipped=skipped,
                 separating=separating,
                 gains=gains,
+                checks=step_checks(out / "runs"),
             )
         )
     except (RunStopped, Stopped) as e:

@@ -155,7 +155,7 @@ def _plots(out: Path, prob, evals: dict, named: str | None) -> list[str]:
     return files
 
 
-def write(out: Path, prob, evals: dict, decision: dict, screens, skipped, separating, gains) -> dict:
+def write(out: Path, prob, evals: dict, decision: dict, screens, skipped, separating, gains, checks=None) -> dict:
     """Write report.md, diagnosis.json and the PNGs into ``out``; return the diagnosis (diagnosis.json's content)."""
     out = Path(out)
     spec = prob.spec
@@ -188,6 +188,7 @@ def write(out: Path, prob, evals: dict, decision: dict, screens, skipped, separa
         "extended": {n: _model_json(e) for n, e in evals.items() if n != "base"},
         "gain": gains,
         "pictures": pictures,
+        "checks": checks,
     }
     with open(out / "diagnosis.json", "w") as fh:
         json.dump(diag, fh, indent=1, default=_json_default)
@@ -240,6 +241,15 @@ def _markdown(prob, evals, decision, diag, screens, skipped, separating, gains) 
             f"| {r} | {_f(nz['measurement_sd'][r])} | {_f(nz['seed_sd'].get(r, math.nan))} | "
             f"{_f(nz['roughness_sd'].get(r, math.nan))} |"
         )
+    ck = diag.get("checks") or {}
+    if ck.get("over_stable_step"):
+        L += [
+            "",
+            f"**Check:** {ck['over_stable_step']} of the {ck['worlds']} simulated worlds stepped past the stable step "
+            f"of their stiffest contact in some tick (worst {_f(ck['worst_step_margin'], 3)} of it): leapfrog beyond "
+            "its stability limit, so their figures are less trustworthy than the noise budget says. A lower "
+            "`run.dt_fraction` in `[fixed]` removes it (at the cost of more steps).",
+        ]
     L += ["", "## Base model: calibrated parameters", ""]
     L += _params_table(base)
     L += ["", _surrogate_line(base), ""]
