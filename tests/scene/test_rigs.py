@@ -414,10 +414,7 @@ def test_truck_tipper_pictures(rig_run):
     names = list(final["wall_names"])
     walls = [(final[f"wall{k}_vertices"], final[f"wall{k}_triangles"]) for k in range(len(names))]
 
-    class Model:
-        wall_names = names
-
-    (x0, z0), (x1, z1) = _impact_frame(Model, walls, ["Body", "Tailgate"], final["sphere_x"])
+    (x0, z0), (x1, z1) = _impact_frame(names, walls, ["Body", "Tailgate"], final["sphere_x"])
     body = walls[names.index("Body")][0]
     ground = walls[names.index("Ground")][0]
     assert x0 <= body[:, 0].min() and body[:, 0].max() <= x1 and z0 <= body[:, 2].min() and body[:, 2].max() <= z1

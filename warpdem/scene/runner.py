@@ -98,21 +98,29 @@ PILE_METRICS = (
 """The metrics :func:`measure_pile` writes: what a stored final state can be measured for again."""
 
 
-def pile(x, r, m) -> tuple[dict, dict | None, np.ndarray, np.ndarray]:
-    """:func:`measure_pile`'s metrics, the surface fit (``measure.angle_surface_fit``'s result, None when it
-    failed) and the pile's own spheres: centres (k, 3) [m] and radii (k,) [m]."""
+def pile_select(x, r, m) -> tuple[np.ndarray, np.ndarray, int]:
+    """The pile among one world's free particle spheres (centres ``x`` (n, 3) [m], radii ``r`` (n,) [m]) under the
+    angle-of-repose measure settings ``m``: spheres below the base (rolled off the plate) and those not connected
+    to it (stuck to a lifted wall, in the air) are not the pile. Returns its centres (k, 3) [m], radii (k,) [m] and
+    how many spheres above the base were left out (``detached``)."""
     x, r = np.asarray(x, dtype=np.float64).reshape(-1, 3), np.asarray(r, dtype=np.float64).reshape(-1)
-    mw: dict = {}
-    # what rolled off the base is not part of the pile
     keep = x[:, 2] - r > m.base_height - 2 * r.max(initial=0.0)
     x, r = x[keep], r[keep]
-    # nor is what sticks to a lifted wall or is still in the air
     on = ms.pile_spheres(x, r, base_z=m.base_height) if len(r) else np.zeros(0, bool)
-    mw["detached"] = int(len(r) - on.sum())
-    x, r = x[on], r[on]
-    mw["particles"] = int(len(r))
-    mw["pile_height_m"] = float((x[:, 2] + r).max() - m.base_height) if len(r) else 0.0
-    fit = None
+    return x[on], r[on], int(len(r) - on.sum())
+
+
+def measure_pile(x, r, m) -> dict:
+    """The pile metrics of one world (:data:`PILE_METRICS`) from its free particle spheres at the end of a run:
+    centres ``x`` (n, 3) [m] and radii ``r`` (n,) [m] (glued spheres excluded), under the angle-of-repose measure
+    settings ``m`` (a ``MeasureSpec``: base_height, center), on the pile :func:`pile_select` finds. Used at the end
+    of a run and on a stored final state (a study's ``runs/<point_id>.npz``), so both give the same numbers."""
+    x, r, detached = pile_select(x, r, m)
+    mw = {
+        "detached": detached,
+        "particles": int(len(r)),
+        "pile_height_m": float((x[:, 2] + r).max() - m.base_height) if len(r) else 0.0,
+    }
     try:
         fit = ms.angle_surface_fit(x, r, base_z=m.base_height, center=m.center)
         img = ms.angle_image(x, r, base_z=m.base_height, center=m.center)
@@ -125,18 +133,8 @@ def pile(x, r, m) -> tuple[dict, dict | None, np.ndarray, np.ndarray]:
             angle_cone_deg=float(ms.angle_cone(x, r, base_z=m.base_height, center=m.center)),
         )
     except ValueError as e:
-        fit = None
         mw["angle_error"] = str(e)
-    return mw, fit, x, r
-
-
-def measure_pile(x, r, m) -> dict:
-    """The pile metrics of one world (:data:`PILE_METRICS`) from its free particle spheres at the end of a run:
-    centres ``x`` (n, 3) [m] and radii ``r`` (n,) [m] (glued spheres excluded), under the angle-of-repose measure
-    settings ``m`` (a ``MeasureSpec``: base_height, center). Spheres below the base (rolled off the plate) and
-    those not connected to it (stuck to a lifted wall, in the air) are not the pile. Used at the end of a run and
-    on a stored final state (a study's ``runs/<point_id>.npz``), so both give the same numbers."""
-    return pile(x, r, m)[0]
+    return mw
 
 
 def _particles(model, state, h, world: int):
@@ -1095,12 +1093,11 @@ def _final_npz(out: Path, model, state, h) -> dict:
     return {"final_npz": str(out / "final.npz")}
 
 
-def world_state(final, world: int) -> dict:
-    """One world of a ``final.npz`` (a path or its loaded arrays): its spheres (``sphere_x`` (n, 3) [m],
+def world_state(data, world: int) -> dict:
+    """One world of a ``final.npz``'s arrays (``data``, {name: array}): its spheres (``sphere_x`` (n, 3) [m],
     ``sphere_r`` (n,) [m], ``sphere_glued`` (n,)) and every wall (``wall<k>_vertices``, ``wall<k>_triangles``,
     ``wall_names``, ``wall_pose``), as arrays to save or measure. A file written before ``sphere_world`` existed
     holds world 0 only."""
-    data = np.load(final) if isinstance(final, (str, Path)) else final
     sel = data["sphere_world"] == world if "sphere_world" in data else np.full(len(data["sphere_r"]), world == 0)
     out = {k: np.asarray(data[k])[sel] for k in ("sphere_x", "sphere_r", "sphere_glued")}
     out.update({k: np.asarray(data[k]) for k in data.keys() if k.startswith("wall")})
@@ -1112,11 +1109,11 @@ def state_walls(state: dict) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(state[f"wall{k}_vertices"], state[f"wall{k}_triangles"]) for k in range(len(state["wall_names"]))]
 
 
-def _impact_frame(model, walls, measured, x) -> tuple | None:
+def _impact_frame(wall_names, walls, measured, x) -> tuple | None:
     """The part of an impact scene's side view (x, z) worth showing [m]: the measured walls (a dump body and its
     tailgate) where they are, and the middle 98 % of the particles, with a margin; the site's ground and the
     loader otherwise shrink a 5 m body to a few specks on a 12 m axis."""
-    boxes = [v[:, [0, 2]] for name, (v, _) in zip(model.wall_names, walls) if name in measured]
+    boxes = [v[:, [0, 2]] for name, (v, _) in zip(wall_names, walls) if name in measured]
     if len(x):
         boxes.append(np.percentile(x[:, [0, 2]], [1, 99], axis=0))
     if not boxes:
@@ -1165,7 +1162,7 @@ def _pictures(out: Path, spec, model, state, h, result) -> dict:
         title += f": angle of repose {m0['angle_fit_deg']:.1f} deg (fit), {m0['angle_image_deg']:.1f} deg (image)"
     frame = None
     if spec.measure.kind == "impacts":
-        frame = _impact_frame(model, walls, spec.measure.walls, xs)
+        frame = _impact_frame(model.wall_names, walls, spec.measure.walls, xs)
         title = f"{title}: world 0 at {state.time:.2f} s"
     files["pile_png"] = side_view_png(
         str(out / "pile.png"), xs, rs, walls_world=walls, axis="y", title=title, frame=frame

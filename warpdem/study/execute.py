@@ -1045,6 +1045,28 @@ def _free_spheres(state: dict) -> tuple[np.ndarray, np.ndarray]:
     return state["sphere_x"][free].astype(np.float64), state["sphere_r"][free].astype(np.float64)
 
 
+def _stored_piles(out: Path, study: sp.StudySpec, measure: Mapping | None, where: str):
+    """(design row, run record, measure settings, stored state) of each finished run of ``out``: for a pile (an
+    angle-of-repose scene) its measure settings with ``measure`` ({``measure.FIELD``: value}) applied and its
+    stored state (``runs/<point_id>.npz``, None when it has none); for any other scene its own settings and None.
+    Each caller decides what a missing state means. Raises StudyError for a key that is not a measure setting or a
+    value the stage grammar refuses (``where`` names the caller in the message)."""
+    from warpdem.scene.stage import StageError, apply_overrides
+
+    ov = _measure_overrides(measure or {}, f"{out}: {where}")
+    scene = _scene_cache(study)
+    for row, rec in _finished_records(out, study):
+        sc = scene(row["overrides"])
+        if sc.measure.kind != "angle_of_repose":
+            yield row, rec, sc.measure, None
+            continue
+        try:
+            m = apply_overrides(sc, ov).measure if ov else sc.measure
+        except (StageError, ValueError) as e:
+            raise sp.StudyError(f"{out}: {where}: {e}") from None
+        yield row, rec, m, _run_state(out, row["point_id"])
+
+
 def remeasure(out, study: sp.StudySpec | None = None, measure: Mapping | None = None) -> dict[str, dict]:
     """Every finished run of ``out`` measured again from its stored final state (``runs/<point_id>.npz``): the
     pile metrics (``runner.PILE_METRICS``) under the run's own measure settings with ``measure``
@@ -1054,31 +1076,24 @@ def remeasure(out, study: sp.StudySpec | None = None, measure: Mapping | None = 
     angle of repose, a key that is not a measure setting, or a run stored without its state (made before the
     states were kept: run it again)."""
     from warpdem.scene.runner import PILE_METRICS, measure_pile
-    from warpdem.scene.stage import StageError, apply_overrides
 
     out = Path(out)
     study = study or sp.load_study(out / "study.toml", check_scene=False)
-    ov = _measure_overrides(measure or {}, f"{out}: measure again")
-    scene, result = _scene_cache(study), {}
-    for row, rec in _finished_records(out, study):
-        try:
-            sc = apply_overrides(scene(row["overrides"]), ov) if ov else scene(row["overrides"])
-        except (StageError, ValueError) as e:
-            raise sp.StudyError(f"{out}: measure again: {e}") from None
-        if sc.measure.kind != "angle_of_repose":
+    result = {}
+    for row, rec, m, state in _stored_piles(out, study, measure, "measure again"):
+        if m.kind != "angle_of_repose":
             raise sp.StudyError(
-                f"{out}: measure again: the scene measures {sc.measure.kind!r}; only an angle_of_repose pile is "
+                f"{out}: measure again: the scene measures {m.kind!r}; only an angle_of_repose pile is "
                 "measured from its final state (a press curve or a drum's frames need the run itself)"
             )
-        state = _run_state(out, row["point_id"])
         if state is None:
             raise sp.StudyError(
                 f"{out}: run {row['run']} ({row['point_id']}) has no stored final state (runs/{row['point_id']}.npz); "
                 "it was made before every run's state was kept: delete its runs/ JSON and run the study again"
             )
-        m = {k: v for k, v in rec["metrics"].items() if k not in PILE_METRICS}
-        m.update(measure_pile(*_free_spheres(state), sc.measure))
-        result[row["point_id"]] = m
+        metrics = {k: v for k, v in rec["metrics"].items() if k not in PILE_METRICS}
+        metrics.update(measure_pile(*_free_spheres(state), m))
+        result[row["point_id"]] = metrics
     return result
 
 
@@ -1088,37 +1103,39 @@ GALLERY_RUNS_PER_ROW = 3
 
 def _append_gallery(out: Path, study: sp.StudySpec, measure: Mapping | None) -> None:
     """A side view per finished run of a pile (``analysis/gallery/run_NN.png``, named by run number) with the
-    fitted flanks drawn on it (``measure.flank_lines``: the protractor), gathered in report.md."""
+    fitted flanks drawn on it (``measure.flank_lines``: the protractor), gathered in report.md. Only the surface
+    fit is computed again (the flanks are its lines), not the run's other measurements."""
     from warpdem.scene.export import side_view_png
-    from warpdem.scene.measure import flank_lines
-    from warpdem.scene.runner import pile, state_walls
-    from warpdem.scene.stage import apply_overrides
+    from warpdem.scene.measure import angle_surface_fit, flank_lines
+    from warpdem.scene.runner import pile_select, state_walls
 
-    ov = _measure_overrides(measure or {}, f"{out}: gallery")
-    scene, shots = _scene_cache(study), []
+    shots = []
     folder = out / "analysis" / "gallery"
-    for row, _ in _finished_records(out, study):
-        sc = scene(row["overrides"])
-        state = _run_state(out, row["point_id"]) if sc.measure.kind == "angle_of_repose" else None
+    for row, _, m, state in _stored_piles(out, study, measure, "gallery"):
         if state is None:
             continue
-        m = apply_overrides(sc, ov).measure if ov else sc.measure
-        mw, fit, x, r = pile(*_free_spheres(state), m)
-        lines, frame, title = [], None, f"run {row['run']}: {mw['particles']} particles in the pile"
+        x, r, _ = pile_select(*_free_spheres(state), m)
+        lines, frame, title = [], None, f"run {row['run']}: {len(r)} particles in the pile"
+        try:
+            fit = angle_surface_fit(x, r, base_z=m.base_height, center=m.center)
+        except ValueError:
+            fit = None  # too small a pile to fit: drawn without the protractor, as its run recorded the error
         if fit is not None:
             flanks = flank_lines(fit, m.base_height, "y")
             lines = [(f["points"][0], f["points"][1], f"{f['angle_deg']:.1f}°") for f in flanks]
-            title = f"run {row['run']}: {mw['angle_fit_deg']:.1f}° (fit, mean of {len(fit['lines'])} sectors)"
+            title = f"run {row['run']}: {fit['mean_deg']:.1f}° (fit, mean of {len(fit['lines'])} sectors)"
             reach = 1.15 * fit["extent_m"]
-            top = m.base_height + max(mw["pile_height_m"], 0.3 * fit["extent_m"])
+            height = float((x[:, 2] + r).max() - m.base_height)
+            top = m.base_height + max(height, 0.3 * fit["extent_m"])
             frame = (
                 (fit["center"][0] - reach, m.base_height - 0.1 * reach),
                 (fit["center"][0] + reach, top + 0.15 * reach),
             )
         folder.mkdir(parents=True, exist_ok=True)
         name = f"run_{int(row['run']):02d}.png"
-        xs = np.concatenate([x, state["sphere_x"][state["sphere_glued"] >= 0]])
-        rs = np.concatenate([r, state["sphere_r"][state["sphere_glued"] >= 0]])
+        glued = state["sphere_glued"] >= 0
+        xs = np.concatenate([x, state["sphere_x"][glued]])
+        rs = np.concatenate([r, state["sphere_r"][glued]])
         side_view_png(
             folder / name, xs, rs, state_walls(state), "y", title, figsize=(4.5, 3.0), dpi=90, lines=lines, frame=frame
         )
