@@ -35,3 +35,17 @@ class Overflow(enum.IntFlag):
     NONE = 0
     NEIGHBOR = 1
     MESH = 2
+
+
+class SphereActivity(enum.IntEnum):
+    """What a sphere takes part in (``State.sphere_active``): only a MOVING sphere is stepped and found by the
+    contact search."""
+
+    PARKED = 0
+    """A factory particle not released yet, or a body removed from the domain: invisible, at rest where it is."""
+    MOVING = 1
+    """Released: stepped, and in contact with the others."""
+    SETTLED = 2
+    """Its world has settled (the scene's settle rule, :meth:`warpdem.engine.solver.Solver.settle_worlds`): held
+    where it came to rest, neither stepped nor searched (so a launch costs only its worlds still moving), and
+    still measured and drawn."""

@@ -22,7 +22,7 @@ from typing import Any
 
 import warp as wp
 
-from .enums import Overflow
+from .enums import Overflow, SphereActivity
 from .features import MODULE_OPTIONS, StepFeatures
 from .geometry import closest_point_triangle
 from .params import ContactHistory, history_store, slot_bit, slot_live
@@ -124,9 +124,9 @@ def count_cells(
     # Out (cell_start_out[b + 1]: bucket b's count, advanced):
     cell_start_out: wp.array[int],
 ):
-    """Count the active spheres of each bucket (parked factory particles stay out)."""
+    """Count the moving spheres of each bucket (parked factory particles and settled worlds stay out)."""
     i = wp.tid()
-    if active[i] == 0:
+    if active[i] != SphereActivity.MOVING:
         return
     b = cell_bucket(cell_of(x[i], inv_cell), sphere_world[i], cell_start_out.shape[0] - 2)
     wp.atomic_add(cell_start_out, b + 1, 1)
@@ -245,7 +245,7 @@ def sort_spheres(
     """Put each active sphere in a slot of its bucket, with what the walk reads of it (slots of one bucket in any
     order)."""
     i = wp.tid()
-    if active[i] == 0:
+    if active[i] != SphereActivity.MOVING:
         return
     x_i = x[i]
     world = sphere_world[i]
@@ -380,8 +380,8 @@ def build_contacts_kernel(features: StepFeatures):
         i = wp.tid()
         x_i = x[i]
         build_x_out[i] = x_i
-        # parked factory particles and spheres glued to a wall take no part as the gathering side
-        parked = active[i] == 0
+        # parked factory particles, settled worlds and spheres glued to a wall take no part as the gathering side
+        parked = active[i] != SphereActivity.MOVING
         if wp.static(coated_walls):
             parked = parked or sphere_wall[i] >= 0
         if parked:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .enums import RollingModel
+from .enums import RollingModel, SphereActivity
 from .features import MODULE_OPTIONS, StepFeatures
 from .geometry import FEATURE_FACE, closest_point_triangle
 from .law_contact import contact_force_for
@@ -389,12 +389,13 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
         clump = int(-1)
         if wp.static(clumps):
             clump = sphere_clump[i]
-        parked = active_in[i] == 0
+        parked = active_in[i] != SphereActivity.MOVING
         if wp.static(coated_walls):
             parked = parked or sphere_wall[i] >= 0
         if parked:
-            # a factory particle not released yet (parked, invisible to the others), or a sphere glued to a
-            # wall (infinitely heavy; follow_walls places it): neither gathers forces
+            # a factory particle not released yet (parked, invisible to the others), a settled world's sphere
+            # (held where it came to rest), or a sphere glued to a wall (infinitely heavy; follow_walls places
+            # it): none gathers forces
             if clump < 0:
                 x_out[i] = x_i
                 v_out[i] = v_i
@@ -468,7 +469,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                                 body_key(j, sphere_clump, clump_total),
                             )
                 continue
-            if dist <= 0.0 or active_in[j] == 0:
+            if dist <= 0.0 or active_in[j] != SphereActivity.MOVING:
                 if was_live:
                     history_store(neighbor_history_out, k, i, ContactHistory())
                 continue
@@ -840,13 +841,13 @@ def integrate_clumps_kernel(tiled: bool):
         last = clump_sphere_end[c]
         x_c = x_in[c]
         q_c = q_in[c]
-        if active_in[first] == 0:
+        if active_in[first] != SphereActivity.MOVING:
             if lane == 0:
                 x_out[c] = x_c
                 q_out[c] = q_c
                 v_out[c] = v_in[c]
                 angmom_out[c] = angmom_in[c]
-            # parked (not released yet) or removed (left the domain): at rest where it is
+            # parked (not released yet), removed (left the domain) or settled: held where it is
             return
         world = clump_world[c]
         rho = material_density[world % material_density.shape[0], clump_material[c]]
@@ -1005,8 +1006,8 @@ def place_clump_spheres(
     arm = wp.quat_rotate(clump_q[c], sphere_offset[s])
     xs = clump_x[c] + arm
     sphere_x_out[s] = xs
-    if active_in[clump_sphere_start[c]] == 0:
-        # parked (not released yet) or removed (left the domain): at rest where it is
+    if active_in[clump_sphere_start[c]] != SphereActivity.MOVING:
+        # parked (not released yet), removed (left the domain) or settled: held where it is
         sphere_v_out[s] = clump_v[c]
         sphere_w_out[s] = wp.vec3(0.0)
         return
@@ -1340,7 +1341,7 @@ def place_bodies(
         x_out[i] = sphere_x[k]
         v_out[i] = sphere_v[k]
         w_out[i] = wp.vec3(0.0)
-        active_out[i] = 1
+        active_out[i] = SphereActivity.MOVING
     else:
         c = clump_index[k - n_s]
         clump_x_out[c] = clump_x[k - n_s]
@@ -1351,7 +1352,7 @@ def place_bodies(
             x_out[s] = clump_x[k - n_s] + wp.quat_rotate(clump_q[k - n_s], sphere_offset[s])
             v_out[s] = clump_v[k - n_s]
             w_out[s] = wp.vec3(0.0)
-            active_out[s] = 1
+            active_out[s] = SphereActivity.MOVING
     rebuild_out[0] = 1
 
 
@@ -1438,7 +1439,7 @@ def retire_escaped(
     and at rest (so they neither touch anything nor flag rebuilds); each removed body counts once in its
     world. Every sphere of a clump tests the clump's centre, so a clump leaves whole."""
     i = wp.tid()
-    if active_out[i] == 0 or sphere_wall[i] >= 0:
+    if active_out[i] != SphereActivity.MOVING or sphere_wall[i] >= 0:
         return
     c = sphere_clump[i]
     p = x_in[i]
@@ -1486,5 +1487,36 @@ def launch_retire_escaped(model, state) -> None:
             state.clump_w,
             state.world_removed,
         ],
+        device=m.device,
+    )
+
+
+@wp.kernel
+def settle_worlds(
+    # Model:
+    sphere_world: wp.array[int],
+    # Options (host-prepared):
+    world_settled: wp.array[int],
+    # Out (read, then written):
+    active_out: wp.array[int],
+):
+    """Hold the moving spheres of every world flagged in ``world_settled`` where they are (SETTLED)."""
+    i = wp.tid()
+    if active_out[i] == SphereActivity.MOVING and world_settled[sphere_world[i]] != 0:
+        active_out[i] = SphereActivity.SETTLED
+
+
+def launch_settle_worlds(model, state, worlds) -> None:
+    """Hold the spheres of ``worlds`` (host ints) where they are: stepping, the contact search, wall forces and
+    removal leave them out from the next step on, and nothing of them moves again. Their clumps' poses and
+    velocities stay as they were."""
+    m = model
+    flags = np.zeros(m.world_count, dtype=np.int32)
+    flags[np.asarray(worlds, dtype=np.int64)] = 1
+    wp.launch(
+        settle_worlds,
+        dim=m.sphere_count,
+        inputs=[m.sphere_world, wp.array(flags, dtype=int, device=m.device)],
+        outputs=[state.sphere_active],
         device=m.device,
     )

@@ -25,7 +25,7 @@ from .engine.factories import (
 from .engine.materials import Interaction, InteractionTable, Material, effective_moduli
 from .engine.motion import MotionTable, Segment, WallMotion
 from .engine.solver import SimulationError, Solver, SolverOptions
-from .engine.types import ContactLaw, Contacts, Control, Model, Overflow, RollingModel, State
+from .engine.types import ContactLaw, Contacts, Control, Model, Overflow, RollingModel, SphereActivity, State
 from .scene import measure, rigs
 from .scene.export import ResultWriter, ShapeGeometry, WallGeometry, side_view_png
 from .scene.runner import RunResult, RunStopped, run_scene
@@ -100,6 +100,7 @@ __all__ = [
     "ModelBuilder",
     "Overflow",
     "RollingModel",
+    "SphereActivity",
     "SimulationError",
     "Solver",
     "SolverOptions",

@@ -337,6 +337,42 @@ def test_bodies_leaving_the_domain_are_removed():
     assert s.rebuild_count == rebuilds and np.array_equal(st.sphere_x.numpy()[:3], x_gone)
 
 
+def test_a_settled_world_is_held_where_it_is():
+    """Solver.settle_worlds holds a world (SphereActivity.SETTLED): its free sphere and its clump stay exactly where
+    they were, gravity notwithstanding, stay present (nonzero activity) and leave the contact search (no neighbours
+    after a rebuild), while the other world falls on, bit-identical to the same model never held, along the
+    free-fall parabola z0 - g t^2 / 2 (leapfrog is exact under a constant force)."""
+    r, g, z0 = 0.005, 9.81, 1.0
+    b = wd.ModelBuilder(gravity=(0, 0, -g))
+    b.add_material(wd.Material("a", density=2500, youngs_modulus=1e7, poisson_ratio=0.3))
+    # within the search's reach of the clump (its lists hold the pair) but not touching it: free fall
+    b.add_sphere((0, 0, z0), r, "a")
+    b.add_clump(wd.ClumpTemplate.from_spheres("pair", [[-r, 0, 0], [r, 0, 0]], [r, r]), (0.0, 0.0, z0 + 2.0 * r), "a")
+    b.replicate(2)
+    m = b.finalize("cpu")
+
+    def run(hold: bool):
+        s = wd.Solver(m)
+        st, c = m.state(), s.contacts()
+        st = s.run(st, c, 100)
+        x_held, q_held = st.sphere_x.numpy()[:3].copy(), st.clump_q.numpy()[0].copy()
+        if hold:
+            s.settle_worlds(st, [0])
+        st = s.run(st, c, 200)
+        s.rebuild(st, c)
+        return s, st, c, x_held, q_held
+
+    s, st, c, x_held, q_held = run(True)
+    _, free, _, _, _ = run(False)
+    assert st.sphere_active.numpy().tolist() == [wd.SphereActivity.SETTLED] * 3 + [wd.SphereActivity.MOVING] * 3
+    assert np.array_equal(st.sphere_x.numpy()[:3], x_held) and np.array_equal(st.clump_q.numpy()[0], q_held)
+    assert c.neighbor_count.numpy()[:3].tolist() == [0, 0, 0] and c.neighbor_count.numpy()[3:].sum() > 0
+    assert np.array_equal(st.sphere_x.numpy()[3:], free.sphere_x.numpy()[3:])
+    t = st.time
+    assert st.sphere_x.numpy()[3, 2] == pytest.approx(z0 - 0.5 * g * t**2, abs=1e-6)
+    assert t == pytest.approx(300 * s.dt)
+
+
 def test_domain_is_validated():
     b = wd.ModelBuilder()
     with pytest.raises(

@@ -335,11 +335,16 @@ def test_settle_monitor():
 
 def test_settle_monitor_per_world():
     """SettleMonitor with one energy per world: a sample is below the threshold only when every world is,
-    a NaN world (blown up) is not below, and the streak can be restored (a resumed run)."""
+    a NaN world (blown up) is not below, and the streak can be restored (a resumed run). Each world keeps its own
+    streak: world 0, below in every sample, has settled after two while world 1 has not."""
     m = SettleMonitor(1e-6, window=2)
+    assert len(m.settled_worlds) == 0
     assert m.update(0.0, np.array([5e-7, 2e-6])) is False and m.streak == 0
+    assert m.settled_worlds.tolist() == [False, False]
     assert m.update(0.1, np.array([5e-7, 5e-7])) is False and m.streak == 1
+    assert m.settled_worlds.tolist() == [True, False] and m.world_streak.tolist() == [2, 1]
     assert m.update(0.2, np.array([5e-7, np.nan])) is False and m.streak == 0
+    assert m.world_streak.tolist() == [3, 0]
     resumed = SettleMonitor(1e-6, window=2)
     resumed.streak = 1
     assert resumed.update(0.3, np.array([1e-7, 1e-7])) is True

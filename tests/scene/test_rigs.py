@@ -1131,6 +1131,27 @@ def test_world_seeds_make_repeats_differ():
     assert np.abs(x[2] - x[0]).max() > 1e-3
 
 
+def test_each_world_settles_on_its_own_and_ends_as_it_would_alone(tmp_path):
+    """The worlds of one launch settle at their own times (the scene's rule: kinetic energy per particle below
+    m g r / 1000 for three outputs after the pour): each is then held where it came to rest, so that at a fixed
+    step both worlds of a two-world funnel launch end bit-identical to each run alone, the one that settled first
+    included (it was once stepped on until its launch-mate settled too), and each says when it settled."""
+    from warpdem.scene.stage import apply_overrides
+
+    spec = apply_overrides(rigs.spec("funnel", {"count": 30, "duration": 1.0}, smoke=True), {"run.dt_levels": 0})
+    pair = runner.run_scene(spec, "cpu", world_count=2, world_seeds=[0, 7], frames=False, out_dir=tmp_path / "pair")
+    both = np.load(tmp_path / "pair" / "final.npz")
+    times = []
+    for k, seed in enumerate((0, 7)):
+        alone = runner.run_scene(spec, "cpu", world_seeds=[seed], frames=False, out_dir=tmp_path / f"alone{k}")
+        x = np.load(tmp_path / f"alone{k}" / "final.npz")["sphere_x"]
+        assert np.array_equal(both["sphere_x"][both["sphere_world"] == k], x)
+        assert pair.metrics[k]["stop"] == alone.metrics[0]["stop"] == "settled"
+        assert pair.metrics[k]["time_s"] == alone.metrics[0]["time_s"]
+        times.append(alone.metrics[0]["time_s"])
+    assert times[0] != times[1] and pair.info["simulated_s"] == max(times) < spec.run.duration
+
+
 def test_funnels_of_two_grain_sizes_share_a_launch():
     """A gated funnel of 2 mm grains and one of 3 mm (its gate placed by its grains) run as one launch
     (``run_scene(also=...)``): each world holds its own grains and its own gate, the funnel and plate are shared,

@@ -549,6 +549,13 @@ class Solver:
             self.model, contacts, state, sphere_index, sphere_x, sphere_v, clump_index, clump_x, clump_q, clump_v
         )
 
+    def settle_worlds(self, state: State, worlds) -> None:
+        """Hold every sphere of ``worlds`` (world indices, host ints) where it is from the next step on
+        (``SphereActivity.SETTLED``): a world whose scene says it has settled costs a launch nothing more while its
+        others still move, and ends as it would alone (not moved on by its launch-mates' time). Irreversible."""
+        if len(worlds):
+            _st.launch_settle_worlds(self.model, state, worlds)
+
     @property
     def rebuild_count(self) -> int:
         """Neighbour-list rebuilds this solver has made (a host read: synchronises)."""

@@ -14,7 +14,7 @@ from typing import ClassVar
 import numpy as np
 import warp as wp
 
-from warpdem.kernels.enums import ContactLaw, Overflow, RollingModel
+from warpdem.kernels.enums import ContactLaw, Overflow, RollingModel, SphereActivity
 
 __all__ = [
     "ContactLaw",
@@ -23,6 +23,7 @@ __all__ = [
     "Model",
     "Overflow",
     "RollingModel",
+    "SphereActivity",
     "State",
     "host",
     "init_warp",
@@ -248,7 +249,9 @@ class State:
     sphere_t: wp.array
     """Contact torque about each sphere's centre in the last step [N m], shape (sphere_count,), vec3."""
     sphere_active: wp.array
-    """1 for a sphere in the simulation, 0 for a factory particle not released yet, shape (sphere_count,), int32."""
+    """:class:`SphereActivity` of each sphere, shape (sphere_count,), int32: 1 (MOVING) in the simulation, 0
+    (PARKED) a factory particle not released yet or a removed body's, 2 (SETTLED) held where its settled world came
+    to rest (:meth:`warpdem.engine.solver.Solver.settle_worlds`). Nonzero: present (measured, drawn)."""
     clump_x: wp.array
     """Clump centre of mass [m], shape (max(clump_count, 1),), vec3."""
     clump_q: wp.array

@@ -1641,6 +1641,9 @@ class SettleMonitor:
             (a float, or an array of one per world).
         settled_time: time [s] of the update at which the monitor first reported settled, or None.
         streak: consecutive updates below the threshold so far (a resumed run restores it).
+        world_streak: with one energy per world, each world's consecutive updates below the threshold so far,
+            shape (W,) int (None before the first such update; a resumed run restores it). The streak of all
+            worlds together is their smallest.
     """
 
     def __init__(self, threshold: float, window: int = 3):
@@ -1649,6 +1652,7 @@ class SettleMonitor:
         self.history: list[tuple[float, float | np.ndarray]] = []
         self.settled_time: float | None = None
         self.streak = 0
+        self.world_streak: np.ndarray | None = None
 
     def update(self, time: float, kinetic_energy_per_particle) -> bool:
         """Record one sample: time [s] and kinetic energy per particle [J], a number or an array of one per
@@ -1672,6 +1676,11 @@ class SettleMonitor:
             _bad("time", time, f"a time >= the previous update's {self.history[-1][0]!r} s")
         self.history.append((t, ke))
         self.streak = self.streak + 1 if np.all(ke < self.threshold) else 0
+        if np.ndim(ke):
+            below = ke < self.threshold  # a NaN is not below
+            if self.world_streak is None or self.world_streak.shape != below.shape:
+                self.world_streak = np.zeros(below.shape, dtype=np.int64)
+            self.world_streak = np.where(below, self.world_streak + 1, 0)
         if self.settled and self.settled_time is None:
             self.settled_time = t
         return self.settled
@@ -1680,6 +1689,14 @@ class SettleMonitor:
     def settled(self) -> bool:
         """Whether the last ``window`` updates were all below the threshold."""
         return self.streak >= self.window
+
+    @property
+    def settled_worlds(self) -> np.ndarray:
+        """With one energy per world: which worlds' last ``window`` updates were all below the threshold, shape
+        (W,) bool (empty before the first such update)."""
+        if self.world_streak is None:
+            return np.zeros(0, dtype=bool)
+        return self.world_streak >= self.window
 
 
 # --------------------------------------------------------------------------------------------------

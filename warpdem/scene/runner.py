@@ -561,6 +561,8 @@ def run_scene_iter(
         counts = [world_count] + [g.world_count for g in also]
         settle_scale = np.repeat(np.asarray(settle_energies, dtype=np.float64), counts)
         settle = ms.SettleMonitor(1.0, window=3)
+    # when each world settled and was held (SphereActivity.SETTLED): it ends as it would in a launch of its own
+    settled_s = np.full(W, np.nan)
     eps = 0.5 * solver.dt
     ckpt = (
         out / "checkpoint.npz"
@@ -577,6 +579,10 @@ def run_scene_iter(
             solver.restore_dt_state(book["dt_state"])
             if settle is not None:
                 settle.streak = book["settled_since"]
+                if book.get("world_settled_since") is not None:
+                    settle.world_streak = np.asarray(book["world_settled_since"], dtype=np.int64)
+            if book.get("world_settled_s") is not None:
+                settled_s = np.asarray(book["world_settled_s"], dtype=float)
             resumed_from = state.time
             if "unload_start_s" in series:
                 _start_unloading(spec, model, solver, piston, series["unload_start_s"])
@@ -655,14 +661,15 @@ def run_scene_iter(
         factories_done = all(
             state.released.get(f, {}).get("count", 0) >= rec["count"] for f, rec in enumerate(model.factories)
         )
-        if (
-            settle is not None
-            and t >= run.settle_after
-            and factories_done
-            and settle.update(t, ke if settle_scale is None else ke / settle_scale)
-        ):
-            stop_reason = "settled"
-            break
+        if settle is not None and t >= run.settle_after and factories_done:
+            every = settle.update(t, ke if settle_scale is None else ke / settle_scale)
+            newly = settle.settled_worlds & np.isnan(settled_s)
+            settled_s[newly] = t
+            if every:
+                stop_reason = "settled"
+                break
+            # a settled world is held where it is: the rest of the launch steps only the worlds still moving
+            solver.settle_worlds(state, np.flatnonzero(newly))
         now = time.perf_counter()
         # a dense bed can take a minute per tick on the GPU: stop before the tick that would overrun
         stopping = stop_after > 0 and (now - t_wall0) + (now - t_tick) >= stop_after
@@ -678,6 +685,10 @@ def run_scene_iter(
                     "t_prev": t_prev,
                     "phase_snap": phase_snap,
                     "settled_since": settle.streak if settle is not None else 0,
+                    "world_settled_since": (
+                        settle.world_streak.tolist() if settle is not None and settle.world_streak is not None else None
+                    ),
+                    "world_settled_s": settled_s.tolist(),
                     "dt_state": solver.dt_state(),
                 },
             )
@@ -694,6 +705,9 @@ def run_scene_iter(
     for w in range(W):
         # removed: bodies that left the scene's domain (e.g. rolled off the plate's edge)
         mw = {"world": w, "time_s": state.time, "stop": stop_reason, "removed": int(removed[w])}
+        if np.isfinite(settled_s[w]):
+            # held since it settled: its state is that instant's, whatever its launch-mates did after
+            mw.update(time_s=float(settled_s[w]), stop="settled")
         # how the world came to rest: its kinetic energy per particle at every output tick, and the threshold
         mw["settling"] = {
             "time_s": list(map(float, series["time"])),
@@ -831,6 +845,8 @@ def _save_checkpoint(path: Path, fingerprint: str, state, contacts, book: dict) 
         "series": book["series"],
         "t_prev": book["t_prev"],
         "settled_since": book["settled_since"],
+        "world_settled_since": book.get("world_settled_since"),
+        "world_settled_s": book.get("world_settled_s"),
         "dt_state": book["dt_state"],
         "snaps": len(book["phase_snap"]),
     }
@@ -870,7 +886,12 @@ def _load_checkpoint(path: Path, fingerprint: str, state, contacts) -> dict | No
     state.time, state.step, state.half_step = meta["time"], meta["step"], meta["half_step"]
     state.released = {int(f): v for f, v in meta["released"].items()}
     book.update(
-        series=meta["series"], t_prev=meta["t_prev"], settled_since=meta["settled_since"], dt_state=meta["dt_state"]
+        series=meta["series"],
+        t_prev=meta["t_prev"],
+        settled_since=meta["settled_since"],
+        world_settled_since=meta.get("world_settled_since"),
+        world_settled_s=meta.get("world_settled_s"),
+        dt_state=meta["dt_state"],
     )
     return book
 
