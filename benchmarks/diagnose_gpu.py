@@ -8,10 +8,12 @@ angle grows as the size falls. Three replicates per size at world seeds 501-503,
 noise. The diagnosis sees the CSV only: base model Hertz-Mindlin with mu_r free in [0.05, 0.5], and every
 candidate that applies (cohesion, plasticity, shape, size distribution, wall friction).
 
-    python benchmarks/diagnose_gpu.py [--device cuda] [--out DIR] [--stage data|diagnose|all]
+    python benchmarks/diagnose_gpu.py [--device cuda] [--out DIR] [--stage data|diagnose|all] [--data-set K]
 
 ``data`` makes the data (3 launches), ``diagnose`` runs the diagnosis and prints its wall time, the simulated
-worlds and launches, the verdict and the gain; both resume from DIR.
+worlds and launches, the verdict, the gain and whether each interval covers the hidden value; both resume from
+DIR. ``--data-set K`` makes the K-th data set of the same recipe (world seeds 501 + 3K, 502 + 3K, 503 + 3K,
+noise seed 2026 + K; K = 0 is the README's): run K = 0, 1, 2, ... into their own folders for a coverage rate.
 """
 
 from __future__ import annotations
@@ -46,7 +48,11 @@ PARAMETER = {
 """The base model's free parameter."""
 
 
-def make_data(out: Path, device: str) -> Path:
+TRUTH = {"cohesion": GAMMA, "mu_r": MU_R}
+"""The hidden values each interval should cover: the cohesion candidate's surface energy and the base's mu_r."""
+
+
+def make_data(out: Path, device: str, data_set: int = 0) -> Path:
     path = out / "funnel_cohesion.toml"
     if path.exists():
         return path
@@ -55,9 +61,22 @@ def make_data(out: Path, device: str) -> Path:
         "interaction.grain.grain.surface_energy": GAMMA,
         "interaction.grain.grain.rolling_friction": MU_R,
     }
-    rows = syn.funnel_data(syn.funnel_experiments(), {}, hidden, device, seed=2026)
+    seeds = [s + 3 * data_set for s in syn.DATA_SEEDS]
+    rows = syn.funnel_data(syn.funnel_experiments(), {}, hidden, device, seed=2026 + data_set, world_seeds=seeds)
     toml = syn.funnel_toml("Hidden cohesion in lab-size funnel piles of three particle sizes", PARAMETER)
     return syn.write_case(out, "funnel_cohesion", toml, rows)
+
+
+def covers(res: dict) -> dict:
+    """Whether each 95 % interval of the cohesion model (surface energy and mu_r) covers its hidden value
+    (:data:`TRUTH`); empty when the diagnosis did not recalibrate that model."""
+    out = {}
+    ext = res.get("extended", {}).get("cohesion")
+    if ext:
+        for name, truth in TRUTH.items():
+            lo, hi = ext["parameters"][name]["interval_95"]
+            out[f"cohesion model: {name}"] = {"interval": [lo, hi], "truth": truth, "covers": lo <= truth <= hi}
+    return out
 
 
 def main() -> None:
@@ -66,10 +85,11 @@ def main() -> None:
     ap.add_argument("--out", default="runs/diagnose_gpu")
     ap.add_argument("--stage", choices=("data", "diagnose", "all"), default="all")
     ap.add_argument("--stop-after", type=float, default=0.0, help="wall seconds after which the diagnosis stops")
+    ap.add_argument("--data-set", type=int, default=0, help="which data set of the recipe (0: the README's)")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    path = make_data(out, a.device)
+    path = make_data(out, a.device, a.data_set)
     if a.stage == "data":
         return
     res = diagnose(str(path), out / "diagnosis", device=a.device, progress=False, stop_after=a.stop_after)
@@ -88,6 +108,7 @@ def main() -> None:
             for c in res["candidates"]
         ],
         "gain": res["gain"]["rmse"] if res["gain"] else None,
+        "covers": covers(res),
     }
     print(json.dumps(summary, indent=1, default=str))
 

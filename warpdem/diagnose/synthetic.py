@@ -93,18 +93,20 @@ def funnel_experiments(count_at_2mm: int = 1500, pour_time: float = 0.75) -> lis
     return out
 
 
-def funnel_data(exps: list[dict], rig: dict, overrides: dict, device: str, seed: int) -> list[dict]:
+def funnel_data(
+    exps: list[dict], rig: dict, overrides: dict, device: str, seed: int, world_seeds=DATA_SEEDS
+) -> list[dict]:
     """Rows of the funnel case: the worlds of each experiment of ``exps`` with the rig parameters ``rig`` (the
-    hidden setting among them or among ``overrides``) at :data:`DATA_SEEDS`, plus :data:`FUNNEL_NOISE_SD` noise
-    drawn from ``seed``; the experiments' launches run side by side on a GPU (``runner.run_together``). Prints
-    each experiment's simulated values."""
+    hidden setting among them or among ``overrides``) at ``world_seeds`` (one replicate each), plus
+    :data:`FUNNEL_NOISE_SD` noise drawn from ``seed``; the experiments' launches run side by side on a GPU
+    (``runner.run_together``). Prints each experiment's simulated values."""
     import time
 
     from warpdem.scene import rigs
     from warpdem.scene.runner import run_scene_iter, run_together
     from warpdem.scene.stage import apply_overrides
 
-    seeds = list(DATA_SEEDS)
+    seeds = [int(k) for k in world_seeds]
     scenes = [
         apply_overrides(
             rigs.spec("funnel", {**FUNNEL_FIXED, **rig, **{k: e[k] for k in ("particle_radius", "count", "rate")}}),
