@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.slow  # about 10 minutes of both cores: pytest -m slow tests/diagnose/test_confounded.py
+pytestmark = pytest.mark.slow  # about 17 minutes of both cores: pytest -m slow (CI runs it after the suite)
 
 pytest.importorskip("warp")
 pytest.importorskip("sklearn")
@@ -77,14 +77,21 @@ ranges = {{ shape = [1.0, 2.0] }}
 @pytest.fixture(scope="module")
 def confounded(tmp_path_factory):
     """Both diagnoses of one data set: {"angle": result, "both": result}."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
     tmp = tmp_path_factory.mktemp("confounded")
-    exps, mets = [], []
+    exps, jobs = [], []
+    hidden = {**syn.LIFT_SOFT, "interaction.ore.ore.static_friction": MU_S}
     for k, radius in enumerate(syn.LIFT_RADII):
         geo = syn.lift_geometry(radius)
         exps.append({"id": f"R{k}", **geo})
-        rig = {**syn.LIFT_RIG, "count": COUNT, "aspect_ratio": ASPECT, **geo}
-        hidden = {**syn.LIFT_SOFT, "interaction.ore.ore.static_friction": MU_S}
-        mets.append(syn.run_worlds("lifting_cylinder", True, rig, hidden, syn.DATA_SEEDS))
+        jobs.append({**syn.LIFT_RIG, "count": COUNT, "aspect_ratio": ASPECT, **geo})
+    # each size's three rod worlds take a minute of one core: two processes (CI's two cores), spawned, as
+    # Warp's runtime does not survive a fork
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = [pool.submit(syn.run_worlds, "lifting_cylinder", True, rig, hidden, syn.DATA_SEEDS) for rig in jobs]
+        mets = [f.result() for f in futures]
     rows = syn.noisy_rows(exps, mets, NOISE, np.random.default_rng(12))
     runs = tmp / "runs"
     runs.mkdir()
