@@ -276,6 +276,8 @@ def cmd_study(args) -> int:
             verify=not args.no_verify,
             checkpoint_every=args.checkpoint,
             stop_after=args.stop_after,
+            scheduler=args.scheduler,
+            shared_dir=args.shared_dir,
         )
     except StudyError as e:
         print(f"error: {e}", file=sys.stderr)
@@ -315,7 +317,13 @@ def cmd_diagnose(args) -> int:
 
     try:
         res = diagnose(
-            args.data, args.out, device=args.device, progress=not args.no_progress, stop_after=args.stop_after
+            args.data,
+            args.out,
+            device=args.device,
+            progress=not args.no_progress,
+            stop_after=args.stop_after,
+            scheduler=args.scheduler,
+            shared_dir=args.shared_dir,
         )
     except StudyError as e:
         print(f"error: {e}", file=sys.stderr)
@@ -394,6 +402,18 @@ def _add_wall_time_options(parser, checkpoint: str, stop_after: str) -> None:
     parser.add_argument("--stop-after", type=float, default=0.0, metavar="SECONDS", help=stop_after)
 
 
+SCHEDULER_HELP = (
+    "address of a Dask scheduler (tcp://HOST:8786; default: the environment variable WARPDEM_SCHEDULER): each "
+    "launch becomes a task of its cluster (GPU=1 where the workers declare GPUs); results are written here as "
+    "they arrive and a rerun sends only what is missing"
+)
+
+SHARED_HELP = (
+    "with --scheduler: a folder every worker can write (a shared file system); launches checkpoint there, so a "
+    "launch retried on another worker resumes; without it a retried launch starts again"
+)
+
+
 def main(argv=None) -> int:
     from .engine.keys import KeyGrammar
     from .scene import rigs
@@ -447,8 +467,11 @@ def main(argv=None) -> int:
         "--device",
         default="cpu",
         help="cpu, cuda, cuda:N, cuda:all, or a comma-separated list (cuda:0,cuda:1; cpu,cpu): with "
-        "several, the runs are split into one launch per device, run at once, one process each",
+        "several, the runs are split into one launch per device, run at once on a local Dask cluster, one "
+        "worker process each",
     )
+    st.add_argument("--scheduler", default=None, help=SCHEDULER_HELP)
+    st.add_argument("--shared-dir", default=None, help=SHARED_HELP)
     st.add_argument("--out", help="output folder (default runs/NAME); rerunning resumes it")
     st.add_argument("--no-progress", action="store_true", help="no progress bar")
     st.add_argument("--no-verify", action="store_true", help="skip the verification runs at the optimum")
@@ -471,6 +494,8 @@ def main(argv=None) -> int:
     dg.add_argument("data", help="measured-data file (TOML; schema in warpdem/diagnose/data.py)")
     dg.add_argument("--device", default="cpu", help="as for study: cpu, cuda, cuda:N, cuda:all or a list")
     dg.add_argument("--out", default=None, help="output folder (default runs/diagnose/<name>)")
+    dg.add_argument("--scheduler", default=None, help=SCHEDULER_HELP)
+    dg.add_argument("--shared-dir", default=None, help=SHARED_HELP)
     dg.add_argument("--no-progress", action="store_true", help="no progress bar")
     dg.add_argument(
         "--stop-after",

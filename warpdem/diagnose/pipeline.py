@@ -56,6 +56,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -131,6 +132,26 @@ class Simulations:
         self.runs.mkdir(parents=True, exist_ok=True)
         self._cache: dict[str, dict] = {}
         self.launched = 0
+        self._executor = None
+        self.scheduler: str | None = None
+        self.shared_dir: str | None = None
+
+    @property
+    def executor(self):
+        """The diagnosis's executor (:func:`warpdem.study.executor.executor_for`), made on first use and kept for
+        every stage, so that a cluster's workers keep Warp and its compiled kernels loaded between stages."""
+        if self._executor is None:
+            from warpdem.study.executor import executor_for
+
+            self._executor = executor_for(self.devices, self.scheduler, self.shared_dir)
+            if getattr(self._executor, "dashboard", None):
+                self.log(f"{len(self._executor.devices)} worker(s), Dask dashboard {self._executor.dashboard}")
+        return self._executor
+
+    def close(self) -> None:
+        if self._executor is not None:
+            self._executor.close()
+            self._executor = None
 
     def key(self, overrides: dict, seed: int) -> str:
         return sp.point_key(self.study, overrides, seed)
@@ -147,27 +168,13 @@ class Simulations:
             rows.append({"run": len(rows) + 1, "point_id": pid, "world_seed": int(seed), "overrides": ov})
             rows[-1]["row"] = {"stage": stage}
         if rows:
-            batches = execute._batches(self.study, rows, len(self.devices), execute.merges_scenes(self.devices))
+            batches = execute._batches(self.study, rows, self.executor.parallel, execute.merges_scenes(self.devices))
             self.log(f"{stage}: {len(rows)} simulation(s) in {len(batches)} launch(es)")
             bar = execute._progress_bar(len(rows), 0, stage, self.progress)
             try:
-                if len(self.devices) > 1:
-                    stopped = execute._run_parallel(
-                        self.study,
-                        self.out,
-                        batches,
-                        self.devices,
-                        bar,
-                        self.t0,
-                        60.0,
-                        self.stop_after,
-                        self.log,
-                        on_done=lambda *a: None,
-                    )
-                else:
-                    stopped = execute._run_on_device(
-                        self.study, self.out, batches, self.devices[0], bar, self.t0, 60.0, self.stop_after
-                    )
+                stopped = self.executor.run(
+                    self.study, self.out, batches, bar, self.t0, 60.0, self.stop_after, self.log
+                )
                 if stopped:
                     raise Stopped(stopped)
             finally:
@@ -927,13 +934,18 @@ def diagnose(
     progress: bool = True,
     log=print,
     stop_after: float = 0.0,
+    scheduler: str | None = None,
+    shared_dir: str | None = None,
 ) -> dict:
     """Diagnose the data file ``source`` (a path, or a (DiagnosisSpec, Experiments) pair) into ``out_dir``
     (default ``runs/diagnose/<name>``): report.md, diagnosis.json and PNGs (:mod:`.report`). Resumable: every
     simulation is stored as it finishes and a rerun reuses it. ``device`` is any a study accepts (one device,
     or a comma-separated list, launches then spread over them). With ``stop_after`` [wall s] the diagnosis
     stops once that much time has passed (a launch saves its checkpoint); the same call resumes. Returns the
-    diagnosis (as written to diagnosis.json) plus ``out``, ``wall_s``, ``worlds``, ``launches`` and ``stopped``."""
+    diagnosis (as written to diagnosis.json) plus ``out``, ``wall_s``, ``worlds``, ``launches`` and ``stopped``.
+    ``scheduler`` (else ``WARPDEM_SCHEDULER``): a Dask scheduler's address, whose cluster then runs every launch
+    (as for :func:`warpdem.study.execute.run_study`); several devices of this host are a local cluster, kept for
+    the whole diagnosis; ``shared_dir`` as for a study."""
     from warpdem.scene.runner import RunStopped
 
     from .report import write
@@ -946,6 +958,8 @@ def diagnose(
         shutil.copyfile(ex.source, out / "experiments.csv")
     study = spec.study(list(ex.responses))
     sims = Simulations(study, out, execute.parse_devices(device), progress, log, stop_after)
+    sims.scheduler = scheduler or os.environ.get("WARPDEM_SCHEDULER")
+    sims.shared_dir = shared_dir
     t0 = time.perf_counter()
     prob = _problem(spec, ex)
     ev = Evaluator(prob, sims, log)
@@ -998,6 +1012,8 @@ def diagnose(
     except (RunStopped, Stopped) as e:
         result["stopped"] = str(e)
         log(f"{spec.name}: stopped; {e}")
+    finally:
+        sims.close()
     result["wall_s"] = time.perf_counter() - t0
     result["worlds"] = len(list((out / "runs").glob("*.json")))
     result["launches"] = sims.launched

@@ -21,11 +21,11 @@ per launch.
 
 On one CUDA device the launches run side by side, a CUDA stream each, up to ``runner.SIDE_BY_SIDE_SPHERES``
 spheres together (:func:`_run_on_device`); on the CPU one after another. Several devices
-(``device="cuda:0,cuda:1"``, ``"cuda:all"``, or ``"cpu,cpu"`` for two CPU processes) split
-each group of runs into one launch per device, as even as the runs allow; each device runs its launches in
-a process of its own (spawned, so every process owns its CUDA context and Warp's CPU kernels, which run on
-one thread each, use one core each). Launch ids hash the point ids, so a resumed study must keep the
-same number of devices to pick up a checkpoint; finished points are kept whatever the devices.
+(``device="cuda:0,cuda:1"``, ``"cuda:all"``, or ``"cpu,cpu"`` for two CPU processes) are a Dask LocalCluster
+of one worker process per device, and a scheduler's address a cluster elsewhere (:mod:`.executor`): each group
+of runs is cut into at least one launch per worker, as even as the runs allow, and each launch is a task,
+saved here as it returns. Launch ids hash the point ids, so a resumed study must keep the same number of
+devices to pick up a checkpoint; finished points are kept whatever the devices.
 """
 
 from __future__ import annotations
@@ -148,16 +148,6 @@ def _batches(study: sp.StudySpec, rows: list[dict], parts: int = 1, merge: bool 
     return out
 
 
-def _assign(batches: list[list[dict]], count: int) -> list[list[int]]:
-    """Batch indices per device: largest batch first to the device with the fewest worlds so far."""
-    load, lists = [0] * count, [[] for _ in range(count)]
-    for k in sorted(range(len(batches)), key=lambda k: -len(batches[k])):
-        d = min(range(count), key=lambda i: load[i])
-        lists[d].append(k)
-        load[d] += len(batches[k])
-    return [sorted(x) for x in lists]
-
-
 def _launch_id(rows: list[dict]) -> str:
     import hashlib
 
@@ -277,11 +267,20 @@ def _save_state(runs_dir: Path, point_id: str, rec: dict, finals: dict) -> None:
     os.replace(tmp, runs_dir / f"{point_id}.npz")
 
 
-def _save_batch(study, runs_dir: Path, batch: list[dict], records: list[dict], wall: float, device: str) -> None:
+def _save_batch(
+    study, runs_dir: Path, batch: list[dict], records: list[dict], wall: float, device: str, states=None
+) -> None:
+    """Write each run of ``batch``: its world's final state (from ``states``, {point_id: world state}, as a
+    cluster's task returns them, else cut out of the launch's final.npz), then its JSON."""
     finals: dict = {}
     for row, rec in zip(batch, records):
         # the state before the record: a run is finished when its JSON exists, and then its state does too
-        _save_state(runs_dir, row["point_id"], rec, finals)
+        if states is None:
+            _save_state(runs_dir, row["point_id"], rec, finals)
+        elif row["point_id"] in states:
+            tmp = runs_dir / f"{row['point_id']}.tmp.npz"
+            np.savez_compressed(tmp, **states[row["point_id"]])
+            os.replace(tmp, runs_dir / f"{row['point_id']}.npz")
         _write_json(
             runs_dir / f"{row['point_id']}.json",
             {
@@ -299,63 +298,6 @@ def _save_batch(study, runs_dir: Path, batch: list[dict], records: list[dict], w
         )
 
 
-def _device_worker(
-    study,
-    out: str,
-    batches: list[list[dict]],
-    device: str,
-    deadline: float,
-    checkpoint_every: float,
-    queue,
-    slot: int,
-    quiet: tuple,
-) -> dict:
-    """One device's launches, in order, in a process of its own (see :func:`run_study`). ``deadline`` is a
-    ``time.time()`` (0: none): no launch starts after it, and the running one stops at it with a checkpoint.
-    Reports (slot, launch, fraction, message) on ``queue``; ``quiet`` is the parent's Warp (quiet, log_level).
-    Returns {"ran", "stopped", "walls"}."""
-    import warp as wp
-
-    from warpdem.engine.types import init_warp
-    from warpdem.scene.runner import RunStopped
-
-    wp.config.quiet = quiet[0]
-    if quiet[1] is not None:
-        wp.config.log_level = quiet[1]
-    init_warp(device)
-    runs_dir = Path(out) / "runs"
-    ran, walls = 0, []
-    for k, batch in enumerate(batches):
-        if deadline and k > 0 and time.time() >= deadline:
-            return {
-                "ran": ran,
-                "walls": walls,
-                "stopped": f"{device}: the wall-time limit came before its launch {k + 1} of {len(batches)}",
-            }
-
-        def tick(frac, msg, k=k):
-            queue.put((slot, k, frac, msg))
-
-        tb = time.perf_counter()
-        try:
-            records = run_batch(
-                study,
-                batch,
-                device,
-                progress=tick,
-                out_dir=Path(out) / "launches" / _launch_id(batch),
-                checkpoint_every=checkpoint_every,
-                stop_after=max(deadline - time.time(), 1e-9) if deadline else 0.0,
-            )
-        except RunStopped as e:
-            return {"ran": ran, "walls": walls, "stopped": f"{device}, launch {k + 1} of {len(batches)}: {e}"}
-        walls.append(time.perf_counter() - tb)
-        _save_batch(study, runs_dir, batch, records, walls[-1], device)
-        ran += len(batch)
-        queue.put((slot, k, 1.0, "done"))
-    return {"ran": ran, "walls": walls, "stopped": None}
-
-
 def _run_on_device(
     study,
     out: Path,
@@ -367,10 +309,11 @@ def _run_on_device(
     stop_after: float,
     on_saved=None,
     log=None,
+    save=None,
 ) -> str | None:
     """Run ``batches`` on one device: side by side on a GPU (:func:`runner.run_together`, up to
-    ``runner.SIDE_BY_SIDE_SPHERES``), one after another on the CPU; each launch is saved (``OUT/runs``) the moment
-    it ends, then ``on_saved()`` is called. With ``stop_after`` (wall seconds since ``t0``) a launch saves its
+    ``runner.SIDE_BY_SIDE_SPHERES``), one after another on the CPU; each launch is saved (``OUT/runs``, or by
+    ``save(batch, records, wall_s, device, None)``) the moment it ends, then ``on_saved()`` is called. With ``stop_after`` (wall seconds since ``t0``) a launch saves its
     checkpoint and stops, and no launch starts past the limit but the first. A failing launch lets the running
     ones end, starts no other, and its error is raised. Returns the stop message(s), or None."""
     from warpdem.scene.runner import RunStopped, run_together
@@ -417,7 +360,10 @@ def _run_on_device(
             errors.append(outcome)
         else:
             what = "done"
-            _save_batch(study, runs_dir, batches[k], outcome, wall, device)
+            if save is None:
+                _save_batch(study, runs_dir, batches[k], outcome, wall, device)
+            else:
+                save(batches[k], outcome, wall, device, None)
             show(k, 1.0, "done")
             if on_saved is not None:
                 on_saved()
@@ -432,80 +378,6 @@ def _run_on_device(
     left = sum(o is None for o in outcomes)
     if left and not stops:
         stops.append(f"the wall-time limit ({stop_after:.0f} s) came before {left} of {len(batches)} launch(es)")
-    return "; ".join(stops) or None
-
-
-def _run_parallel(
-    study,
-    out: Path,
-    batches: list[list[dict]],
-    devices: list[str],
-    bar,
-    t0: float,
-    checkpoint_every: float,
-    stop_after: float,
-    log,
-    on_done=None,
-) -> str | None:
-    """Run ``batches`` over ``devices`` at once, one spawned process per device that has work; every finished
-    launch is saved by its process as it ends. A failing device does not stop the others: its error is
-    raised once they are done. ``on_done(study, out)`` runs once every device has stopped (default: rewrite
-    results.csv). Returns the stop message(s), or None."""
-    import multiprocessing as mp
-    import queue as queue_mod
-    from concurrent.futures import ProcessPoolExecutor
-
-    import warp as wp
-
-    plan = [(d, [batches[k] for k in ks]) for d, ks in zip(devices, _assign(batches, len(devices))) if ks]
-    for d, bs in plan:
-        log(f"{study.name}: {d}: {len(bs)} launch(es) of {', '.join(str(len(b)) for b in bs)} world(s)")
-    deadline = time.time() + max(stop_after - (time.perf_counter() - t0), 1e-9) if stop_after > 0 else 0.0
-    ctx = mp.get_context("spawn")
-    done = [[0.0] * len(bs) for _, bs in plan]
-    base = bar.n if bar is not None else 0
-    results, errors = [None] * len(plan), []
-    with ctx.Manager() as manager, ProcessPoolExecutor(len(plan), mp_context=ctx) as pool:
-        q = manager.Queue()
-        futures = [
-            pool.submit(
-                _device_worker,
-                study,
-                str(out),
-                bs,
-                d,
-                deadline,
-                checkpoint_every,
-                q,
-                i,
-                (bool(getattr(wp.config, "quiet", False)), getattr(wp.config, "log_level", None)),
-            )
-            for i, (d, bs) in enumerate(plan)
-        ]
-        while True:
-            try:
-                slot, k, frac, msg = q.get(timeout=0.5)
-                done[slot][k] = frac * len(plan[slot][1][k])
-                if bar is not None:
-                    bar.n = int(base + sum(map(sum, done)))
-                    bar.set_postfix_str(f"{len(plan)} devices, {plan[slot][0]}: {msg}", refresh=False)
-                    bar.refresh()
-            except queue_mod.Empty:
-                if all(f.done() for f in futures):
-                    break
-        for i, f in enumerate(futures):
-            try:
-                results[i] = f.result()
-            except Exception as e:  # kept, raised after every device has finished
-                errors.append((plan[i][0], e))
-    (on_done or _results_csv)(study, out)
-    for (d, bs), r in zip(plan, results):
-        if r is not None and r["walls"]:
-            log(f"{study.name}: {d}: " + ", ".join(f"{len(b)} worlds in {w:.1f} s" for b, w in zip(bs, r["walls"])))
-    if errors:
-        d, e = errors[0]
-        raise type(e)(f"{d}: {e}") if isinstance(e, sp.StudyError) else e
-    stops = [r["stopped"] for r in results if r and r["stopped"]]
     return "; ".join(stops) or None
 
 
@@ -586,6 +458,8 @@ def run_study(
     log=print,
     checkpoint_every: float = 60.0,
     stop_after: float = 0.0,
+    scheduler: str | None = None,
+    shared_dir: str | None = None,
 ) -> dict:
     """Run (or resume) ``study`` (a path or a StudySpec) into ``out_dir`` (default ``runs/<name>``).
 
@@ -594,14 +468,17 @@ def run_study(
     ``OUT/launches/<id>/`` (id: hash of its point ids), so a crash mid-launch resumes there. Then, unless
     disabled, the analysis (:func:`analyze`) and the verification
     runs at the chosen optimum. ``device`` may name several devices (:func:`parse_devices`): the runs are then
-    split into one launch per device, run at once, one process per device; the verification runs (one
-    launch) use the first device. With ``stop_after`` (wall seconds, 0: none) the study stops by itself
+    split into one launch per device, run at once on a local Dask cluster, one worker per device; the
+    verification runs (one launch) go to the same executor. With ``stop_after`` (wall seconds, 0: none) the study stops by itself
     once that much wall time has passed: a launch then saves its checkpoint at its next output tick, no
     further launch starts, and ``stopped`` in the result says where; the same call resumes. Returns
     {"out", "runs", "ran", "skipped", "wall_s", "batches", "analysis", "verification", "stopped"}.
-    """
-    from warpdem.scene.runner import RunStopped
 
+    ``scheduler`` (else the environment variable ``WARPDEM_SCHEDULER``): the address of a Dask scheduler
+    (``tcp://HOST:8786``); each launch is then a task of its cluster (:mod:`.executor`), and ``device`` says
+    what kind of device the launches are cut for. ``shared_dir``: a folder every worker of that cluster can
+    write; launches checkpoint there, so a launch retried on another worker resumes instead of restarting.
+    """
     study = study if isinstance(study, sp.StudySpec) else sp.load_study(study)
     out = Path(out_dir) if out_dir else Path("runs") / study.name
     out.mkdir(parents=True, exist_ok=True)
@@ -616,29 +493,75 @@ def run_study(
     runs_dir.mkdir(exist_ok=True)
     rows = _study_rows(study, table)
     devices = parse_devices(device)
+    from .executor import executor_for
+
+    # a cluster is reached (or refused) before anything is counted or drawn
+    ex = executor_for(devices, scheduler or os.environ.get("WARPDEM_SCHEDULER"), shared_dir)
     pending = [r for r in rows if not (runs_dir / f"{r['point_id']}.json").exists()]
     done0 = len(rows) - len(pending)
     if done0:
         log(f"{study.name}: {done0} of {len(rows)} runs already finished in {out}; running {len(pending)}")
     t0 = time.perf_counter()
     bar = _progress_bar(len(rows), done0, study.name, progress)
-    batches = _batches(study, pending, len(devices), merges_scenes(devices)) if pending else []
+    batches = _batches(study, pending, ex.parallel, merges_scenes(devices)) if pending else []
     stopped = None
-    if len(devices) > 1 and batches:
-        stopped = _run_parallel(study, out, batches, devices, bar, t0, checkpoint_every, stop_after, log)
-    if len(devices) == 1 and batches:
-        stopped = _run_on_device(
+    with ex:
+        if batches:
+            if getattr(ex, "dashboard", None):
+                log(f"{study.name}: {len(ex.devices)} worker(s), Dask dashboard {ex.dashboard}")
+            stopped = ex.run(
+                study,
+                out,
+                batches,
+                bar,
+                t0,
+                checkpoint_every,
+                stop_after,
+                lambda m: log(f"{study.name}: {m}"),
+                on_saved=lambda: _results_csv(study, out),
+            )
+            _results_csv(study, out)
+        return _finish_study(
             study,
             out,
-            batches,
-            devices[0],
-            bar,
+            rows,
+            done0,
             t0,
+            bar,
+            batches,
+            stopped,
+            progress,
+            log,
+            ex,
+            analyze_after,
+            verify,
             checkpoint_every,
             stop_after,
-            lambda: _results_csv(study, out),
-            log=lambda m: log(f"{study.name}: {m}"),
         )
+
+
+def _finish_study(
+    study,
+    out,
+    rows,
+    done0,
+    t0,
+    bar,
+    batches,
+    stopped,
+    progress,
+    log,
+    ex,
+    analyze_after,
+    verify,
+    checkpoint_every,
+    stop_after,
+) -> dict:
+    """The rest of :func:`run_study` once its launches have ended: counts, run checks, the analysis and the
+    verification runs on the study's executor ``ex``."""
+    from warpdem.scene.runner import RunStopped
+
+    runs_dir = out / "runs"
     if bar is not None:
         bar.close()
     wall = time.perf_counter() - t0
@@ -672,15 +595,20 @@ def run_study(
                     study,
                     out,
                     result["analysis"],
-                    devices[0],
+                    ex.devices[0],
                     progress,
                     log,
                     checkpoint_every=checkpoint_every,
                     stop_after=_time_left(stop_after, t0),
+                    executor=ex,
                 )
             except RunStopped as e:
                 result["stopped"] = f"verification: {e}"
-                log(f"{study.name}: stopped in the verification runs; {e}")
+            v = result["verification"]
+            if isinstance(v, dict) and v.get("stopped"):
+                result["stopped"], result["verification"] = f"verification: {v['stopped']}", None
+            if result["stopped"]:
+                log(f"{study.name}: stopped in the verification runs; {result['stopped']}")
     return result
 
 
@@ -1216,13 +1144,15 @@ def run_verification(
     log=print,
     checkpoint_every: float = 60.0,
     stop_after: float = 0.0,
+    executor=None,
 ) -> dict | None:
     """Verification replicates at the chosen optimum of the first response with a target: ``replicates``
-    runs (world seeds 1..n, so they differ from each other) as one batch; writes
-    ``out/verification/verification.json`` with each value, the mean, SD and relative error against the
-    target, and appends them to the report. Resumes like the design runs (one file per replicate); the
-    launch checkpoints into ``out/verification/launch/`` and, with ``stop_after``, raises
-    ``runner.RunStopped`` after that many wall seconds (see :func:`run_batch`)."""
+    runs (world seeds 1..n, so they differ from each other) as one launch, on ``executor`` (the study's; by
+    default ``device`` in this process); writes ``out/verification/verification.json`` with each value, the
+    mean, SD and relative error against the target, and appends them to the report. Resumes like the design
+    runs (one file per replicate); the launch checkpoints into ``out/verification/launches/<id>/`` and, with
+    ``stop_after``
+    (wall seconds), returns {"stopped": message} once it has saved its checkpoint."""
     out = Path(out)
     resp = next((r for r in study.responses if r.target is not None), None)
     if resp is None:
@@ -1239,40 +1169,46 @@ def run_verification(
     for f in study.factors:
         v = float(chosen[f.name])
         base[f.parameter] = sp.rig_value(study, f.parameter, v) if sp.is_rig_key(f.parameter) else v
-    rows = [{"world_seed": k + 1, "overrides": base, "file": vdir / f"replicate_{k + 1}.json"} for k in range(n)]
+    rows = [
+        {
+            "run": k + 1,
+            "point_id": f"verification_{k + 1}_{sp.point_key(study, base, k + 1)}",
+            "world_seed": k + 1,
+            "overrides": base,
+            "row": {"stage": "verification"},
+            "file": vdir / f"replicate_{k + 1}.json",
+        }
+        for k in range(n)
+    ]
     pending = [r for r in rows if not r["file"].exists()]
     if pending:
+        from .executor import InProcess
+
+        def save(batch, records, wall, dev, states):
+            for row, rec in zip(batch, records):
+                _write_json(
+                    row["file"],
+                    {
+                        "world_seed": row["world_seed"],
+                        "overrides": row["overrides"],
+                        "responses": rec["responses"],
+                        "metrics": rec["metrics"],
+                        "info": rec["info"],
+                        "device": dev,
+                    },
+                )
+
         bar = _progress_bar(len(pending), 0, f"{study.name} verification", progress)
-
-        def tick(frac, msg):
-            if bar is not None:
-                bar.n = int(frac * len(pending))
-                bar.refresh()
-
         try:
-            records = run_batch(
-                study,
-                pending,
-                device,
-                progress=tick,
-                out_dir=vdir / "launch",
-                checkpoint_every=checkpoint_every,
-                stop_after=stop_after,
+            # the verification folder holds its launch (OUT/verification/launches/<id>)
+            stopped = (executor or InProcess(device)).run(
+                study, vdir, [pending], bar, time.perf_counter(), checkpoint_every, stop_after, log, save=save
             )
         finally:
             if bar is not None:
                 bar.close()
-        for row, rec in zip(pending, records):
-            _write_json(
-                row["file"],
-                {
-                    "world_seed": row["world_seed"],
-                    "overrides": row["overrides"],
-                    "responses": rec["responses"],
-                    "metrics": rec["metrics"],
-                    "info": rec["info"],
-                },
-            )
+        if stopped:
+            return {"stopped": stopped}
     values = []
     for r in rows:
         with open(r["file"]) as fh:
