@@ -56,7 +56,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -958,7 +957,7 @@ def diagnose(
         shutil.copyfile(ex.source, out / "experiments.csv")
     study = spec.study(list(ex.responses))
     sims = Simulations(study, out, execute.parse_devices(device), progress, log, stop_after)
-    sims.scheduler = scheduler or os.environ.get("WARPDEM_SCHEDULER")
+    sims.scheduler = scheduler
     sims.shared_dir = shared_dir
     t0 = time.perf_counter()
     prob = _problem(spec, ex)

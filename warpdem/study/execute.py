@@ -251,33 +251,34 @@ def _check_folder(out: Path, study: sp.StudySpec) -> None:
             raise sp.StudyError(f"{out}: holds study {name!r}, not {study.name!r}; choose another --out")
 
 
-def _save_state(runs_dir: Path, point_id: str, rec: dict, finals: dict) -> None:
-    """``runs/<point_id>.npz``: the run's own world cut out of its launch's final.npz (every world's final state
-    is kept, so a run can be drawn and measured again without rerunning); ``finals`` caches the loaded files."""
+def world_states(batch: list[dict], records: list[dict]) -> dict:
+    """{point_id: world state}: each run's own world cut out of its launch's final.npz (every world's final state
+    is kept, so a run can be drawn and measured again without rerunning); {} for a run whose launch wrote
+    none."""
     from warpdem.scene.runner import world_state
 
-    path = rec["info"].get("files", {}).get("final_npz")
-    if not path or not Path(path).exists():
-        return
-    if path not in finals:
-        with np.load(path) as data:
-            finals[path] = {k: data[k] for k in data.keys()}
-    tmp = runs_dir / f"{point_id}.tmp.npz"
-    np.savez_compressed(tmp, **world_state(finals[path], int(rec["metrics"]["world"])))
-    os.replace(tmp, runs_dir / f"{point_id}.npz")
+    finals: dict = {}
+    out = {}
+    for row, rec in zip(batch, records):
+        path = rec["info"].get("files", {}).get("final_npz")
+        if not path or not Path(path).exists():
+            continue
+        if path not in finals:
+            with np.load(path) as data:
+                finals[path] = {k: data[k] for k in data.keys()}
+        out[row["point_id"]] = world_state(finals[path], int(rec["metrics"]["world"]))
+    return out
 
 
 def _save_batch(
     study, runs_dir: Path, batch: list[dict], records: list[dict], wall: float, device: str, states=None
 ) -> None:
-    """Write each run of ``batch``: its world's final state (from ``states``, {point_id: world state}, as a
-    cluster's task returns them, else cut out of the launch's final.npz), then its JSON."""
-    finals: dict = {}
+    """Write each run of ``batch``: its world's final state (``runs/<point_id>.npz``, from ``states``, as a
+    cluster's task returns them, else :func:`world_states`), then its JSON."""
+    states = world_states(batch, records) if states is None else states
     for row, rec in zip(batch, records):
         # the state before the record: a run is finished when its JSON exists, and then its state does too
-        if states is None:
-            _save_state(runs_dir, row["point_id"], rec, finals)
-        elif row["point_id"] in states:
+        if row["point_id"] in states:
             tmp = runs_dir / f"{row['point_id']}.tmp.npz"
             np.savez_compressed(tmp, **states[row["point_id"]])
             os.replace(tmp, runs_dir / f"{row['point_id']}.npz")
@@ -496,7 +497,7 @@ def run_study(
     from .executor import executor_for
 
     # a cluster is reached (or refused) before anything is counted or drawn
-    ex = executor_for(devices, scheduler or os.environ.get("WARPDEM_SCHEDULER"), shared_dir)
+    ex = executor_for(devices, scheduler, shared_dir)
     pending = [r for r in rows if not (runs_dir / f"{r['point_id']}.json").exists()]
     done0 = len(rows) - len(pending)
     if done0:
@@ -959,7 +960,7 @@ def _measure_overrides(measure: Mapping, where: str) -> dict:
 
 
 def _run_state(out: Path, point_id: str) -> dict | None:
-    """The stored final state of run ``point_id`` (``runs/<point_id>.npz``, :func:`_save_state`), or None."""
+    """The stored final state of run ``point_id`` (``runs/<point_id>.npz``, :func:`_save_batch`), or None."""
     f = out / "runs" / f"{point_id}.npz"
     if not f.exists():
         return None

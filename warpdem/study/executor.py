@@ -28,6 +28,9 @@ DEVICE_ENV = "WARPDEM_DEVICE"
 """Environment variable naming a worker's Warp device ("cpu", "cuda:0"); a worker without it takes "cuda:0" when
 it has a CUDA device and "cpu" otherwise."""
 
+SCHEDULER_ENV = "WARPDEM_SCHEDULER"
+"""Environment variable naming a Dask scheduler's address, used where no ``scheduler`` is given."""
+
 CONNECT_TIMEOUT_S = 10.0
 """Seconds a client waits for a scheduler to answer before the study stops with an error."""
 
@@ -55,12 +58,10 @@ def run_launch(
     state}), "wall_s", "device"}, or {"stopped": message} ({"stopped", "started": False} for one not started)."""
     import tempfile
 
-    import numpy as np
-
     from warpdem.engine.types import init_warp
-    from warpdem.scene.runner import RunStopped, world_state
+    from warpdem.scene.runner import RunStopped
 
-    from .execute import _launch_id, run_batch
+    from .execute import _launch_id, run_batch, world_states
 
     if deadline and not first and time.time() >= deadline:
         return {"stopped": "the wall-time limit came before it started", "started": False}
@@ -81,14 +82,7 @@ def run_launch(
     except RunStopped as e:
         return {"stopped": f"{device}: {e}"}
     wall = time.perf_counter() - t0
-    states = {}
-    path = records[0]["info"].get("files", {}).get("final_npz") if records else None
-    if path and Path(path).exists():
-        with np.load(path) as data:
-            finals = {k: data[k] for k in data.keys()}
-        for row, rec in zip(batch, records):
-            states[row["point_id"]] = world_state(finals, int(rec["metrics"]["world"]))
-    return {"records": records, "states": states, "wall_s": wall, "device": device}
+    return {"records": records, "states": world_states(batch, records), "wall_s": wall, "device": device}
 
 
 class Executor:
@@ -300,8 +294,10 @@ class _DevicePlugin(WorkerPlugin):
 
 
 def executor_for(devices: list[str], scheduler: str | None = None, checkpoint_root: str | None = None) -> Executor:
-    """The executor of ``devices`` (:func:`execute.parse_devices`): a cluster's when ``scheduler`` names one, one
-    device in this process, or a LocalCluster of one worker per device."""
+    """The executor of ``devices`` (:func:`execute.parse_devices`): a cluster's when ``scheduler`` (else the
+    environment variable ``WARPDEM_SCHEDULER``) names one, one device in this process, or a LocalCluster of one
+    worker per device."""
+    scheduler = scheduler or os.environ.get(SCHEDULER_ENV)
     if scheduler:
         return DaskExecutor.connect(scheduler, devices, checkpoint_root)
     if len(devices) == 1:
