@@ -18,6 +18,8 @@ from typing import NoReturn
 
 import numpy as np
 
+from warpdem.errors import InputError
+
 _SHOWN = 12  # most numbers of an array that a message prints
 
 
@@ -38,12 +40,12 @@ def not_allowed(where: str, name: str, value, allowed: str) -> str:
     return f"{head}{name} = {short(value)} is not allowed; expected {allowed}"
 
 
-def fail(where: str, name: str, value, allowed: str, error: type[ValueError] = ValueError) -> NoReturn:
+def fail(where: str, name: str, value, allowed: str, error: type[ValueError] = InputError) -> NoReturn:
     """Raise ``error`` refusing ``name = value`` (see :func:`not_allowed`)."""
     raise error(not_allowed(where, name, value, allowed))
 
 
-def check(cond, where: str, name: str, value, allowed: str, error: type[ValueError] = ValueError) -> None:
+def check(cond, where: str, name: str, value, allowed: str, error: type[ValueError] = InputError) -> None:
     """Refuse ``name = value`` unless ``cond`` holds."""
     if not cond:
         fail(where, name, value, allowed, error)
@@ -71,7 +73,7 @@ def check_number(
     value,
     ok: Callable[[float], bool],
     allowed: str,
-    error: type[ValueError] = ValueError,
+    error: type[ValueError] = InputError,
 ) -> float:
     """``float(value)``, refused unless it is finite and ``ok`` of it holds."""
     check(is_finite(value) and ok(float(value)), where, name, value, allowed, error)
@@ -92,7 +94,7 @@ def integer(where: str, name: str, value, minimum: int, allowed: str = "") -> in
 
 
 def finite_number(
-    where: str, name: str, value, allowed: str = "a finite number", error: type[ValueError] = ValueError
+    where: str, name: str, value, allowed: str = "a finite number", error: type[ValueError] = InputError
 ) -> float:
     """``float(value)``, refused unless ``value`` is a finite real number (not a bool, not a string)."""
     check(is_number(value) and math.isfinite(value), where, name, value, allowed, error)

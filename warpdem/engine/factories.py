@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from warpdem.errors import InputError
+
 from .checks import check, check_number, enum_value, float_array, integer, is_finite, positive, vec3
 
 RSA_SATURATION = 0.38
@@ -839,7 +841,7 @@ Region = Box | Cylinder | Cone
 # Random sequential addition
 
 
-class RegionFullError(RuntimeError):
+class RegionFullError(InputError):
     """A region could not take the requested particles; ``placed`` of ``requested`` fitted."""
 
     def __init__(self, message: str, placed: int, requested: int):

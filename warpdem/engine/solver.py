@@ -9,16 +9,12 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from warpdem.errors import SimulationError
 from warpdem.kernels import neighbors as _nb
 from warpdem.kernels import step as _st
 from warpdem.kernels.features import StepFeatures
 
 from .types import ContactLaw, Contacts, Control, Model, Overflow, State, host
-
-
-class SimulationError(RuntimeError):
-    """A run stopped: a sphere's velocity became non-finite or exceeded the limit, or a capacity overflowed."""
-
 
 CLUMP_CONTACT_MASSES = ("shared", "body")
 """The values of SolverOptions.clump_contact_mass (also a stage's warpdem:run:clumpContactMass)."""

@@ -40,12 +40,13 @@ from warpdem.engine.checks import check, did_you_mean, enum_value, number_fields
 from warpdem.engine.keys import KeyGrammar
 from warpdem.engine.materials import INTERACTION_ENUMS, INTERACTION_FIELDS, MATERIAL_SCALARS, Interaction, Material
 from warpdem.engine.solver import CLUMP_CONTACT_MASSES, SolverOptions
+from warpdem.errors import InputError
 
 TIME_CODES_PER_SECOND = 100.0
 NS = "warpdem:"
 
 
-class StageError(ValueError):
+class StageError(InputError):
     """A stage is missing something the engine needs, or holds a value it cannot use."""
 
 

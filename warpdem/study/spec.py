@@ -135,6 +135,7 @@ except ModuleNotFoundError:  # pragma: no cover - Python 3.10 needs the tomli ba
 from warpdem.engine.checks import did_you_mean, finite_number, is_number, not_allowed
 from warpdem.engine.keys import PER_WORLD, KeyGrammar, is_rig_key
 from warpdem.engine.materials import INTERACTION_SCALARS
+from warpdem.errors import InputError
 from warpdem.scene.runner import COMMON_METRICS, MEASURE_METRICS
 
 from . import designs
@@ -179,7 +180,7 @@ __all__ = [
 ]
 
 
-class StudyError(ValueError):
+class StudyError(InputError):
     """A study definition that cannot be used; the message names file, table, field, value and what is
     allowed."""
 
