@@ -31,6 +31,8 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from warpdem.errors import InputError
+
 CANDIDATE_NAMES = (
     "cohesion",
     "plasticity",
@@ -76,9 +78,9 @@ class Candidate:
 
     def __post_init__(self):
         if self.name not in CANDIDATE_NAMES:
-            raise ValueError(f"Candidate: name = {self.name!r} is not allowed; expected one of {CANDIDATE_NAMES}")
+            raise InputError(f"Candidate: name = {self.name!r} is not allowed; expected one of {CANDIDATE_NAMES}")
         if not (self.low < self.high and self.low <= self.off <= self.high):
-            raise ValueError(
+            raise InputError(
                 f"Candidate {self.name!r}: range [{self.low}, {self.high}] with off = {self.off} is not allowed; "
                 "expected low < high and off within the range"
             )

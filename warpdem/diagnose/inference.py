@@ -29,6 +29,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from warpdem.errors import InputError
+
 if TYPE_CHECKING:
     import pandas as pd
 
@@ -60,16 +62,16 @@ EDGE = 1e-6
 def _vector(name: str, a, n: int | None = None) -> np.ndarray:
     a = np.asarray(a, dtype=float)
     if a.ndim != 1:
-        raise ValueError(f"{name} must be one-dimensional, got shape {a.shape}")
+        raise InputError(f"{name} must be one-dimensional, got shape {a.shape}")
     if n is not None and a.shape[0] != n:
-        raise ValueError(f"{name} has {a.shape[0]} values, expected {n}")
+        raise InputError(f"{name} has {a.shape[0]} values, expected {n}")
     return a
 
 
 def _variance(name: str, v, n: int) -> np.ndarray:
     v = _vector(name, v, n)
     if not np.all(np.isfinite(v) & (v > 0)):
-        raise ValueError(f"{name} must be finite and positive")
+        raise InputError(f"{name} must be finite and positive")
     return v
 
 
@@ -145,14 +147,14 @@ class Surrogate:
 
         X = np.asarray(X, dtype=float)
         if X.ndim != 2:
-            raise ValueError(f"X must be (n, d), got shape {X.shape}")
+            raise InputError(f"X must be (n, d), got shape {X.shape}")
         y = _vector("y", y, X.shape[0])
         if not np.all(np.isfinite(X)) or X.min(initial=0.0) < -1e-9 or X.max(initial=1.0) > 1 + 1e-9:
-            raise ValueError("X must lie in the unit cube [0, 1]^d")
+            raise InputError("X must lie in the unit cube [0, 1]^d")
         keep = np.isfinite(y)
         X, y = X[keep], y[keep]
         if y.size == 0:
-            raise ValueError("no finite response to fit")
+            raise InputError("no finite response to fit")
         self.X, self.y = X, y
         self._offset, self._scale = float(y.mean()), float(y.std())
         if np.ptp(y) <= 1e-12 * np.abs(y).max():
@@ -311,7 +313,7 @@ def calibrate(
         if np.isfinite(res.fun) and (best is None or res.fun < best.fun):
             best = res
     if best is None:
-        raise ValueError("the log-likelihood is not finite at any start")
+        raise InputError("the log-likelihood is not finite at any start")
     u_map = np.clip(best.x, 0.0, 1.0)
     at_bound = np.where(u_map <= EDGE, -1, np.where(u_map >= 1 - EDGE, 1, 0))
     if steps == 0:
@@ -320,7 +322,7 @@ def calibrate(
     nwalkers = walkers or max(4 * d, 16)
     nwalkers += nwalkers % 2  # the stretch move updates two equal halves of the ensemble
     if nwalkers < 2 * d:
-        raise ValueError(f"emcee needs at least 2d = {2 * d} walkers, got {nwalkers}")
+        raise InputError(f"emcee needs at least 2d = {2 * d} walkers, got {nwalkers}")
     rng = np.random.default_rng(seed)
     # reflected into the cube: a MAP on a face must not pin every walker to it (the ensemble would never leave)
     p0 = np.abs(u_map + 1e-3 * rng.standard_normal((nwalkers, d)))
@@ -419,13 +421,13 @@ def adequacy(
     n = r.size
     v = _variance("variance", variance, n)
     if not np.all(np.isfinite(r)):
-        raise ValueError("residual must be finite")
+        raise InputError("residual must be finite")
     conditions = pd.DataFrame(conditions)
     if len(conditions) != n:
-        raise ValueError(f"conditions has {len(conditions)} rows, expected {n}")
+        raise InputError(f"conditions has {len(conditions)} rows, expected {n}")
     responses = np.asarray(responses, dtype=object)
     if responses.shape != (n,):
-        raise ValueError(f"responses must have {n} labels")
+        raise InputError(f"responses must have {n} labels")
     z = r / np.sqrt(v)
     experiments = list(conditions.index)
 
@@ -504,7 +506,7 @@ def lrt_boundary(loglik_base: float, loglik_ext: float, df: int = 1) -> tuple[fl
     from scipy import stats
 
     if df < 1:
-        raise ValueError("df must be >= 1")
+        raise InputError("df must be >= 1")
     lr = 2.0 * (float(loglik_ext) - float(loglik_base))
     if not lr > 0:
         return lr, 1.0
@@ -603,11 +605,11 @@ def bootstrap(losses: Mapping[str, np.ndarray], seed: int = 0, n_boot: int = 200
 
     names = list(losses)
     if not names:
-        raise ValueError("no models")
+        raise InputError("no models")
     L = [_vector(f"losses[{k!r}]", losses[k]) for k in names]
     n = L[0].size
     if n == 0 or any(a.size != n for a in L) or not all(np.all(np.isfinite(a)) for a in L):
-        raise ValueError("every model needs the same number (>= 1) of finite losses")
+        raise InputError("every model needs the same number (>= 1) of finite losses")
     index = np.random.default_rng(seed).integers(0, n, size=(n_boot, n))
     boot = np.array([a[index].mean(axis=1) for a in L])  # (models, n_boot)
     q = 50.0 * (1.0 - level), 50.0 * (1.0 + level)

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import warp as wp
 
+from warpdem.errors import InputError
 from warpdem.kernels.params import PairParams
 
 from . import analytic
@@ -63,7 +64,7 @@ class ModelBuilder:
         if not isinstance(material, Material):
             raise TypeError(f"add_material: expected a Material, got {type(material).__name__}")
         if any(m.name == material.name for m in self.materials):
-            raise ValueError(f"add_material: a material named {material.name!r} exists already")
+            raise InputError(f"add_material: a material named {material.name!r} exists already")
         self.materials.append(material)
         return len(self.materials) - 1
 
@@ -79,7 +80,7 @@ class ModelBuilder:
                 if m.name == material:
                     return k
         names = ", ".join(m.name for m in self.materials) or "none yet"
-        raise ValueError(f"material = {material!r} is not defined; defined materials: {names}")
+        raise InputError(f"material = {material!r} is not defined; defined materials: {names}")
 
     def set_interaction(self, a, b, interaction: Interaction | None = None, **kwargs) -> Interaction:
         """Set the contact parameters of materials ``a`` and ``b`` (see :class:`Interaction`)."""
@@ -108,10 +109,10 @@ class ModelBuilder:
         n = x.shape[0]
         r = np.broadcast_to(np.asarray(radius, dtype=np.float64), (n,)).copy()
         if not np.all(np.isfinite(x)):
-            raise ValueError("add_spheres: positions contain a non-finite value")
+            raise InputError("add_spheres: positions contain a non-finite value")
         bad = np.flatnonzero(~(np.isfinite(r) & (r > 0)))
         if bad.size:
-            raise ValueError(
+            raise InputError(
                 f"add_spheres: radius = {float(r[bad[0]])!r} (sphere {bad[0]}) is not allowed; expected a radius > 0 m"
             )
         v = np.zeros((n, 3)) if velocities is None else np.asarray(velocities, dtype=np.float64).reshape(n, 3)
@@ -121,9 +122,9 @@ class ModelBuilder:
             else np.asarray(angular_velocities, dtype=np.float64).reshape(n, 3)
         )
         if not (np.all(np.isfinite(v)) and np.all(np.isfinite(w))):
-            raise ValueError("add_spheres: velocities contain a non-finite value")
+            raise InputError("add_spheres: velocities contain a non-finite value")
         if int(world) != 0:
-            raise ValueError(
+            raise InputError(
                 f"add_spheres: world = {world!r} is not allowed; build world 0 and call replicate(world_count)"
             )
         mat = self.material_index(material)
@@ -165,12 +166,12 @@ class ModelBuilder:
 
         k = self._wall_index(wall, "coat_wall")
         if not (np.isfinite(radius) and radius > 0):
-            raise ValueError(f"coat_wall: radius = {radius!r} is not allowed; expected a radius > 0 m")
+            raise InputError(f"coat_wall: radius = {radius!r} is not allowed; expected a radius > 0 m")
         spacing = 2.0 * radius if spacing is None else float(spacing)
         if not (np.isfinite(spacing) and spacing > 0):
-            raise ValueError(f"coat_wall: spacing = {spacing!r} is not allowed; expected a distance > 0 m")
+            raise InputError(f"coat_wall: spacing = {spacing!r} is not allowed; expected a distance > 0 m")
         if side not in (1, -1, 1.0, -1.0):
-            raise ValueError(f"coat_wall: side = {side!r} is not allowed; expected 1 or -1")
+            raise InputError(f"coat_wall: side = {side!r} is not allowed; expected 1 or -1")
         verts, tris = self._walls[k][0], self._walls[k][1]
         a, b, c = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
         cross = np.cross(b - a, c - a)
@@ -201,7 +202,7 @@ class ModelBuilder:
         elif isinstance(wall, (int, np.integer)) and 0 <= int(wall) < len(self._walls):
             return int(wall)
         names = ", ".join(repr(w[4]) for w in self._walls) or "none yet"
-        raise ValueError(f"{where}: wall = {wall!r} is not a mesh wall; defined walls: {names}")
+        raise InputError(f"{where}: wall = {wall!r} is not a mesh wall; defined walls: {names}")
 
     def add_clump(
         self, template, position, material, orientation=(0, 0, 0, 1), velocity=(0, 0, 0), angular_velocity=(0, 0, 0)
@@ -254,13 +255,13 @@ class ModelBuilder:
         )
         for name, arr in (("positions", x), ("orientations", q), ("velocities", v), ("angular_velocities", w)):
             if not np.all(np.isfinite(arr)):
-                raise ValueError(f"add_clumps: {name} contain a non-finite value")
+                raise InputError(f"add_clumps: {name} contain a non-finite value")
         s = np.broadcast_to(np.asarray(1.0 if scale is None else scale, dtype=np.float64), (n,)).copy()
         if not np.all(np.isfinite(s) & (s > 0)):
-            raise ValueError(f"add_clumps: scale = {scale!r} is not allowed; expected factors > 0")
+            raise InputError(f"add_clumps: scale = {scale!r} is not allowed; expected factors > 0")
         norms = np.linalg.norm(q, axis=1)
         if np.any(norms < 1e-6):
-            raise ValueError(
+            raise InputError(
                 "add_clumps: orientations contain a zero quaternion; expected unit quaternions (x, y, z, w)"
             )
         q = q / norms[:, None]
@@ -362,11 +363,11 @@ class ModelBuilder:
         from .factories import DynamicFactory
 
         if not isinstance(factory, DynamicFactory):
-            raise ValueError(f"add_factory: factory = {factory!r} is not allowed; expected a DynamicFactory")
+            raise InputError(f"add_factory: factory = {factory!r} is not allowed; expected a DynamicFactory")
         if template is not None:
             need = template.bounding_radius / template.equivalent_radius
             if factory.bounding_ratio < need * (1 - 1e-9):
-                raise ValueError(
+                raise InputError(
                     f"add_factory: factory.bounding_ratio = {factory.bounding_ratio!r} is not allowed for "
                     f"template {template.name!r}; expected at least its bounding / equivalent radius "
                     f"= {need:.6g}, or released clumps could overlap"
@@ -414,7 +415,7 @@ class ModelBuilder:
         nrm = np.array(vec3("add_plane", "normal", normal))
         length = np.linalg.norm(nrm)
         if length == 0:
-            raise ValueError("add_plane: normal = (0, 0, 0) is not allowed; expected a non-zero vector")
+            raise InputError("add_plane: normal = (0, 0, 0) is not allowed; expected a non-zero vector")
         self._planes.append((p, nrm / length, self.material_index(material), int(world)))
         return len(self._planes) - 1
 
@@ -430,16 +431,16 @@ class ModelBuilder:
         if motion is None:
             motion = WallMotion.static()
         if not isinstance(motion, WallMotion):
-            raise ValueError(f"add_wall_mesh: motion = {motion!r} is not allowed; expected a WallMotion or None")
+            raise InputError(f"add_wall_mesh: motion = {motion!r} is not allowed; expected a WallMotion or None")
         verts = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
         tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
         label = name or f"wall{len(self._walls)}"
         if tris.size == 0:
-            raise ValueError(f"add_wall_mesh {label!r}: triangles is empty; expected at least one triangle")
+            raise InputError(f"add_wall_mesh {label!r}: triangles is empty; expected at least one triangle")
         if tris.min() < 0 or tris.max() >= len(verts):
-            raise ValueError(f"add_wall_mesh {label!r}: triangles index {int(tris.max())} outside 0..{len(verts) - 1}")
+            raise InputError(f"add_wall_mesh {label!r}: triangles index {int(tris.max())} outside 0..{len(verts) - 1}")
         if not np.all(np.isfinite(verts)):
-            raise ValueError(f"add_wall_mesh {label!r}: vertices contain a non-finite value")
+            raise InputError(f"add_wall_mesh {label!r}: vertices contain a non-finite value")
         self._walls.append((verts, tris, self.material_index(material), int(world), label, motion))
         return len(self._walls) - 1
 
@@ -454,7 +455,7 @@ class ModelBuilder:
         ``State.world_removed``. Without a domain nothing is removed."""
         lo, hi = np.array(vec3("set_domain", "low", low)), np.array(vec3("set_domain", "high", high))
         if not np.all(lo < hi):
-            raise ValueError(
+            raise InputError(
                 f"set_domain: low = {tuple(lo.tolist())} and high = {tuple(hi.tolist())} are not "
                 "allowed; expected low < high on every axis"
             )
@@ -463,7 +464,7 @@ class ModelBuilder:
     def replicate(self, world_count: int) -> None:
         """Make ``world_count`` identical copies of the scene, all at the origin (kept apart by world id)."""
         if int(world_count) < 1:
-            raise ValueError(f"replicate: world_count = {world_count!r} is not allowed; expected an integer >= 1")
+            raise InputError(f"replicate: world_count = {world_count!r} is not allowed; expected an integer >= 1")
         self.world_count = int(world_count)
 
     def vary(self, target: str, values) -> None:
@@ -476,7 +477,7 @@ class ModelBuilder:
         """
         vals = list(values)
         if len(vals) != self.world_count:
-            raise ValueError(f"vary {target!r}: {len(vals)} values given; expected world_count = {self.world_count}")
+            raise InputError(f"vary {target!r}: {len(vals)} values given; expected world_count = {self.world_count}")
         key = VARY.parse(target, "vary", "target", defined={"material": [m.name for m in self.materials]})
         if key != _GRAVITY:
             vals = [_world_value(key, target, v) for v in vals]
@@ -488,10 +489,10 @@ class ModelBuilder:
         points, replicates) batched as worlds differ only through these seeds. Call after :meth:`replicate`."""
         vals = [int(v) for v in seeds]
         if len(vals) != self.world_count:
-            raise ValueError(f"seed_worlds: {len(vals)} seeds given; expected world_count = {self.world_count}")
+            raise InputError(f"seed_worlds: {len(vals)} seeds given; expected world_count = {self.world_count}")
         bad = [v for v in vals if v < 0]
         if bad:
-            raise ValueError(f"seed_worlds: seed = {bad[0]} is not allowed; expected integers >= 0")
+            raise InputError(f"seed_worlds: seed = {bad[0]} is not allowed; expected integers >= 0")
         self._world_seeds = vals
 
     def _world_tables(self):
@@ -529,7 +530,7 @@ class ModelBuilder:
         Call once both are complete; stacking is not undone.
         """
         if not isinstance(other, ModelBuilder) or other is self or other in self._stacked:
-            raise ValueError(f"stack: other = {other!r} is not allowed; expected another, complete ModelBuilder")
+            raise InputError(f"stack: other = {other!r} is not allowed; expected another, complete ModelBuilder")
         what = None
         if [m.name for m in other.materials] != [m.name for m in self.materials] or other.materials != self.materials:
             what = "materials"
@@ -547,7 +548,7 @@ class ModelBuilder:
         elif other._stacked:
             what = "stacked worlds of its own"
         if what is not None:
-            raise ValueError(f"stack: the other scene has different {what}; expected the same as this one's")
+            raise InputError(f"stack: the other scene has different {what}; expected the same as this one's")
         if self._domain is None or other._domain is None:
             self._domain = None
         else:
@@ -565,11 +566,11 @@ class ModelBuilder:
         """Build the Model on ``device`` ("cpu" or "cuda[:n]"): this builder's worlds, then those of each
         :meth:`stack` ed builder."""
         if not self.materials:
-            raise ValueError("finalize: no material defined; call add_material first")
+            raise InputError("finalize: no material defined; call add_material first")
         groups = [self, *self._stacked]
         for g in groups:
             if g.sphere_count == 0:
-                raise ValueError("finalize: the scene has no sphere")
+                raise InputError("finalize: the scene has no sphere")
         device = str(wp.get_device(device))
         W = sum(g.world_count for g in groups)
         world0 = np.cumsum([0] + [g.world_count for g in groups])
@@ -787,7 +788,7 @@ def _world_value(key: OverrideKey, target: str, value):
             return getattr(Interaction(**{key.field: value}), key.field)
         return float(value)
     except (TypeError, ValueError) as e:
-        raise ValueError(f"vary {target!r}: value = {value!r} is not allowed: {e}") from None
+        raise InputError(f"vary {target!r}: value = {value!r} is not allowed: {e}") from None
 
 
 def contact_reach(params: np.ndarray, radius_max: float) -> float:

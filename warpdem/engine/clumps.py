@@ -25,6 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from warpdem.errors import InputError
+
 from .checks import check, check_number, fail, float_array, integer, positive, readonly
 
 _FOUR_THIRDS_PI = 4.0 * math.pi / 3.0
@@ -296,7 +298,7 @@ def _validate_mesh(vertices, faces, where: str) -> tuple[np.ndarray, np.ndarray]
     scale = np.ptp(v, axis=0).max()
     bad = np.flatnonzero(area2 <= 1e-12 * scale * scale)
     if bad.size:
-        raise ValueError(
+        raise InputError(
             f"{where}: faces[{bad[0]}] = {f[bad[0]].tolist()} is not allowed; the triangle is degenerate (zero area)"
         )
     # Closed (watertight, 2-manifold) <=> every undirected edge is shared by exactly two faces.
@@ -311,14 +313,14 @@ def _validate_mesh(vertices, faces, where: str) -> tuple[np.ndarray, np.ndarray]
             parts.append(f"{len(open_edges)} boundary edge(s) used by one face, e.g. vertices {open_edges[0].tolist()}")
         if len(many):
             parts.append(f"{len(many)} edge(s) used by more than two faces, e.g. vertices {many[0].tolist()}")
-        raise ValueError(
+        raise InputError(
             f"{where}: faces do not form a closed surface ({'; '.join(parts)}); expected every "
             "edge shared by exactly two triangles"
         )
     # Consistent orientation <=> each directed edge occurs once (its twin runs the other way).
     _, dcounts = np.unique(directed, axis=0, return_counts=True)
     if np.any(dcounts != 1):
-        raise ValueError(
+        raise InputError(
             f"{where}: faces are not consistently oriented ({int((dcounts > 1).sum())} directed "
             "edge(s) occur twice); expected neighbouring triangles to traverse a shared edge in "
             "opposite directions"
@@ -439,12 +441,12 @@ def _autofill(fld: _Field, min_radius: float, smoothing: float, overlap, sphere_
     t = 0.5 * smoothing * h
     inside = depth > 0
     if not inside.any():
-        raise ValueError(
+        raise InputError(
             f"{where}: cells = {tuple(shape)} leaves no cell centre inside the shape; expected a finer grid"
         )
     deepest = float(depth[inside].max())
     if deepest < min_radius:
-        raise ValueError(
+        raise InputError(
             f"{where}: min_radius = {min_radius!r} is not allowed; expected at most the largest "
             f"inscribed radius found on the grid, {deepest:.6g} m"
         )

@@ -53,7 +53,7 @@ def _points(points) -> np.ndarray:
     if p.ndim == 1 and p.shape[0] == 3:
         p = p[None, :]
     if p.ndim != 2 or p.shape[1] != 3:
-        raise ValueError(f"points: shape {p.shape} is not allowed; expected (n, 3)")
+        raise InputError(f"points: shape {p.shape} is not allowed; expected (n, 3)")
     return p
 
 
@@ -334,7 +334,7 @@ class SieveTable(_Moments):
         )
         total = float(f.sum())
         if not abs(total - 1.0) <= _FRACTION_TOL:
-            raise ValueError(
+            raise InputError(
                 f"{where}: mass_fractions = {[float(x) for x in f]} (sum {total!r}) is not allowed; "
                 f"expected fractions summing to 1 within 1e-6 (percentages: divide by 100; a table "
                 f"with sieving loss: SieveTable.normalised(...) spreads the loss over the classes)"
@@ -400,12 +400,12 @@ class SieveTable(_Moments):
         with open(path, newline="") as fh:
             rows = [r for r in csv.DictReader(fh)]
         if not rows:
-            raise ValueError(f"{where}: the file has no data rows")
+            raise InputError(f"{where}: the file has no data rows")
         names = list(rows[0].keys())
         low = {n: n.strip().lower() for n in names}
         size_col = next((n for n in names if low[n].startswith(("sieve", "size", "aperture", "mesh_"))), None)
         if size_col is None:
-            raise ValueError(
+            raise InputError(
                 f"{where}: columns {names} have no sieve size column; expected a name starting "
                 f"with 'sieve', 'size' or 'aperture' and ending in _um, _mm or _m"
             )
@@ -418,7 +418,7 @@ class SieveTable(_Moments):
             None,
         )
         if scale is None:
-            raise ValueError(f"{where}: size column {size_col!r} has no unit suffix; expected one of _um, _mm, _m")
+            raise InputError(f"{where}: size column {size_col!r} has no unit suffix; expected one of _um, _mm, _m")
 
         def is_cum(n):
             return "cum" in low[n]
@@ -433,15 +433,15 @@ class SieveTable(_Moments):
         candidates += [n for n in names if any(t in low[n] for t in ("passing", "finer", "undersize"))]
         if column is not None:
             if column not in names:
-                raise ValueError(f"{where}: column = {column!r} is not allowed; expected one of {names}")
+                raise InputError(f"{where}: column = {column!r} is not allowed; expected one of {names}")
             candidates = [column]
         if not candidates:
-            raise ValueError(f"{where}: columns {names} have no retained or passing column")
+            raise InputError(f"{where}: columns {names} have no retained or passing column")
         col = candidates[0]
         try:
             table = sorted(((float(r[size_col]), float(r[col])) for r in rows), key=lambda t: -t[0])
         except (TypeError, ValueError) as exc:
-            raise ValueError(f"{where}: a value in columns {size_col!r}/{col!r} is not a number ({exc})") from None
+            raise InputError(f"{where}: a value in columns {size_col!r}/{col!r} is not a number ({exc})") from None
         aperture = np.array([t[0] for t in table]) * scale
         value = np.array([t[1] for t in table])
         has_pan = aperture[-1] == 0.0
@@ -458,7 +458,7 @@ class SieveTable(_Moments):
                 has_pan = True
         sieves = aperture[:-1] if has_pan else aperture
         if sieves.size < 2:
-            raise ValueError(
+            raise InputError(
                 f"{where}: {sieves.size} sieve(s) with an aperture > 0; expected at least 2 to "
                 f"extrapolate the open classes"
             )
@@ -484,7 +484,7 @@ class SieveTable(_Moments):
         # that the table does not reach to an extrapolated edge no particle comes from.
         used = np.flatnonzero(retained > 0.0)
         if used.size == 0:
-            raise ValueError(f"{where}: column {col!r} gives no retained mass in any class")
+            raise InputError(f"{where}: column {col!r} gives no retained mass in any class")
         keep = slice(used[0], used[-1] + 1)
         return cls.normalised(edges[used[0] : used[-1] + 2], retained[keep], spread)
 
@@ -945,7 +945,7 @@ def _check_existing(where: str, existing_x, existing_r) -> tuple[np.ndarray, np.
     if existing_x is None and existing_r is None:
         return np.zeros((0, 3)), np.zeros(0)
     if existing_x is None or existing_r is None:
-        raise ValueError(f"{where}: give existing_x and existing_r together (one of them is None)")
+        raise InputError(f"{where}: give existing_x and existing_r together (one of them is None)")
     x = np.asarray(existing_x, dtype=float).reshape(-1, 3) if np.size(existing_x) else np.zeros((0, 3))
     r = np.asarray(existing_r, dtype=float).ravel()
     check(len(x) == len(r), where, "existing_r", f"shape {r.shape}", f"shape ({len(x)},) to match existing_x")
@@ -1083,7 +1083,7 @@ def _check_region_sizes(where: str, region, sizes) -> None:
 
 def _check_fits(where: str, region, bound: np.ndarray) -> None:
     if len(bound) and not bool(region._fits(float(bound.max()))):
-        raise ValueError(
+        raise InputError(
             f"{where}: sizes: a particle of bounding radius {float(bound.max())!r} m does not fit in "
             f"{region}; expected at most {region.inradius!r} m (the largest sphere that fits): use "
             f"smaller sizes or a larger region"

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from warpdem.errors import InputError
 from warpdem.kernels.law_hertz_mindlin import SQRT_5_6, stable_factors
 from warpdem.kernels.params import PairParams
 
@@ -61,7 +62,7 @@ class Material:
         check_number(where, "density", self.density, lambda v: v > 0, "a density > 0 kg/m^3")
         check_number(where, "poisson_ratio", self.poisson_ratio, lambda v: -1.0 < v < 0.5, "a value in (-1, 0.5)")
         if self.youngs_modulus is None and self.shear_modulus is None:
-            raise ValueError(f"{where}: give youngs_modulus or shear_modulus (neither was given)")
+            raise InputError(f"{where}: give youngs_modulus or shear_modulus (neither was given)")
         nu = float(self.poisson_ratio)
         for name in ("youngs_modulus", "shear_modulus"):
             if getattr(self, name) is not None:

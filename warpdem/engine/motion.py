@@ -22,11 +22,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from warpdem.errors import InputError
+
 
 def _vec(value, where, name):
     a = np.asarray(value, dtype=np.float64).reshape(-1)
     if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"{where}: {name} = {value!r} is not allowed; expected three finite numbers")
+        raise InputError(f"{where}: {name} = {value!r} is not allowed; expected three finite numbers")
     return a
 
 
@@ -88,9 +90,9 @@ class Segment:
     def __post_init__(self):
         where = "Segment"
         if not (math.isfinite(self.start) and self.start >= 0.0):
-            raise ValueError(f"{where}: start = {self.start!r} is not allowed; expected a time >= 0 s")
+            raise InputError(f"{where}: start = {self.start!r} is not allowed; expected a time >= 0 s")
         if not (self.end > self.start):
-            raise ValueError(f"{where}: end = {self.end!r} is not allowed; expected a time after start = {self.start}")
+            raise InputError(f"{where}: end = {self.end!r} is not allowed; expected a time after start = {self.start}")
         for name in ("velocity", "angular_velocity", "pivot"):
             object.__setattr__(self, name, tuple(_vec(getattr(self, name), where, name)))
 
@@ -112,9 +114,9 @@ class WallMotion:
         last = 0.0
         for k, s in enumerate(self.segments):
             if not isinstance(s, Segment):
-                raise ValueError(f"WallMotion: segments[{k}] = {s!r} is not allowed; expected a Segment")
+                raise InputError(f"WallMotion: segments[{k}] = {s!r} is not allowed; expected a Segment")
             if s.start < last - 1e-12:
-                raise ValueError(
+                raise InputError(
                     f"WallMotion: segments[{k}].start = {s.start} is not allowed; expected segments in "
                     f"time order without overlap (previous ends at {last})"
                 )
@@ -122,11 +124,11 @@ class WallMotion:
         if self.keyframe_times:
             t = np.asarray(self.keyframe_times, dtype=np.float64)
             if self.segments:
-                raise ValueError("WallMotion: give segments or keyframes, not both")
+                raise InputError("WallMotion: give segments or keyframes, not both")
             if np.any(np.diff(t) <= 0) or not np.all(np.isfinite(t)):
-                raise ValueError(f"WallMotion: keyframe_times = {list(t)} is not allowed; expected increasing times")
+                raise InputError(f"WallMotion: keyframe_times = {list(t)} is not allowed; expected increasing times")
             if len(self.keyframe_translations) != len(t) or len(self.keyframe_rotations) != len(t):
-                raise ValueError("WallMotion: keyframe_translations and keyframe_rotations need one entry per time")
+                raise InputError("WallMotion: keyframe_translations and keyframe_rotations need one entry per time")
 
     @staticmethod
     def static() -> WallMotion:
@@ -160,7 +162,7 @@ class WallMotion:
         )
         norms = np.linalg.norm(rot, axis=1)
         if np.any(np.abs(norms - 1.0) > 1e-3):
-            raise ValueError(f"WallMotion.keyframes: rotations have norms {norms.tolist()}; expected unit quaternions")
+            raise InputError(f"WallMotion.keyframes: rotations have norms {norms.tolist()}; expected unit quaternions")
         rot = rot / norms[:, None]
         return WallMotion(
             keyframe_times=t, keyframe_translations=tuple(map(tuple, tr)), keyframe_rotations=tuple(map(tuple, rot))

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from warpdem.errors import SimulationError
+from warpdem.errors import InputError, SimulationError
 from warpdem.kernels import neighbors as _nb
 from warpdem.kernels import step as _st
 from warpdem.kernels.features import StepFeatures
@@ -73,7 +73,7 @@ class SolverOptions:
 
     def __post_init__(self):
         def bad(name, value, allowed):
-            raise ValueError(f"SolverOptions: {name} = {value!r} is not allowed; expected {allowed}")
+            raise InputError(f"SolverOptions: {name} = {value!r} is not allowed; expected {allowed}")
 
         if self.dt is not None and not (math.isfinite(self.dt) and self.dt > 0):
             bad("dt", self.dt, "a time step > 0 s or None (automatic)")
@@ -121,7 +121,7 @@ def check_row_bytes(sphere_count: int, dtype) -> None:
     """Refuse a list array whose row (one slot per sphere) is too long for Warp's int32 strides."""
     size = wp.types.type_size_in_bytes(dtype)
     if sphere_count * size > ROW_BYTES_MAX:
-        raise ValueError(
+        raise InputError(
             f"Solver.contacts: sphere_count = {sphere_count:,} is not allowed with {size}-byte "
             f"{getattr(dtype, '__name__', dtype)} list slots; expected at most {ROW_BYTES_MAX // size:,} spheres "
             "in one model (Warp addresses a row of one slot per sphere with int32 strides): split the launch "
@@ -246,7 +246,7 @@ class Solver:
         :meth:`contacts` allocated them would not match)."""
         want = self.features.history_type
         if contacts.neighbor_history.dtype is not want:
-            raise ValueError(
+            raise InputError(
                 f"Solver: contacts hold history of type {contacts.neighbor_history.dtype.__name__}, but the "
                 f"kernels are compiled for {want.__name__} (features {self.features}); allocate them with "
                 "Solver.contacts() after setting Solver.features"

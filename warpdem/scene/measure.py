@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpdem.engine.checks import fail, finite_number
+from warpdem.errors import InputError
 
 __all__ = [
     "SettleMonitor",
@@ -297,7 +298,7 @@ def angle_surface_fit(
         azimuth = -180.0 + (s + 0.5) * 360.0 / slices  # the sector's middle, as atan2 measures it
         lines.append({"azimuth_deg": azimuth, "slope": float(slope), "intercept_m": float(intercept)})
     if len(angles) < 2:
-        raise ValueError(
+        raise InputError(
             f"angle_surface_fit: only {len(angles)} of slices = {slices} sectors have >= 3 surface points "
             f"between inner = {inner} and outer = {outer} of the extent {extent:.4g} m with bins "
             f"{width:.4g} m wide (>= {MIN_BIN_DIAMETERS} sphere diameters); the pile is too small or too "
@@ -369,7 +370,7 @@ def flank_lines(fit: dict, base_z: float = 0.0, axis: str = "y") -> list[dict]:
         weighted line's) and ``points`` ((h0, z0), (h1, z1)) [m] in the view plane, apex end first.
     """
     if axis not in ("x", "y"):
-        raise ValueError(f'flank_lines: axis = {axis!r} is not allowed; expected "x" or "y"')
+        raise InputError(f'flank_lines: axis = {axis!r} is not allowed; expected "x" or "y"')
     cx, cy = fit["center"]
     h0 = cx if axis == "y" else cy
     facing = 0.0 if axis == "y" else 90.0  # the azimuth of +h
@@ -578,7 +579,7 @@ def angle_image(
         for side in (-1.0, 1.0):
             on = side * uc > 0
             if not on.any():
-                raise ValueError(
+                raise InputError(
                     f"angle_image: view {k} has no silhouette on the "
                     f"{'left' if side < 0 else 'right'} of the axis center = {(cx, cy)}; "
                     f"expected a pile around the axis"
@@ -586,7 +587,7 @@ def angle_image(
             w = float((side * uc[on]).max())
             keep = on & (side * uc >= inner * w) & (side * uc <= outer * w)
             if keep.sum() < 3:
-                raise ValueError(
+                raise InputError(
                     f"angle_image: view {k}, {'left' if side < 0 else 'right'} flank has "
                     f"{int(keep.sum())} columns between inner = {inner} and outer = {outer} of its "
                     f"width {w:.4g} m at pixel = {p:.4g} m; expected >= 3 (use a smaller pixel)"

@@ -30,6 +30,7 @@ from warpdem.engine.checks import check
 from warpdem.engine.keys import is_rig_key
 from warpdem.engine.materials import Interaction, Material
 from warpdem.engine.types import ContactLaw, RollingModel
+from warpdem.errors import InputError
 
 from .stage import FactorySpec, MeasureSpec, RunSpec, SceneSpec, ShapeSpec, StageError, WallSpec, unload_keyframes
 
@@ -94,7 +95,7 @@ def _check_aspect_ratio(p) -> None:
     )
     particle = getattr(p, "particle", "sphere")
     if p.aspect_ratio != 1 and particle != "sphere":
-        raise ValueError(
+        raise InputError(
             f"{where}: aspect_ratio = {p.aspect_ratio} is not allowed with particle = {particle!r}; expected 1 "
             "(only spheres are elongated into rods)"
         )
@@ -113,7 +114,7 @@ def _shape(kind: str, where: str, aspect_ratio: float = 1.0) -> tuple[ShapeSpec,
     elif kind in templates:
         name, t = kind, templates[kind]()
     else:
-        raise ValueError(f"{where}: particle = {kind!r} is not allowed; expected sphere, " + ", ".join(templates))
+        raise InputError(f"{where}: particle = {kind!r} is not allowed; expected sphere, " + ", ".join(templates))
     return ShapeSpec(name, "clump", np.asarray(t.sphere_offset), np.asarray(t.sphere_radius)), t.equivalent_radius
 
 
@@ -356,10 +357,10 @@ class Funnel:
         _check_aspect_ratio(self)
         _check_params(self)
         if self.material not in ("pellet", "feed"):
-            raise ValueError(f"Funnel: material = {self.material!r} is not allowed; expected pellet or feed")
+            raise InputError(f"Funnel: material = {self.material!r} is not allowed; expected pellet or feed")
         _check_order(self, "outlet_diameter", "less than", "top_diameter", self.top_diameter)
         if not 0 < self.cone_angle < 180:
-            raise ValueError(f"Funnel: cone_angle = {self.cone_angle} is not allowed; expected (0, 180) degrees")
+            raise InputError(f"Funnel: cone_angle = {self.cone_angle} is not allowed; expected (0, 180) degrees")
         if self.gate_time > 0:
             # opened during the pour, the gate would only shorten the pour's fall: no hopper under its own head
             _check_order(self, "gate_time", "more than", "the pour's end count / rate [s]", self.count / self.rate)
@@ -369,7 +370,7 @@ class Funnel:
         shape, r_eq = _shape(self.particle, "Funnel", self.aspect_ratio)
         radius = self.particle_radius or (r_eq if self.particle != "sphere" else 0.0)
         if radius <= 0:
-            raise ValueError("Funnel: particle_radius = 0 is not allowed for spheres; expected a radius > 0 m")
+            raise InputError("Funnel: particle_radius = 0 is not allowed for spheres; expected a radius > 0 m")
         ct = RollingModel.CONSTANT_TORQUE
         if self.material == "pellet":
             # seed 000: feed pellets, calibrated (Hertz-Mindlin)
@@ -539,9 +540,9 @@ class LiftingCylinder:
         _check_aspect_ratio(self)
         _check_params(self)
         if (self.count == 0) == (self.mass == 0):
-            raise ValueError(f"LiftingCylinder: count = {self.count}, mass = {self.mass}: expected exactly one > 0")
+            raise InputError(f"LiftingCylinder: count = {self.count}, mass = {self.mass}: expected exactly one > 0")
         if self.law not in ORE_LAWS:
-            raise ValueError(f"LiftingCylinder: law = {self.law!r} is not allowed; expected {', '.join(ORE_LAWS)}")
+            raise InputError(f"LiftingCylinder: law = {self.law!r} is not allowed; expected {', '.join(ORE_LAWS)}")
 
     def spec(self) -> SceneSpec:
         shape, _ = _shape(self.particle, "LiftingCylinder", self.aspect_ratio)
@@ -665,11 +666,11 @@ class DiePress:
         _check_params(self)
         _check_order(self, "inlet_diameter", "more than", "die_diameter", self.die_diameter)
         if not 0 < self.max_travel < 1:
-            raise ValueError(f"DiePress: max_travel = {self.max_travel} is not allowed; expected a fraction in (0, 1)")
+            raise InputError(f"DiePress: max_travel = {self.max_travel} is not allowed; expected a fraction in (0, 1)")
         if self.law not in PRESS_LAWS:
-            raise ValueError(f"DiePress: law = {self.law!r} is not allowed; expected {', '.join(PRESS_LAWS)}")
+            raise InputError(f"DiePress: law = {self.law!r} is not allowed; expected {', '.join(PRESS_LAWS)}")
         if not self.plasticity_ratio < 1:
-            raise ValueError(
+            raise InputError(
                 f"DiePress: plasticity_ratio = {self.plasticity_ratio} is not allowed; expected a ratio in [0, 1)"
             )
 
@@ -963,16 +964,16 @@ class RotatingDrum:
         _check_aspect_ratio(self)
         _check_params(self)
         if not self.fill_fraction <= 0.6:
-            raise ValueError(
+            raise InputError(
                 f"RotatingDrum: fill_fraction = {self.fill_fraction} is not allowed; expected a fraction of the "
                 "drum's volume in (0, 0.6] (the pour needs the drum's upper part)"
             )
         _check_order(self, "particle_radius", "less than", "width / 4", self.width / 4)
         _check_order(self, "particle_radius", "less than", "inner_diameter / 20", self.inner_diameter / 20)
         if not 0 < self.rpm <= 120:
-            raise ValueError(f"RotatingDrum: rpm = {self.rpm} is not allowed; expected (0, 120] revolutions/min")
+            raise InputError(f"RotatingDrum: rpm = {self.rpm} is not allowed; expected (0, 120] revolutions/min")
         if not self.radius_spread < 0.25:
-            raise ValueError(
+            raise InputError(
                 f"RotatingDrum: radius_spread = {self.radius_spread} is not allowed; expected a relative SD in [0, 0.25)"
             )
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from warpdem.engine.types import host
+from warpdem.errors import InputError
 
 from . import measure as ms
 from .stage import SceneSpec, StageError, build, unload_keyframes
@@ -201,9 +202,9 @@ class RunStopped(RuntimeError):
 def check_stop_after(stop_after: float, out_dir, frames: bool) -> None:
     """Raise ValueError unless ``stop_after`` [s] is usable: >= 0, and > 0 only with an out_dir and no frames."""
     if not (math.isfinite(stop_after) and stop_after >= 0):
-        raise ValueError(f"stop_after = {stop_after!r} is not allowed; expected wall seconds >= 0 (0: no limit)")
+        raise InputError(f"stop_after = {stop_after!r} is not allowed; expected wall seconds >= 0 (0: no limit)")
     if stop_after > 0 and (out_dir is None or frames):
-        raise ValueError(
+        raise InputError(
             "stop_after needs out_dir and frames=False, i.e. warpdem run --no-frames (it stops by saving a checkpoint)"
         )
 
@@ -491,14 +492,14 @@ def run_scene_iter(
     """
     check_stop_after(stop_after, out_dir, frames)
     if world_count > 1 and not independent_worlds(spec):
-        raise ValueError(
+        raise InputError(
             f"run_scene: world_count = {world_count} is not allowed for a {spec.measure.kind!r} measurement; "
             "expected 1 (its worlds would share the wall it is read from)"
         )
     also = tuple(also)
     for g in also:
         if not shares_launch(spec, g.spec):
-            raise ValueError(
+            raise InputError(
                 f"run_scene: also = a {g.spec.rig!r} scene that cannot share a launch with this {spec.rig!r} one; "
                 "expected scenes that differ only in their particles, factories, wall shapes and domain"
             )

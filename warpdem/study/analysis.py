@@ -40,6 +40,8 @@ import pandas as pd
 import statsmodels.api as sm
 from scipy import optimize, stats
 
+from warpdem.errors import InputError
+
 from .designs import Factor
 from .goals import GOALS, Goal
 from .transforms import NONE, Transform
@@ -84,9 +86,9 @@ def _canonical(term: Iterable[str], factors: Sequence[str]) -> Term:
     term = tuple(term)
     bad = [t for t in term if t not in factors]
     if bad:
-        raise ValueError(f"term {term} names unknown factor(s) {bad}; factors are {list(factors)}")
+        raise InputError(f"term {term} names unknown factor(s) {bad}; factors are {list(factors)}")
     if not term:
-        raise ValueError("empty term (the intercept is always in the model)")
+        raise InputError("empty term (the intercept is always in the model)")
     return tuple(sorted(term, key=list(factors).index))
 
 
@@ -105,7 +107,7 @@ def parse_term(spec: str | Sequence[str], factors: Sequence[str]) -> Term:
         while i < len(part):
             name = max((f for f in factors if part.startswith(f, i)), key=len, default=None)
             if name is None:
-                raise ValueError(f"cannot parse term {spec!r} with factors {factors}")
+                raise InputError(f"cannot parse term {spec!r} with factors {factors}")
             i += len(name)
             power = 1
             if i < len(part) and part[i] == "^":
@@ -140,7 +142,7 @@ def model_terms(model: str | Sequence, factors: Sequence[str]) -> list[Term]:
     if isinstance(model, str):
         m = model.lower()
         if m not in ("linear", "2fi", "quadratic"):
-            raise ValueError(f"model must be 'linear', '2fi', 'quadratic' or a list of terms, got {model!r}")
+            raise InputError(f"model must be 'linear', '2fi', 'quadratic' or a list of terms, got {model!r}")
         terms: list[Term] = [(f,) for f in factors]
         if m in ("2fi", "quadratic"):
             terms += list(itertools.combinations(factors, 2))
@@ -149,7 +151,7 @@ def model_terms(model: str | Sequence, factors: Sequence[str]) -> list[Term]:
         return terms
     terms = [parse_term(t, factors) for t in model]
     if len(set(terms)) != len(terms):
-        raise ValueError(f"a term is repeated in {model}")
+        raise InputError(f"a term is repeated in {model}")
     return terms
 
 
@@ -268,10 +270,10 @@ class ModelFit:
 
     def _levels(self) -> dict[str, Factor]:
         if not self.levels:
-            raise ValueError("this fit has no factor levels: pass levels=... to fit_model")
+            raise InputError("this fit has no factor levels: pass levels=... to fit_model")
         missing = [f for f in self.factors if f not in self.levels]
         if missing:
-            raise ValueError(f"no levels for factor(s) {missing}")
+            raise InputError(f"no levels for factor(s) {missing}")
         return self.levels
 
     def equation(self, units: str = "coded") -> dict[Term, float]:
@@ -286,7 +288,7 @@ class ModelFit:
             out.update({t: float(b) for t, b in zip(self.terms, beta[1:])})
             return out
         if units != "actual":
-            raise ValueError("units must be 'coded' or 'actual'")
+            raise InputError("units must be 'coded' or 'actual'")
         lv = self._levels()
         poly: dict[Term, float] = {(): float(beta[0])}
         for t, b in zip(self.terms, beta[1:]):
@@ -370,7 +372,7 @@ def fit_model(
     transform = NONE if transform is None else transform
     df = data[factors + [response]].astype(float).reset_index(drop=True)
     if df.isna().any().any():
-        raise ValueError("data contains missing values")
+        raise InputError("data contains missing values")
     if transform != NONE:
         df[response] = transform.forward(df[response].to_numpy(), f"response {response!r}")
     y = df[response].to_numpy()
@@ -378,7 +380,7 @@ def fit_model(
     X = _columns(xk, terms, factors)
     n, p = X.shape
     if np.linalg.matrix_rank(X) < p:
-        raise ValueError(
+        raise InputError(
             "the model is not estimable from this design (aliased terms); "
             f"rank {np.linalg.matrix_rank(X)} < {p} parameters"
         )
@@ -593,7 +595,7 @@ def _bounds(fit: ModelFit, bounds) -> dict[str, tuple[float, float]]:
         elif bounds in ("design", "axial"):
             b = float(np.abs(fit.data[fit.factors].to_numpy()).max())
         else:
-            raise ValueError("bounds must be 'cube', 'design'/'axial', a number, a pair or a mapping")
+            raise InputError("bounds must be 'cube', 'design'/'axial', a number, a pair or a mapping")
         return {f: (-b, b) for f in fit.factors}
     if isinstance(bounds, Mapping):
         return {f: tuple(map(float, bounds.get(f, (-1.0, 1.0)))) for f in fit.factors}
@@ -641,7 +643,7 @@ def _region(fit: ModelFit, bounds, fixed):
     b = _bounds(fit, bounds)
     free = [f for f in fit.factors if f not in fixed]
     if not free:
-        raise ValueError("all factors are fixed")
+        raise InputError("all factors are fixed")
     lo = np.array([b[f][0] for f in free])
     hi = np.array([b[f][1] for f in free])
     return b, free, lo, hi, _Surface(fit, free, fixed)
@@ -938,7 +940,7 @@ def mean_prediction_interval(
     from scipy import stats
 
     if int(runs) < 1:
-        raise ValueError(f"mean_prediction_interval: runs = {runs}; expected an integer >= 1")
+        raise InputError(f"mean_prediction_interval: runs = {runs}; expected an integer >= 1")
     if df <= 0 or not math.isfinite(mse):
         return math.nan, math.nan
     half = float(stats.t.ppf(1.0 - alpha / 2.0, df)) * math.sqrt(mse * (1.0 / int(runs) + h0))

@@ -38,6 +38,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from warpdem.errors import InputError
+
 __all__ = [
     "FACTOR_LETTERS",
     "PB_GENERATORS",
@@ -90,7 +92,7 @@ class Factor:
 
     def __post_init__(self):
         if not (math.isfinite(self.low) and math.isfinite(self.high)) or self.low == self.high:
-            raise ValueError(
+            raise InputError(
                 f"Factor {self.name!r}: low and high must be finite and different, got {self.low!r}, {self.high!r}"
             )
 
@@ -143,7 +145,7 @@ def to_actual(df: pd.DataFrame, factors: Iterable[Factor] | Mapping[str, Factor]
 def factor_names(k: int) -> list[str]:
     """The first ``k`` Design-Expert letters (A, B, ..., H, J, ...)."""
     if not 1 <= k <= len(FACTOR_LETTERS):
-        raise ValueError(f"number of factors must be in 1..{len(FACTOR_LETTERS)}, got {k}")
+        raise InputError(f"number of factors must be in 1..{len(FACTOR_LETTERS)}, got {k}")
     return list(FACTOR_LETTERS[:k])
 
 
@@ -152,9 +154,9 @@ def _names(factors: int | Sequence[str]) -> list[str]:
         return factor_names(int(factors))
     names = [str(n) for n in factors]
     if len(set(names)) != len(names) or not names:
-        raise ValueError(f"factor names must be unique and non-empty, got {names}")
+        raise InputError(f"factor names must be unique and non-empty, got {names}")
     if "kind" in names or "run_order" in names:
-        raise ValueError("'kind' and 'run_order' are reserved column names")
+        raise InputError("'kind' and 'run_order' are reserved column names")
     return names
 
 
@@ -167,7 +169,7 @@ def _frame(points: np.ndarray, names: list[str], kinds: list[str]) -> pd.DataFra
 
 def _centre_block(n: int, k: int) -> np.ndarray:
     if n < 0:
-        raise ValueError(f"number of centre points must be >= 0, got {n}")
+        raise InputError(f"number of centre points must be >= 0, got {n}")
     return np.zeros((n, k))
 
 
@@ -195,7 +197,7 @@ def full_factorial(factors: int | Sequence[str], center_points: int = 0, replica
     """Two-level full factorial 2^k in standard order, replicated, plus centre points."""
     names = _names(factors)
     if replicates < 1:
-        raise ValueError(f"replicates must be >= 1, got {replicates}")
+        raise InputError(f"replicates must be >= 1, got {replicates}")
     pts = np.vstack([_yates(len(names))] * replicates)
     kinds = ["factorial"] * len(pts)
     pts = np.vstack([pts, _centre_block(center_points, len(names))])
@@ -210,7 +212,7 @@ def _parse_generator(gen: str, names: list[str]) -> tuple[str, int, list[str]]:
     """'E=ABCD' -> ('E', +1, ['A','B','C','D']); names may be multi-character if joined by '*'."""
     m = _GEN_RE.match(gen)
     if not m:
-        raise ValueError(f"cannot parse generator {gen!r}; expected e.g. 'E=ABCD' or 'F=-ABC'")
+        raise InputError(f"cannot parse generator {gen!r}; expected e.g. 'E=ABCD' or 'F=-ABC'")
     target, sign, word = m.group(1), m.group(2), m.group(3)
     if "*" in word or ":" in word:
         letters = [w.strip() for w in re.split(r"[*:]", word) if w.strip()]
@@ -218,9 +220,9 @@ def _parse_generator(gen: str, names: list[str]) -> tuple[str, int, list[str]]:
         letters = list(word.replace(" ", ""))
     unknown = [x for x in letters + [target] if x not in names]
     if unknown:
-        raise ValueError(f"generator {gen!r} names unknown factors {unknown}; factors are {names}")
+        raise InputError(f"generator {gen!r} names unknown factors {unknown}; factors are {names}")
     if len(set(letters)) != len(letters):
-        raise ValueError(f"generator {gen!r} repeats a factor")
+        raise InputError(f"generator {gen!r} repeats a factor")
     return target, (-1 if sign == "-" else 1), letters
 
 
@@ -238,12 +240,12 @@ def fractional_factorial(
     parsed = [_parse_generator(g, names) for g in gens]
     generated = [t for t, _, _ in parsed]
     if len(set(generated)) != len(generated):
-        raise ValueError(f"a factor is generated twice in {gens}")
+        raise InputError(f"a factor is generated twice in {gens}")
     base = [n for n in names if n not in generated]
     for t, _, word in parsed:
         bad = [w for w in word if w not in base]
         if bad:
-            raise ValueError(f"generator for {t} uses generated factor(s) {bad}; use base factors only")
+            raise InputError(f"generator for {t} uses generated factor(s) {bad}; use base factors only")
     cols = dict(zip(base, _yates(len(base)).T))
     for t, s, word in parsed:
         cols[t] = s * np.prod([cols[w] for w in word], axis=0)
@@ -343,11 +345,11 @@ def plackett_burman(
     if n_runs is None:
         n_runs = min((n for n in PB_GENERATORS if n >= 12 and n - 1 >= k), default=0)
         if not n_runs:
-            raise ValueError(f"at most 23 factors are supported, got {k}")
+            raise InputError(f"at most 23 factors are supported, got {k}")
     if n_runs not in PB_GENERATORS:
-        raise ValueError(f"n_runs must be one of {sorted(PB_GENERATORS)}, got {n_runs}")
+        raise InputError(f"n_runs must be one of {sorted(PB_GENERATORS)}, got {n_runs}")
     if k > n_runs - 1:
-        raise ValueError(f"a {n_runs}-run Plackett–Burman design holds at most {n_runs - 1} factors, got {k}")
+        raise InputError(f"a {n_runs}-run Plackett–Burman design holds at most {n_runs - 1} factors, got {k}")
     g = np.array([1.0 if c == "+" else -1.0 for c in PB_GENERATORS[n_runs]])
     m = n_runs - 1
     i = np.arange(m)[:, None]
@@ -357,7 +359,7 @@ def plackett_burman(
     elif layout == "columns":
         block = g[(i - j) % m]
     else:
-        raise ValueError(f"layout must be 'rows' (Design-Expert) or 'columns' (Minitab), got {layout!r}")
+        raise InputError(f"layout must be 'rows' (Design-Expert) or 'columns' (Minitab), got {layout!r}")
     pts = np.vstack([block, -np.ones((1, m))])[:, :k]
     kinds = ["factorial"] * n_runs
     pts = np.vstack([pts, _centre_block(center_points, k)])
@@ -383,7 +385,7 @@ def box_behnken(factors: int | Sequence[str], center_points: int | None = None) 
     names = _names(factors)
     k = len(names)
     if k not in (3, 4, 5):
-        raise ValueError(f"Box–Behnken designs are provided for 3 to 5 factors, got {k}")
+        raise InputError(f"Box–Behnken designs are provided for 3 to 5 factors, got {k}")
     if center_points is None:
         center_points = _BBD_DEFAULT_CENTRE[k]
     rows = []
@@ -415,15 +417,15 @@ def ccd_alpha(alpha: str | float, n_factorial: int, n_runs: int | None = None) -
             return 1.0
         if a == "orthogonal":
             if n_runs is None:
-                raise ValueError("orthogonal alpha needs the total number of runs")
+                raise InputError("orthogonal alpha needs the total number of runs")
             val = (math.sqrt(n_factorial * n_runs) - n_factorial) / 2.0
             if val <= 0:
-                raise ValueError("orthogonal alpha undefined for this design")
+                raise InputError("orthogonal alpha undefined for this design")
             return math.sqrt(val)
-        raise ValueError(f"alpha must be 'rotatable', 'orthogonal', 'face' or a number, got {alpha!r}")
+        raise InputError(f"alpha must be 'rotatable', 'orthogonal', 'face' or a number, got {alpha!r}")
     a = float(alpha)
     if not (math.isfinite(a) and a > 0):
-        raise ValueError(f"alpha must be > 0, got {alpha!r}")
+        raise InputError(f"alpha must be > 0, got {alpha!r}")
     return a
 
 
@@ -443,7 +445,7 @@ def central_composite(
     names = _names(factors)
     k = len(names)
     if k < 2:
-        raise ValueError("a central composite design needs at least 2 factors")
+        raise InputError("a central composite design needs at least 2 factors")
     if generators:
         fact = fractional_factorial(names, generators)[names].to_numpy()
     else:
@@ -473,7 +475,7 @@ def randomize(design: pd.DataFrame, seed: int) -> pd.DataFrame:
     The index (standard order) is kept; a ``run_order`` column 1..n is added.
     """
     if seed is None:
-        raise ValueError("randomize needs an explicit seed (reproducible run order)")
+        raise InputError("randomize needs an explicit seed (reproducible run order)")
     rng = np.random.default_rng(seed)
     out = design.iloc[rng.permutation(len(design))].copy()
     out["run_order"] = np.arange(1, len(out) + 1)
@@ -500,18 +502,18 @@ def steepest_path(
     """
     names = list(coefficients)
     if base not in coefficients:
-        raise ValueError(f"base factor {base!r} is not among the coefficients {names}")
+        raise InputError(f"base factor {base!r} is not among the coefficients {names}")
     b = np.array([float(coefficients[n]) for n in names])
     bb = float(coefficients[base])
     if bb == 0:
-        raise ValueError("the base factor's coefficient is zero: no direction")
+        raise InputError("the base factor's coefficient is zero: no direction")
     fmap = _factor_map(levels) if levels is not None else {}
     if step_units not in ("coded", "actual"):
-        raise ValueError("step_units must be 'coded' or 'actual'")
+        raise InputError("step_units must be 'coded' or 'actual'")
     step = float(base_step)
     if step_units == "actual":
         if base not in fmap:
-            raise ValueError("an actual step needs the base factor's levels")
+            raise InputError("an actual step needs the base factor's levels")
         step = step / abs(fmap[base].half_range)
     sgn = -1.0 if descent else 1.0
     dx = sgn * abs(step) * b / abs(bb)

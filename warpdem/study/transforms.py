@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from warpdem.errors import InputError
+
 TRANSFORMS = ("none", "sqrt", "ln", "log10", "inverse_sqrt", "inverse", "power")
 """The transform names a study accepts: Design-Expert's None, Square Root, Natural Log, Base 10 Log, Inverse Sqrt,
 Inverse and Power (y + k)^lambda."""
@@ -32,20 +34,20 @@ class Transform:
 
     def __post_init__(self):
         if self.kind not in TRANSFORMS:
-            raise ValueError(f"transform = {self.kind!r} is not allowed; expected one of {', '.join(TRANSFORMS)}")
+            raise InputError(f"transform = {self.kind!r} is not allowed; expected one of {', '.join(TRANSFORMS)}")
         if self.kind == "power":
             if self.power is None or not math.isfinite(float(self.power)) or float(self.power) == 0:
-                raise ValueError(
+                raise InputError(
                     f"transform_power = {self.power!r} is not allowed for transform = 'power'; expected a finite "
                     "exponent other than 0 (0 is transform = 'ln')"
                 )
         elif self.power is not None:
-            raise ValueError(
+            raise InputError(
                 f"transform_power = {self.power!r} is not allowed for transform = {self.kind!r}; it is read only "
                 "with transform = 'power'"
             )
         if not math.isfinite(float(self.k)):
-            raise ValueError(f"transform_k = {self.k!r} is not allowed; expected a finite constant")
+            raise InputError(f"transform_k = {self.k!r} is not allowed; expected a finite constant")
 
     @property
     def exponent(self) -> float | None:
@@ -72,7 +74,7 @@ class Transform:
         if np.any(bad):
             v = float(np.asarray(y, dtype=float).reshape(-1)[np.flatnonzero(np.reshape(bad, -1))[0]])
             need = "> 0" if dom == "positive" else ">= 0"
-            raise ValueError(
+            raise InputError(
                 f"{name} = {v!r} cannot be transformed by {self.label('y')}: y + k must be {need}; "
                 f"choose transform_k (now {self.k:g}) so that every value qualifies, or another transform"
             )
