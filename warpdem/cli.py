@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+
+from .errors import ExitCode, InputError, classify
 
 
 def _plain_table(title, columns, rows) -> None:
@@ -110,7 +113,7 @@ def _sets(items) -> dict:
     out = {}
     for item in items or []:
         if "=" not in item:
-            raise SystemExit(f"--set {item!r}: expected name=value")
+            raise InputError(f"--set {item!r} is not allowed; expected NAME=VALUE")
         k, v = item.split("=", 1)
         out[k.strip()] = v.strip()
     return out
@@ -120,19 +123,10 @@ def cmd_run(args) -> int:
     _quiet_warp(args.device)
     from .scene import rigs
     from .scene.runner import RunStopped, check_stop_after, run_scene
-    from .scene.stage import StageError
 
-    try:
-        spec = rigs.load(args.scene, _sets(args.set))
-    except StageError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    spec = rigs.load(args.scene, _sets(args.set))
     out = args.out or f"runs/{spec.rig}"
-    try:
-        check_stop_after(args.stop_after, out, frames=not args.no_frames)
-    except ValueError as e:
-        print(f"error: --stop-after: {e}", file=sys.stderr)
-        return 2
+    check_stop_after(args.stop_after, out, frames=not args.no_frames)
     bar = None
     try:
         from tqdm import tqdm
@@ -158,12 +152,11 @@ def cmd_run(args) -> int:
             stop_after=args.stop_after,
         )
     except RunStopped as e:
+        print(str(e), file=sys.stderr)
+        return ExitCode.STOPPED
+    finally:
         if bar is not None:
             bar.close()
-        print(str(e), file=sys.stderr)
-        return 3
-    if bar is not None:
-        bar.close()
     info = res.info
     print(
         f"{info['rig']}: {info['spheres']} spheres ({info['clumps']} clumps, {info['glued_spheres']} glued), "
@@ -258,36 +251,27 @@ def _print_plan(plan: dict) -> None:
 def cmd_study(args) -> int:
     _quiet_warp(args.device)
     from .study.execute import plan_study, run_study
-    from .study.spec import StudyError
 
     if args.plan:
-        try:
-            _print_plan(plan_study(args.study, args.out, args.device))
-        except StudyError as e:
-            print(f"error: {e}", file=sys.stderr)
-            return 2
+        _print_plan(plan_study(args.study, args.out, args.device))
         return 0
-    try:
-        res = run_study(
-            args.study,
-            args.out,
-            device=args.device,
-            progress=not args.no_progress,
-            verify=not args.no_verify,
-            checkpoint_every=args.checkpoint,
-            stop_after=args.stop_after,
-            scheduler=args.scheduler,
-            shared_dir=args.shared_dir,
-        )
-    except StudyError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    res = run_study(
+        args.study,
+        args.out,
+        device=args.device,
+        progress=not args.no_progress,
+        verify=not args.no_verify,
+        checkpoint_every=args.checkpoint,
+        stop_after=args.stop_after,
+        scheduler=args.scheduler,
+        shared_dir=args.shared_dir,
+    )
     if res["stopped"]:
         print(
             f"{res['ran'] + res['skipped']} of {res['runs']} design runs finished; stopped at the wall-time "
             f"limit ({res['stopped']}); run the same command again to resume"
         )
-        return 3
+        return ExitCode.STOPPED
     print(
         f"{res['runs']} runs ({res['ran']} run now in {res['batches']} batch(es), {res['skipped']} already "
         f"finished) in {res['wall_s']:.1f} s on {args.device}; results in {res['out']}/"
@@ -313,24 +297,19 @@ def cmd_study(args) -> int:
 def cmd_diagnose(args) -> int:
     _quiet_warp(args.device)
     from .diagnose.pipeline import diagnose
-    from .study.spec import StudyError
 
-    try:
-        res = diagnose(
-            args.data,
-            args.out,
-            device=args.device,
-            progress=not args.no_progress,
-            stop_after=args.stop_after,
-            scheduler=args.scheduler,
-            shared_dir=args.shared_dir,
-        )
-    except StudyError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    res = diagnose(
+        args.data,
+        args.out,
+        device=args.device,
+        progress=not args.no_progress,
+        stop_after=args.stop_after,
+        scheduler=args.scheduler,
+        shared_dir=args.shared_dir,
+    )
     if res["stopped"]:
         print(f"stopped at the wall-time limit ({res['stopped']}); run the same command again to resume")
-        return 3
+        return ExitCode.STOPPED
     words = {
         "adequate": "ADEQUATE: the calibrated base model fits the data within the noise",
         "cause": f"CAUSE: {res.get('cause')} ({res.get('cause_words')})",
@@ -355,21 +334,20 @@ def cmd_analyze(args) -> int:
     from .study.execute import analyze
     from .study.spec import StudyError, load_study
 
+    if args.runs and not args.study:
+        raise StudyError(f"--runs {args.runs}: give the study file its runs follow (--study STUDY.toml)")
+    study = load_study(args.study, check_scene=False) if args.study else None
+    if args.measure and not args.remeasure:
+        raise StudyError(f"--measure {args.measure[0]}: give --remeasure too (the settings to measure again under)")
+    measure = _sets(args.measure) if args.remeasure else None
     try:
-        if args.runs and not args.study:
-            raise StudyError(f"--runs {args.runs}: give the study file its runs follow (--study STUDY.toml)")
-        study = load_study(args.study, check_scene=False) if args.study else None
-        if args.measure and not args.remeasure:
-            raise StudyError(f"--measure {args.measure[0]}: give --remeasure too (the settings to measure again under)")
-        measure = _sets(args.measure) if args.remeasure else None
         summary = analyze(args.out, study, runs=args.runs, measure=measure)
-        if args.excel:
-            from .study.execute import export_excel
+    except FileNotFoundError as e:
+        raise StudyError(str(e)) from None
+    if args.excel:
+        from .study.execute import export_excel
 
-            print(f"workbook: {export_excel(args.out, args.excel)}")
-    except (StudyError, FileNotFoundError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+        print(f"workbook: {export_excel(args.out, args.excel)}")
     _print_analysis(args.out, summary)
     print(f"report: {args.out}/analysis/report.md")
     if args.json:
@@ -384,13 +362,8 @@ def cmd_analyze(args) -> int:
 
 def cmd_scene(args) -> int:
     from .scene import rigs
-    from .scene.stage import StageError
 
-    try:
-        rigs.new(args.rig, args.output, _sets(args.set), smoke=args.smoke)
-    except StageError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
+    rigs.new(args.rig, args.output, _sets(args.set), smoke=args.smoke)
     print(f"wrote {args.output}")
     return 0
 
@@ -398,8 +371,33 @@ def cmd_scene(args) -> int:
 def _add_wall_time_options(parser, checkpoint: str, stop_after: str) -> None:
     """--checkpoint (default every 60 s of wall time) and --stop-after (default no limit), in seconds, with the
     command's own help texts."""
-    parser.add_argument("--checkpoint", type=float, default=60.0, metavar="SECONDS", help=checkpoint)
-    parser.add_argument("--stop-after", type=float, default=0.0, metavar="SECONDS", help=stop_after)
+    parser.add_argument("--checkpoint", type=_seconds, default=60.0, metavar="SECONDS", help=checkpoint)
+    parser.add_argument("--stop-after", type=_seconds, default=0.0, metavar="SECONDS", help=stop_after)
+
+
+def _seconds(text: str) -> float:
+    """A wall time option's value: finite seconds >= 0 (argparse names the option in its message)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (value >= 0 and value != float("inf")):
+        raise argparse.ArgumentTypeError(f"{text!r} is not allowed; expected finite seconds >= 0 (0: off)")
+    return value
+
+
+def _count0(text: str) -> int:
+    """A count option's value that may be 0: an integer >= 0."""
+    if not text.strip().isdigit():
+        raise argparse.ArgumentTypeError(f"{text!r} is not allowed; expected an integer >= 0")
+    return int(text)
+
+
+def _count(text: str) -> int:
+    """A count option's value: an integer >= 1."""
+    if not text.strip().isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not allowed; expected an integer >= 1")
+    return int(text)
 
 
 SCHEDULER_HELP = (
@@ -429,13 +427,13 @@ def main(argv=None) -> int:
     b = sub.add_parser("bench", help="throughput of a settled bed")
     b.add_argument("--device", default="cpu")
     b.add_argument("--json")
-    b.add_argument("--count", type=int, help="bodies per world (default 2000 on CPU, 1,000,000 on CUDA)")
-    b.add_argument("--steps", type=int, help="timed steps")
-    b.add_argument("--settle-steps", type=int, help="steps before timing (default: 0.2 s of simulated time)")
-    b.add_argument("--clumps", type=int, default=0, help="8: every body an 8-sphere clump (count = clumps)")
+    b.add_argument("--count", type=_count, help="bodies per world (default 2000 on CPU, 1,000,000 on CUDA)")
+    b.add_argument("--steps", type=_count, help="timed steps")
+    b.add_argument("--settle-steps", type=_count0, help="steps before timing (default: 0.2 s of simulated time)")
+    b.add_argument("--clumps", type=_count0, default=0, help="8: every body an 8-sphere clump (count = clumps)")
     b.add_argument("--walls", default="planes", choices=["planes", "mesh"], help="box as planes or one mesh")
     b.add_argument("--law", default="HM", choices=["HM", "JKR", "EEPA"], help="contact law of every pair")
-    b.add_argument("--worlds", type=int, default=1, help="identical copies of the bed, batched in one model")
+    b.add_argument("--worlds", type=_count, default=1, help="identical copies of the bed, batched in one model")
     b.add_argument("--shuffle", action="store_true", help="number the bodies in a random order (not row by row)")
     b.set_defaults(fn=cmd_bench)
     au = sub.add_parser("audit", help="recompute the seed papers' published statistics from their own data")
@@ -499,7 +497,7 @@ def main(argv=None) -> int:
     dg.add_argument("--no-progress", action="store_true", help="no progress bar")
     dg.add_argument(
         "--stop-after",
-        type=float,
+        type=_seconds,
         default=0.0,
         metavar="SECONDS",
         help="stop by itself after SECONDS of wall time (exit code 3); the same command resumes (0: no limit)",
@@ -541,8 +539,26 @@ def main(argv=None) -> int:
     sn.add_argument("--smoke", action="store_true", help="start from the CPU smoke-test size")
     sn.add_argument("-o", "--output", required=True)
     sn.set_defaults(fn=cmd_scene)
-    args = p.parse_args(argv)
-    return args.fn(args)
+    for parser in [p, *sub.choices.values(), *scs.choices.values()]:
+        parser.add_argument(
+            "--debug",
+            action="store_true",
+            default=argparse.SUPPRESS if parser is not p else False,
+            help="show the traceback of an error (also: the environment variable WARPDEM_DEBUG=1)",
+        )
+    try:
+        args = p.parse_args(argv)
+    except SystemExit as e:  # argparse has printed its usage message; a caller of main() gets the code back
+        return int(e.code or 0)
+    debug = args.debug or os.environ.get("WARPDEM_DEBUG", "") not in ("", "0")
+    try:
+        return int(args.fn(args))
+    except (Exception, KeyboardInterrupt) as e:
+        if debug:
+            raise
+        code, message = classify(e)
+        print(f"error: {message}", file=sys.stderr)
+        return int(code)
 
 
 if __name__ == "__main__":

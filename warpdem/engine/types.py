@@ -14,6 +14,7 @@ from typing import ClassVar
 import numpy as np
 import warp as wp
 
+from warpdem.errors import InputError
 from warpdem.kernels.enums import ContactLaw, Overflow, RollingModel, SphereActivity
 
 __all__ = [
@@ -26,19 +27,64 @@ __all__ = [
     "SphereActivity",
     "State",
     "host",
+    "DEVICE_FORMS",
+    "device_names",
     "init_warp",
 ]
 
 
-def init_warp(device: str = "cpu") -> None:
-    """Initialise Warp for work on ``device`` (any device option, e.g. ``cpu,cpu`` or ``cuda:all``). Where no CUDA
-    device is asked for, Warp's native "Could not find or load the NVIDIA CUDA driver" line (written straight to
-    file descriptor 2 by its C++ start-up on a machine without a GPU) is kept off the terminal; an error at start
-    still raises."""
+DEVICE_FORMS = "'cpu', 'cuda', 'cuda:N', 'cuda:all', or a comma-separated list of these (e.g. 'cuda:0,cuda:1')"
+"""What a device option may say (``--device``; ``device=`` of the study and diagnosis functions)."""
+
+
+def device_names(device: str, where: str = "device") -> list[str]:
+    """The Warp devices named by ``device``: one name ("cpu", "cuda", "cuda:N") or a comma-separated list of
+    them, which may repeat a name ("cpu,cpu": two CPU processes); "cuda:all" is every CUDA device.
+
+    Raises:
+        InputError: a name that is not a device, naming ``where``, the value and :data:`DEVICE_FORMS`.
+        DeviceError: a CUDA device this machine does not have.
+    """
+    from warpdem.errors import DeviceError
+
+    names = [d.strip() for d in str(device).split(",")]
+    out = []
+    for d in names:
+        if d == "cuda:all":
+            out += [f"cuda:{i}" for i in range(_cuda_count(device, where, "'cuda:all' names no device"))]
+        elif d in ("cpu", "cuda") or (d.startswith("cuda:") and d[5:].isdigit()):
+            out.append(d)
+        else:
+            raise InputError(f"{where} = {device!r}: {d!r} is not a device; expected {DEVICE_FORMS}")
+    for d in out:
+        if d.startswith("cuda"):
+            n = _cuda_count(device, where, f"{d!r} is not there")
+            if d != "cuda" and int(d[5:]) >= n:
+                raise DeviceError(
+                    f"{where} = {device!r}: {d!r} is not there; this machine has {n} CUDA device(s), "
+                    f"cuda:0 to cuda:{n - 1}"
+                )
+    return out
+
+
+def _cuda_count(device: str, where: str, what: str) -> int:
+    from warpdem.errors import DeviceError
+
+    _init_quietly(gpu=False)
+    n = wp.get_cuda_device_count()
+    if n == 0:
+        raise DeviceError(f"{where} = {device!r}: {what}, this machine has no CUDA device; use 'cpu'")
+    return n
+
+
+def _init_quietly(gpu: bool) -> None:
+    """``wp.init()``; without a GPU asked for, Warp's native "Could not find or load the NVIDIA CUDA driver" line
+    (written straight to file descriptor 2 by its C++ start-up on a machine without a GPU) is kept off the
+    terminal; an error at start still raises."""
     import os
     import sys
 
-    if "cuda" in str(device):
+    if gpu:
         wp.init()
         return
     sys.stderr.flush()
@@ -50,6 +96,13 @@ def init_warp(device: str = "cpu") -> None:
     finally:
         os.dup2(saved, 2)
         os.close(saved)
+
+
+def init_warp(device: str = "cpu") -> None:
+    """Initialise Warp for work on ``device`` (any device option, e.g. ``cpu,cpu`` or ``cuda:all``), refusing one
+    that is malformed or absent (:func:`device_names`)."""
+    _init_quietly(gpu="cuda" in str(device))
+    device_names(device, "--device")
 
 
 def host(a: wp.array) -> np.ndarray:
@@ -378,7 +431,7 @@ class Control:
         """
         cols = Control._columns(table)
         if not np.array_equal(cols["segment_start"], self.segment_start.numpy()):
-            raise ValueError(
+            raise InputError(
                 f"Control.assign: segments per wall {np.diff(cols['segment_start']).tolist()} are not allowed; "
                 f"expected this Control's {np.diff(self.segment_start.numpy()).tolist()}"
             )

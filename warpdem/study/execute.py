@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from warpdem.engine.types import device_names
 from warpdem.scene.runner import _json_default
 
 from . import spec as sp
@@ -82,27 +83,8 @@ def _response(metrics: dict, measure: str):
 
 
 def parse_devices(device: str) -> list[str]:
-    """The devices named by ``device``: one Warp device name ("cpu", "cuda", "cuda:N") or a comma-separated
-    list of them, which may repeat a name ("cpu,cpu": two CPU processes); "cuda:all" is every CUDA device.
-    Raises StudyError naming the value and what is allowed."""
-    names = [d.strip() for d in str(device).split(",")]
-    allowed = "'cpu', 'cuda', 'cuda:N', 'cuda:all', or a comma-separated list of these (e.g. 'cuda:0,cuda:1')"
-    out = []
-    for d in names:
-        if d == "cuda:all":
-            import warp as wp
-
-            n = wp.get_cuda_device_count()
-            if n == 0:
-                raise sp.StudyError(
-                    f"device = {device!r}: 'cuda:all' names no device, this machine has no CUDA device; use 'cpu'"
-                )
-            out += [f"cuda:{i}" for i in range(n)]
-        elif d in ("cpu", "cuda") or (d.startswith("cuda:") and d[5:].isdigit()):
-            out.append(d)
-        else:
-            raise sp.StudyError(f"device = {device!r}: {d!r} is not a device; expected {allowed}")
-    return out
+    """The devices named by ``device`` (:func:`warpdem.engine.types.device_names`)."""
+    return device_names(device)
 
 
 def merges_scenes(devices: list[str]) -> bool:
