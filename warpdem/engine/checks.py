@@ -163,3 +163,29 @@ def number_fields(cls) -> dict[str, type]:
         if kinds:
             out[f.name] = kinds[0]
     return out
+
+
+def typed_number(
+    where: str, name: str, value, kind: type, optional: bool = False, error: type[ValueError] = InputError
+):
+    """``value`` as a ``kind`` (float or int), refused unless it is a finite real number (not a bool, not a
+    string) and, for an int, a whole number (2.0 reads as 2, 1.5 is refused); None passes when ``optional``."""
+    if value is None and optional:
+        return None
+    if kind is int:
+        check(
+            is_number(value) and math.isfinite(value) and float(value).is_integer(),
+            where,
+            name,
+            value,
+            "a whole number" + (" or null" if optional else ""),
+            error,
+        )
+        return int(value)
+    return finite_number(where, name, value, "a finite number" + (" or null" if optional else ""), error)
+
+
+def optional_fields(cls) -> set[str]:
+    """The fields of dataclass ``cls`` whose annotation admits None."""
+    hints = typing.get_type_hints(cls)
+    return {f.name for f in dataclasses.fields(cls) if type(None) in typing.get_args(hints[f.name])}

@@ -29,6 +29,7 @@ Time codes: ``timeCodesPerSecond`` = :data:`TIME_CODES_PER_SECOND`, so time code
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -36,10 +37,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from warpdem.engine.checks import check, did_you_mean, enum_value, number_fields
+from warpdem.engine.checks import check, did_you_mean, enum_value, number_fields, optional_fields, short, typed_number
 from warpdem.engine.keys import KeyGrammar
 from warpdem.engine.materials import INTERACTION_ENUMS, INTERACTION_FIELDS, MATERIAL_SCALARS, Interaction, Material
-from warpdem.engine.solver import CLUMP_CONTACT_MASSES, SolverOptions
+from warpdem.engine.solver import CLUMP_CONTACT_MASSES
 from warpdem.errors import InputError
 
 TIME_CODES_PER_SECOND = 100.0
@@ -280,6 +281,10 @@ FACTORY_FIELDS = [
 ]
 COAT_FIELDS = ["radius", "material", "side", "seed", "spacing"]
 
+MEASURE_KINDS = ("angle_of_repose", "press", "impacts", "drum", "none")
+"""The values of ``MeasureSpec.kind`` (a stage's ``warpdem:measure:kind``)."""
+RUN_NUMBERS = number_fields(RunSpec)
+"""Run settings an override sets (the numbers), with their types."""
 MEASURE_NUMBERS = number_fields(MeasureSpec)
 """Measurement settings an override sets (the numbers), with their types."""
 FACTORY_NUMBERS = number_fields(FactorySpec)
@@ -607,6 +612,39 @@ def _prim_name(prim) -> str:
     return prim.GetName()
 
 
+def open_stage(path) -> Usd.Stage:  # noqa: F821 (pxr is imported where it is used)
+    """The USD stage in file ``path``; a file that is missing, a folder, empty or not a stage USD can read
+    raises StageError naming the file and USD's reason."""
+    import os
+
+    from pxr import Tf, Usd
+
+    path = str(path)
+    if not os.path.exists(path):
+        raise StageError(f"{path}: no such file; expected a USD stage (.usda, .usdc or .usd)")
+    if os.path.isdir(path):
+        raise StageError(f"{path}: is a folder; expected a USD stage file (.usda, .usdc or .usd)")
+    if os.path.getsize(path) == 0:
+        raise StageError(f"{path}: is empty; expected a USD stage")
+    try:
+        stage = Usd.Stage.Open(path)
+    except Tf.ErrorException as e:
+        try:
+            reason = " ".join(str(e).split())
+        except UnicodeDecodeError:  # USD quotes the file's bytes, and Python cannot print them
+            reason = "it is not UTF-8 text or USD's binary format"
+        for marker in ("Failed to open layer", "Could not open", "syntax error", "Error"):
+            if marker in reason:
+                reason = reason[reason.index(marker) :]
+                break
+        raise StageError(f"{path}: cannot be read as a USD stage: {reason[:300]}") from None
+    except UnicodeDecodeError as e:
+        raise StageError(f"{path}: cannot be read as a USD stage: {e}") from None
+    if stage is None:
+        raise StageError(f"{path}: cannot be read as a USD stage")
+    return stage
+
+
 def read_stage(path_or_stage) -> SceneSpec:
     """Read a stage written by :func:`write_stage` (or by hand, following the module's conventions)."""
     from pxr import Usd, UsdGeom, UsdPhysics, UsdShade
@@ -615,16 +653,20 @@ def read_stage(path_or_stage) -> SceneSpec:
         stage, where = path_or_stage, "stage"
     else:
         where = str(path_or_stage)
-        stage = Usd.Stage.Open(where)
-        if stage is None:
-            raise StageError(f"{where}: cannot open as a USD stage")
+        stage = open_stage(where)
     r = _Reader(stage, where)
     world = stage.GetPrimAtPath("/World")
     if not world:
         raise StageError(f"{where}: no /World prim (the default prim holding the scene)")
     r.check_names(world, "world")
     rig = r.get(world, NS + "rig", "token")
-    authoring = json.loads(r.get(world, NS + "authoring", "string", required=False, default="{}") or "{}")
+    authoring = r.get(world, NS + "authoring", "string", required=False, default="{}") or "{}"
+    try:
+        authoring = json.loads(authoring)
+    except ValueError as e:
+        r.fail(world, NS + "authoring", f"= {authoring[:60]!r} is not allowed; expected a JSON object ({e})")
+    if not isinstance(authoring, dict):
+        r.fail(world, NS + "authoring", f"= {authoring!r} is not allowed; expected a JSON object of rig parameters")
     run = RunSpec(
         **{
             f: r.get(
@@ -637,32 +679,6 @@ def read_stage(path_or_stage) -> SceneSpec:
             for f in RUN_FIELDS
         }
     )
-    for f, allowed in RUN_TOKENS.items():
-        if getattr(run, f) not in allowed:
-            r.fail(
-                world,
-                NS + "run:" + _camel(f),
-                f"= {getattr(run, f)!r} is not allowed; expected " + " or ".join(allowed),
-            )
-    if run.duration <= 0:
-        r.fail(world, NS + "run:duration", f"= {run.duration} is not allowed; expected a duration > 0 s")
-    if not 0 < run.dt_fraction <= 1:
-        r.fail(world, NS + "run:dtFraction", f"= {run.dt_fraction} is not allowed; expected a fraction in (0, 1]")
-    if run.output_interval <= 0:
-        r.fail(world, NS + "run:outputInterval", f"= {run.output_interval} is not allowed; expected > 0 s")
-    if not (math.isfinite(run.skin_fraction) and run.skin_fraction > 0):
-        r.fail(
-            world,
-            NS + "run:skinFraction",
-            f"= {run.skin_fraction} is not allowed; expected a fraction of the smallest radius > 0",
-        )
-
-    for f in ("dt_margin", "dt_levels"):
-        try:
-            SolverOptions(**{f: getattr(run, f)})
-        except ValueError as e:
-            r.fail(world, NS + "run:" + _camel(f), f"= {getattr(run, f)} is not allowed; {str(e).split('; ', 1)[1]}")
-
     lo = r.get(world, NS + "domainMin", "vec3", required=False)
     hi = r.get(world, NS + "domainMax", "vec3", required=False)
     domain = None
@@ -700,45 +716,12 @@ def read_stage(path_or_stage) -> SceneSpec:
         measure.drum_axis = r.get(world, NS + "measure:drumAxis", "vec3")
         measure.drum_radius = r.get(world, NS + "measure:drumRadius")
         measure.average_from = r.get(world, NS + "measure:averageFrom")
-        a = measure.drum_axis
-        if not (math.hypot(a[0], a[1]) > 0 and a[2] == 0):
-            r.fail(
-                world,
-                NS + "measure:drumAxis",
-                f"= {a} is not allowed; expected a horizontal direction (x, y, 0), not (0, 0, 0)",
-            )
-        if measure.drum_radius <= 0:
-            r.fail(world, NS + "measure:drumRadius", f"= {measure.drum_radius} is not allowed; expected a radius > 0 m")
-        if measure.average_from < 0:
-            r.fail(world, NS + "measure:averageFrom", f"= {measure.average_from} is not allowed; expected >= 0 s")
-    for name, value, unit in (("unloadSpeed", measure.unload_speed, "m/s"), ("holdTime", measure.hold_time, "s")):
-        if value < 0:
-            r.fail(world, NS + "measure:" + name, f"= {value} is not allowed; expected >= 0 {unit}")
-    if measure.packing_time < 0:
-        r.fail(world, NS + "measure:packingTime", f"= {measure.packing_time} is not allowed; expected >= 0 s")
-    if measure.packing_time > 0 and measure.packing_radius <= 0:
-        r.fail(
-            world,
-            NS + "measure:packingRadius",
-            f"= {measure.packing_radius} is not allowed; expected the container's inner radius > 0 m",
-        )
-    if measure.packing_margin < 0:
-        r.fail(
-            world, NS + "measure:packingMargin", f"= {measure.packing_margin} is not allowed; expected >= 0 diameters"
-        )
-    if kind not in ("angle_of_repose", "press", "impacts", "drum", "none"):
-        r.fail(world, NS + "measure:kind", f"= {kind!r} is not allowed; expected angle_of_repose, press, impacts, drum")
+    if kind not in MEASURE_KINDS:
+        r.fail(world, NS + "measure:kind", f"= {kind!r} is not allowed; expected " + ", ".join(MEASURE_KINDS))
     if kind == "press":
         measure.piston = _prim_name(r.target(world, NS + "measure:piston"))
     if kind == "impacts":
         measure.walls = [_prim_name(p) for p in r.target(world, NS + "measure:walls", many=True)]
-        if len(measure.phase_names) != len(measure.phase_ends):
-            r.fail(
-                world,
-                NS + "measure:phaseEnds",
-                f"has {len(measure.phase_ends)} values for "
-                f"{len(measure.phase_names)} phase names; expected one end time per phase",
-            )
 
     gravity = (0.0, 0.0, -9.81)
     for prim in stage.Traverse():
@@ -760,6 +743,19 @@ def read_stage(path_or_stage) -> SceneSpec:
         if not prim.HasAPI(UsdPhysics.MaterialAPI):
             raise StageError(f"{where}: prim {prim.GetPath()}: needs UsdPhysics.MaterialAPI (physics:density)")
         density = r.get(prim, "physics:density")
+        for attr, ok, allowed in (
+            ("physics:restitution", lambda v: 0 <= v <= 1, "a coefficient in [0, 1]"),
+            ("physics:staticFriction", lambda v: v >= 0, "a coefficient >= 0"),
+            ("physics:dynamicFriction", lambda v: v >= 0, "a coefficient >= 0"),
+        ):
+            v = r.get(prim, attr, required=False)
+            if v is not None and not ok(v):
+                r.fail(
+                    prim,
+                    attr,
+                    f"= {v!r} is not allowed; expected {allowed} (warpdem reads a pair's warpdem:pair: attributes "
+                    "under /World/Materials/Pairs; this one is for other USD physics tools)",
+                )
         kw = dict(
             name=prim.GetName(),
             density=density,
@@ -852,11 +848,9 @@ def read_stage(path_or_stage) -> SceneSpec:
         authoring=authoring,
         domain=domain,
     )
-    for w in walls:
-        spec.material(w.material)
-    if kind == "press":
-        spec.wall(measure.piston)
-    return spec
+    from .validate import check_scene, stage_origin
+
+    return check_scene(spec, stage_origin(where))
 
 
 def _read_wall(r: _Reader, prim, names) -> WallSpec:
@@ -871,6 +865,15 @@ def _read_wall(r: _Reader, prim, names) -> WallSpec:
     idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
     if counts.size == 0:
         r.fail(prim, "faceVertexCounts", "is missing; expected the faces")
+    if counts.min() < 3 or counts.sum() != idx.size:
+        r.fail(
+            prim,
+            "faceVertexCounts",
+            f"= {short(counts)} is not allowed; expected faces of at least 3 vertices whose counts add up to the "
+            f"{idx.size} faceVertexIndices",
+        )
+    if idx.min() < 0 or idx.max() >= len(pts):
+        r.fail(prim, "faceVertexIndices", f"holds {int(idx.max())}; expected indices of the {len(pts)} points")
     # polygons become fans of triangles
     tris, at = [], 0
     for c in counts:
@@ -894,6 +897,18 @@ def _read_wall(r: _Reader, prim, names) -> WallSpec:
     poses = []
     for code in samples:
         m = xf.ComputeLocalToWorldTransform(code)
+        rot = np.array([[m[i][j] for j in range(3)] for i in range(3)], dtype=float)
+        if not (np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) and abs(np.linalg.det(rot) - 1.0) < 1e-6):
+            at = "its default" if code == Usd.TimeCode.Default() else f"time code {code}"
+            r.fail(
+                prim,
+                "xformOpOrder",
+                f"gives a pose at {at} that is not a rigid motion (a zero or non-unit quaternion, a NaN, a "
+                f"shear): rotation rows {np.round(rot, 6).tolist()}; expected unit quaternions and finite values",
+            )
+        if not np.all(np.isfinite(np.array(m.ExtractTranslation()))):
+            at = "its default" if code == Usd.TimeCode.Default() else f"time code {code}"
+            r.fail(prim, "xformOpOrder", f"gives a translation at {at} that is not finite; expected finite values")
         q = (
             m.ExtractRotationQuat().GetNormalized()
             if hasattr(m, "ExtractRotationQuat")
@@ -983,28 +998,38 @@ def _read_factory(r: _Reader, prim) -> FactorySpec:
 # ----------------------------------------------------------------------------------------------------
 # overrides and building
 # ----------------------------------------------------------------------------------------------------
-def apply_overrides(spec: SceneSpec, overrides: dict) -> SceneSpec:
+def apply_overrides(spec: SceneSpec, overrides: dict, where: str = "--set") -> SceneSpec:
     """Apply ``--set`` style overrides (values as strings or numbers) to a spec, in place: the keys of
     :data:`OVERRIDES` (``material.NAME.FIELD``, ``interaction.A.B.FIELD``, ``run.FIELD``, ``measure.FIELD``,
-    ``factory.NAME.FIELD``). Rig parameters (any other key) are handled by :func:`warpdem.scene.rigs.load`."""
+    ``factory.NAME.FIELD``), then check the whole scene (:func:`warpdem.scene.validate.check_scene`). Rig
+    parameters (any other key) are handled by :func:`warpdem.scene.rigs.load`. A refused key or value raises
+    StageError naming ``where`` (the route: "--set", "[fixed]"), the key, the value and what is allowed."""
+    from .validate import check_scene
+
     defined = {"material": [m.name for m in spec.materials], "factory": [f.name for f in spec.factories]}
     for text, raw in overrides.items():
-        key = OVERRIDES.parse(text, "--set", defined=defined, error=StageError)
+        key = OVERRIDES.parse(text, where, defined=defined, error=StageError)
         try:
-            _apply_override(spec, key, text, _parse(raw))
+            _apply_override(spec, key, where, text, _parse(raw))
         except StageError:
             raise
         except (TypeError, ValueError) as e:
-            # a value the field's own check refuses (Material, Interaction, a float() of a word): name the key
-            raise StageError(f"--set {text} = {raw!r}: {e}") from None
+            # a value the field's own check refuses (Material, Interaction): name the key
+            raise StageError(f"{where} {text} = {raw!r}: {e}") from None
+    if overrides:
+        keys = {str(k) for k in overrides}
+        check_scene(spec, lambda k: where if k in keys else "scene")
     return spec
 
 
-def _apply_override(spec: SceneSpec, key, text: str, value) -> None:
-    """Set one parsed override ``key`` (written ``text``) to ``value`` in ``spec``."""
+def _apply_override(spec: SceneSpec, key, where: str, text: str, value) -> None:
+    """Set one parsed override ``key`` (written ``text``) to ``value`` in ``spec``; ``where`` names the route in a
+    message. Numbers are
+    not coerced: a bool or a word for a number, or a fraction for a count, is refused."""
     if key.kind == "material":
         m = spec.material(key.names[0])
-        spec.materials[spec.materials.index(m)] = m.with_value(key.field, float(value))
+        value = typed_number(where, text, value, float, error=StageError)
+        spec.materials[spec.materials.index(m)] = m.with_value(key.field, value)
     elif key.kind == "interaction":
         a, b = key.names
         # an enum field takes the member's name: Interaction reads it
@@ -1016,15 +1041,20 @@ def _apply_override(spec: SceneSpec, key, text: str, value) -> None:
             spec.pairs.append((a, b, Interaction(**{key.field: value})))
     elif key.kind == "run":
         if key.field in RUN_TOKENS:
-            check(value in RUN_TOKENS[key.field], "--set", text, value, " or ".join(RUN_TOKENS[key.field]), StageError)
+            check(value in RUN_TOKENS[key.field], where, text, value, " or ".join(RUN_TOKENS[key.field]), StageError)
             setattr(spec.run, key.field, value)
         else:
-            setattr(spec.run, key.field, float(value))
+            setattr(spec.run, key.field, typed_number(where, text, value, RUN_NUMBERS[key.field], error=StageError))
     elif key.kind == "measure":
-        setattr(spec.measure, key.field, MEASURE_NUMBERS[key.field](value))
+        kind, optional = MEASURE_NUMBERS[key.field], key.field in _OPTIONAL["measure"]
+        setattr(spec.measure, key.field, typed_number(where, text, value, kind, optional, StageError))
     else:
         fac = next(f for f in spec.factories if f.name == key.names[0])
-        setattr(fac, key.field, FACTORY_NUMBERS[key.field](value))
+        kind, optional = FACTORY_NUMBERS[key.field], key.field in _OPTIONAL["factory"]
+        setattr(fac, key.field, typed_number(where, text, value, kind, optional, StageError))
+
+
+_OPTIONAL = {"measure": optional_fields(MeasureSpec), "factory": optional_fields(FactorySpec)}
 
 
 def _parse(raw):
@@ -1058,6 +1088,17 @@ def _region(region):
     return Cone(base, (0, 0, 1), radius, top, height)
 
 
+@contextlib.contextmanager
+def _named(what: str):
+    """Name the wall or factory whose engine check refused a value (the engine knows no scene names)."""
+    try:
+        yield
+    except StageError:
+        raise
+    except InputError as e:
+        raise StageError(f"{what}: {e}") from None
+
+
 def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None, world_seeds=None):
     """A :class:`warpdem.ModelBuilder` holding the scene (call ``finalize(device)`` on it).
 
@@ -1069,6 +1110,9 @@ def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None,
     from warpdem.engine.factories import DynamicFactory
     from warpdem.engine.motion import WallMotion
 
+    from .validate import check_scene
+
+    check_scene(spec)
     b = ModelBuilder(gravity=spec.gravity)
     if spec.domain is not None:
         b.set_domain(*spec.domain)
@@ -1077,48 +1121,55 @@ def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None,
     for a, c, ia in spec.pairs:
         b.set_interaction(a, c, ia)
     for w in spec.walls:
-        motion = None if w.times is None else WallMotion.keyframes(w.times, w.translations, w.rotations)
-        k = b.add_wall_mesh(w.vertices, w.triangles, w.material, name=w.name, motion=motion)
-        if w.coat:
-            c = w.coat
-            b.coat_wall(
-                k, c["radius"], c["material"], spacing=c.get("spacing"), side=c.get("side", 1), seed=c.get("seed", 0)
-            )
+        with _named(f"wall {w.name!r}"):
+            motion = None if w.times is None else WallMotion.keyframes(w.times, w.translations, w.rotations)
+            k = b.add_wall_mesh(w.vertices, w.triangles, w.material, name=w.name, motion=motion)
+            if w.coat:
+                c = w.coat
+                b.coat_wall(
+                    k,
+                    c["radius"],
+                    c["material"],
+                    spacing=c.get("spacing"),
+                    side=c.get("side", 1),
+                    seed=c.get("seed", 0),
+                )
     for fac in spec.factories:
-        shape = spec.shape(fac.shape)
-        template = shape.template()
-        sizes = _sizes(fac.sizes)
-        region = _region(fac.region)
-        density = spec.material(fac.material).density
-        if fac.mode == "fill":
-            b.fill(
-                region,
-                sizes,
-                fac.material,
-                count=fac.count,
-                mass=fac.mass,
-                seed=fac.seed,
-                template=template,
-                velocity=fac.initial_velocity,
-            )
-        else:
-            ratio = 1.0 if template is None else template.bounding_radius / template.equivalent_radius
-            df = DynamicFactory(
-                region,
-                sizes,
-                rate=fac.rate,
-                mass_rate=fac.mass_rate,
-                count=fac.count,
-                mass=fac.mass,
-                start_time=fac.start_time,
-                density=density,
-                seed=fac.seed,
-                initial_velocity=fac.initial_velocity,
-                interval=fac.interval,
-                bounding_ratio=ratio,
-                random_orientation=template is not None,
-            )
-            b.add_factory(df, fac.material, template)
+        with _named(f"factory {fac.name!r}"):
+            shape = spec.shape(fac.shape)
+            template = shape.template()
+            sizes = _sizes(fac.sizes)
+            region = _region(fac.region)
+            density = spec.material(fac.material).density
+            if fac.mode == "fill":
+                b.fill(
+                    region,
+                    sizes,
+                    fac.material,
+                    count=fac.count,
+                    mass=fac.mass,
+                    seed=fac.seed,
+                    template=template,
+                    velocity=fac.initial_velocity,
+                )
+            else:
+                ratio = 1.0 if template is None else template.bounding_radius / template.equivalent_radius
+                df = DynamicFactory(
+                    region,
+                    sizes,
+                    rate=fac.rate,
+                    mass_rate=fac.mass_rate,
+                    count=fac.count,
+                    mass=fac.mass,
+                    start_time=fac.start_time,
+                    density=density,
+                    seed=fac.seed,
+                    initial_velocity=fac.initial_velocity,
+                    interval=fac.interval,
+                    bounding_ratio=ratio,
+                    random_orientation=template is not None,
+                )
+                b.add_factory(df, fac.material, template)
     if world_count > 1 or variations or world_seeds is not None:
         b.replicate(world_count)
         for target, values in (variations or {}).items():
