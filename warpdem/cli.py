@@ -112,11 +112,25 @@ def cmd_audit(args) -> int:
 def _sets(items) -> dict:
     out = {}
     for item in items or []:
-        if "=" not in item:
+        k, v = item.split("=", 1) if "=" in item else ("", "")
+        if not k.strip():
             raise InputError(f"--set {item!r} is not allowed; expected NAME=VALUE")
-        k, v = item.split("=", 1)
         out[k.strip()] = v.strip()
     return out
+
+
+def _named_scene(path: str, fn):
+    """``fn``, whose refusal of a value (found while the scene is built) is prefixed with the stage ``path``."""
+
+    def call(*a, **kw):
+        try:
+            return fn(*a, **kw)
+        except InputError as e:
+            if str(e).startswith(str(path)):
+                raise
+            raise InputError(f"{path}: {e}") from None
+
+    return call
 
 
 def cmd_run(args) -> int:
@@ -142,7 +156,7 @@ def cmd_run(args) -> int:
             bar.refresh()
 
     try:
-        res = run_scene(
+        res = _named_scene(args.scene, run_scene)(
             spec,
             device=args.device,
             out_dir=out,

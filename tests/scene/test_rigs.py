@@ -1359,9 +1359,11 @@ def test_checkpoint_of_another_format_is_not_resumed(tmp_path):
     "key, raw, says",
     [
         ("interaction.grain.grain.law", "foo", "law = 'foo'"),
-        ("material.grain.density", "abc", "could not convert"),
+        ("material.grain.density", "abc", "'abc' is not allowed; expected a finite number"),
         ("material.grain.density", "-1", "density = -1.0"),
-        ("run.dt_fraction", "abc", "could not convert"),
+        ("run.dt_fraction", "abc", "'abc' is not allowed; expected a finite number"),
+        ("material.grain.density", "true", "True is not allowed; expected a finite number"),
+        ("factory.pour.count", "1.5", "1.5 is not allowed; expected a whole number"),
     ],
 )
 def test_set_value_refused_as_stage_error_naming_the_key(key, raw, says):
@@ -1370,7 +1372,7 @@ def test_set_value_refused_as_stage_error_naming_the_key(key, raw, says):
     spec = rigs.spec("funnel", {}, smoke=True)
     with pytest.raises(StageError) as err:
         apply_overrides(spec, {key: raw})
-    assert f"--set {key} = {raw!r}" in str(err.value) and says in str(err.value)
+    assert str(err.value).startswith("--set") and key in str(err.value) and says in str(err.value)
 
 
 def test_launches_run_together_as_they_run_alone(tmp_path):

@@ -789,7 +789,7 @@ def _check_parameters(spec: DiagnosisSpec, scene, where: str) -> None:
     for p in spec.parameters:
         for which, v in (("low", p.low), ("high", p.high)):
             try:
-                check_override(spec, scene, p.parameter, v)
+                check_override(spec, scene, p.parameter, v, where="")
             except _SCENE_ERRORS as e:
                 raise DiagnoseError(
                     f"{where}[[parameters]] {p.name!r}: {which} = {v!r} ({p.parameter} = {v!r}) is not allowed: {e}"

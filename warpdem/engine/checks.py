@@ -25,7 +25,10 @@ _SHOWN = 12  # most numbers of an array that a message prints
 
 def short(value) -> str:
     """``repr(value)`` for a message; an array prints at most a dozen numbers and, when that does not show
-    its shape (a large, empty or multi-dimensional array), its shape too."""
+    its shape (a large, empty or multi-dimensional array), its shape too. A bool prints as the user wrote it in
+    TOML, JSON or ``--set`` (true, false)."""
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
     if not isinstance(value, np.ndarray):
         return repr(value)
     text = np.array2string(value, precision=6, threshold=_SHOWN, separator=", ")

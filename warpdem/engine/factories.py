@@ -26,7 +26,7 @@ import numpy as np
 
 from warpdem.errors import InputError
 
-from .checks import check, check_number, enum_value, float_array, integer, is_finite, positive, vec3
+from .checks import check, check_number, enum_value, float_array, integer, positive, vec3
 
 RSA_SATURATION = 0.38
 """Jamming volume fraction of random sequential addition of equal spheres in bulk [-] (0.3841,
@@ -141,7 +141,7 @@ class TruncatedNormal(_Moments):
     """Radius normally distributed, truncated to [low, high] (``scipy.stats.truncnorm``).
 
     Attributes:
-        mean: mean of the untruncated normal [m].
+        mean: mean of the untruncated normal [m], > 0 (it may lie outside [low, high]).
         std: standard deviation of the untruncated normal [m], >= 0 (0 gives every particle ``mean``).
         low: smallest radius [m], > 0.
         high: largest radius [m], > low.
@@ -154,7 +154,7 @@ class TruncatedNormal(_Moments):
 
     def __post_init__(self):
         where = "TruncatedNormal"
-        check(is_finite(self.mean), where, "mean", self.mean, "a finite radius [m]")
+        positive(where, "mean", self.mean, "a radius > 0 m")
         check_number(where, "std", self.std, lambda v: v >= 0.0, "a standard deviation >= 0 m")
         low = positive(where, "low", self.low, "a radius > 0 m (radii must be positive)")
         check_number(where, "high", self.high, lambda v: v > low, f"a radius > low = {low!r} m")

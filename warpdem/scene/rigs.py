@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from warpdem.engine import geometry as geo
-from warpdem.engine.checks import check
+from warpdem.engine.checks import check, typed_number
 from warpdem.engine.keys import is_rig_key
 from warpdem.engine.materials import Interaction, Material
 from warpdem.engine.types import ContactLaw, RollingModel
@@ -1193,11 +1193,10 @@ def params(rig: str, values: dict | None = None):
                 try:
                     v = json.loads(v)
                 except ValueError:
-                    raise StageError(f"{rig}: {k} = {v!r} is not allowed; expected a number") from None
-        if isinstance(default, int) and not isinstance(default, bool):
-            if float(v) != int(float(v)):
-                raise StageError(f"{rig}: {k} = {v!r} is not allowed; expected an integer")
-            v = int(v)
+                    pass  # typed_number refuses the word
+        if isinstance(default, (int, float)) and not isinstance(default, bool):
+            # no coercion: true is not a count, 1.5 is not a whole number
+            v = typed_number(rig, k, v, type(default), error=StageError)
         kw[k] = v
     try:
         return cls(**kw)

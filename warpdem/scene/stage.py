@@ -41,7 +41,7 @@ from warpdem.engine.checks import check, did_you_mean, enum_value, number_fields
 from warpdem.engine.keys import KeyGrammar
 from warpdem.engine.materials import INTERACTION_ENUMS, INTERACTION_FIELDS, MATERIAL_SCALARS, Interaction, Material
 from warpdem.engine.solver import CLUMP_CONTACT_MASSES
-from warpdem.errors import InputError
+from warpdem.errors import FileSystemError, InputError
 
 TIME_CODES_PER_SECOND = 100.0
 NS = "warpdem:"
@@ -322,11 +322,27 @@ def _ident(name: str) -> str:
     return Tf.MakeValidIdentifier(name)
 
 
+def _usd_write(path, write):
+    """``write()``, with USD's refusal to write ``path`` (a folder missing or a file in the way, no permission, a
+    full disk) raised as FileSystemError naming the path."""
+    from pxr import Tf
+
+    try:
+        return write()
+    except Tf.ErrorException as e:
+        try:
+            reason = " ".join(str(e).split())
+        except UnicodeDecodeError:
+            reason = "USD could not write it"
+        tail = reason[reason.rfind(": '") + 3 :].rstrip("'") if ": '" in reason else reason
+        raise FileSystemError(f"{path}: cannot be written: {tail[:300]}") from None
+
+
 def write_stage(spec: SceneSpec, path=None):
     """Author ``spec`` as a USD stage; saved to ``path`` (.usda / .usdc / .usd) when given. Returns the stage."""
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
 
-    stage = Usd.Stage.CreateNew(str(path)) if path else Usd.Stage.CreateInMemory()
+    stage = _usd_write(path, lambda: Usd.Stage.CreateNew(str(path))) if path else Usd.Stage.CreateInMemory()
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
     stage.SetTimeCodesPerSecond(TIME_CODES_PER_SECOND)
@@ -516,7 +532,7 @@ def write_stage(spec: SceneSpec, path=None):
         for k, v in sz.items():
             _factory_attr(prim, "size" + k[0].upper() + _camel(k)[1:], "Double", float(v))
     if path:
-        stage.GetRootLayer().Save()
+        _usd_write(path, stage.GetRootLayer().Save)
     return stage
 
 
@@ -729,7 +745,18 @@ def read_stage(path_or_stage) -> SceneSpec:
             s = UsdPhysics.Scene(prim)
             d = np.asarray(s.GetGravityDirectionAttr().Get() or (0, 0, -1), dtype=float)
             mag = s.GetGravityMagnitudeAttr().Get()
-            mag = 9.81 if mag is None or (isinstance(mag, float) and math.isinf(mag)) else float(mag)
+            # UsdPhysics: an unauthored or -inf magnitude means Earth's gravity
+            mag = 9.81 if mag is None or (isinstance(mag, float) and math.isinf(mag) and mag < 0) else float(mag)
+            if not (math.isfinite(mag) and mag >= 0):
+                r.fail(
+                    prim, "physics:gravityMagnitude", f"= {mag!r} is not allowed; expected a finite value >= 0 m/s^2"
+                )
+            if not (np.all(np.isfinite(d)) and np.linalg.norm(d) > 0):
+                r.fail(
+                    prim,
+                    "physics:gravityDirection",
+                    f"= {tuple(d.tolist())} is not allowed; expected a finite, non-zero direction",
+                )
             gravity = tuple(float(v) for v in mag * d / max(np.linalg.norm(d), 1e-300))
 
     materials, names = [], {}
@@ -890,6 +917,7 @@ def _read_wall(r: _Reader, prim, names) -> WallSpec:
         if op.GetOpType() == UsdGeom.XformOp.TypeScale:
             r.fail(prim, op.GetOpName(), "scales the wall; bake the scale into the points (walls move rigidly)")
         times.update(op.GetTimeSamples())
+        _check_op(r, prim, op)
     spec = WallSpec(
         prim.GetName(), np.asarray(pts, dtype=np.float64), np.asarray(tris, dtype=np.int64), names[mat_path]
     )
@@ -937,6 +965,33 @@ def _read_wall(r: _Reader, prim, names) -> WallSpec:
     return spec
 
 
+def _check_op(r: _Reader, prim, op) -> None:
+    """Every value of a wall's transform op, default and time samples, finite, and an orient op's quaternions of
+    unit length (a zero quaternion would silently read as no rotation)."""
+    from pxr import Gf, Usd, UsdGeom
+
+    codes = [Usd.TimeCode.Default()] + [Usd.TimeCode(t) for t in op.GetTimeSamples()]
+    for code in codes:
+        v = op.Get(code)
+        if v is None:
+            continue
+        at = "its default value" if code.IsDefault() else f"time code {code.GetValue():g}"
+        if isinstance(v, (Gf.Quatd, Gf.Quatf, Gf.Quath)):
+            q = np.array([*v.GetImaginary(), v.GetReal()], dtype=float)
+            if not (np.all(np.isfinite(q)) and abs(np.linalg.norm(q) - 1.0) < 1e-3):
+                r.fail(
+                    prim,
+                    op.GetOpName(),
+                    f"at {at} = {short(q)} (x, y, z, w) is not allowed; expected a unit quaternion",
+                )
+            continue
+        a = np.array(v, dtype=float) if not isinstance(v, Gf.Matrix4d) else np.array(v, dtype=float)
+        if not np.all(np.isfinite(a)):
+            r.fail(prim, op.GetOpName(), f"at {at} = {short(a)} is not allowed; expected finite values")
+    if op.GetOpType() == UsdGeom.XformOp.TypeInvalid:
+        r.fail(prim, op.GetOpName(), "is not a transform op USD knows")
+
+
 def _read_factory(r: _Reader, prim) -> FactorySpec:
     from pxr import UsdGeom
 
@@ -968,7 +1023,17 @@ def _read_factory(r: _Reader, prim) -> FactorySpec:
     if dist not in need:
         r.fail(prim, P + "sizeDistribution", f"= {dist!r} is not allowed; expected fixed, normal or lognormal")
     sizes = {"distribution": dist}
-    for k in need[dist] + (["low", "high"] if dist == "lognormal" else []):
+    used = need[dist] + (["low", "high"] if dist == "lognormal" else [])
+    for k in ("radius", "mean", "std", "low", "high", "median", "sigma_log"):
+        name = P + "size" + k[0].upper() + _camel(k)[1:]
+        if k not in used and prim.GetAttribute(name).HasAuthoredValue():
+            r.fail(
+                prim,
+                name,
+                f"is authored, but a {dist!r} size distribution does not use it; expected only "
+                + ", ".join(P + "size" + u[0].upper() + _camel(u)[1:] for u in used),
+            )
+    for k in used:
         v = r.get(prim, P + "size" + k[0].upper() + _camel(k)[1:], required=k in need[dist])
         if v is not None:
             sizes[k] = v
@@ -1090,7 +1155,8 @@ def _region(region):
 
 @contextlib.contextmanager
 def _named(what: str):
-    """Name the wall or factory whose engine check refused a value (the engine knows no scene names)."""
+    """Name the wall or factory whose engine check refused a value (the engine knows no scene names), by the
+    prim a stage holds it on."""
     try:
         yield
     except StageError:
@@ -1121,7 +1187,7 @@ def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None,
     for a, c, ia in spec.pairs:
         b.set_interaction(a, c, ia)
     for w in spec.walls:
-        with _named(f"wall {w.name!r}"):
+        with _named(f"wall /World/Walls/{w.name}"):
             motion = None if w.times is None else WallMotion.keyframes(w.times, w.translations, w.rotations)
             k = b.add_wall_mesh(w.vertices, w.triangles, w.material, name=w.name, motion=motion)
             if w.coat:
@@ -1135,7 +1201,7 @@ def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None,
                     seed=c.get("seed", 0),
                 )
     for fac in spec.factories:
-        with _named(f"factory {fac.name!r}"):
+        with _named(f"factory /World/Factories/{fac.name}"):
             shape = spec.shape(fac.shape)
             template = shape.template()
             sizes = _sizes(fac.sizes)

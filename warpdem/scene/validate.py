@@ -12,6 +12,7 @@ value and what is allowed.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
 
 import numpy as np
@@ -24,6 +25,9 @@ from .stage import MEASURE_KINDS, NS, SceneSpec, StageError, _camel, _region, _s
 MAX_OUTPUTS = 100_000
 """The most output frames a run may ask for (duration / output_interval): more is a mistyped interval (a frame
 every nanosecond would never finish, and its checkpoint grows without end)."""
+
+_SIZE_KEYS = ("radius", "mean", "std", "low", "high", "median", "sigma_log")
+"""The fields of a factory's size distribution (``sizes``), each a stage attribute warpdem:factory:sizeFIELD."""
 
 Origin = Callable[[str], str]
 """Where the value of an override-style key (``run.duration``, ``factory.pour.count``, ``wall.lid.rotations``)
@@ -38,8 +42,8 @@ def stage_origin(path: str) -> Origin:
         if kind in ("run", "measure"):
             return f"{path}: prim /World, attribute {NS}{kind}:{_camel(rest[0])}"
         if kind == "factory":
-            if rest[1] == "sizes":
-                return f"{path}: prim /World/Factories/{rest[0]}, attributes {NS}factory:size*"
+            if rest[1] in ("sizes", "region"):
+                return f"{path}: prim /World/Factories/{rest[0]}"
             attr = rest[1]
             return f"{path}: prim /World/Factories/{rest[0]}, attribute {NS}factory:{_camel(attr)}"
         if kind == "wall":
@@ -197,12 +201,17 @@ def _check_factory(spec: SceneSpec, fac, origin: Origin) -> None:
             fac.rate,
             "exactly one of rate or mass_rate",
         )
-    where = origin(key + "sizes")
     try:
         _sizes(fac.sizes)
+    except (ValueError, KeyError, TypeError) as e:
+        # the distribution names its field ("TruncatedNormal: mean = ..."): the factory's size_mean
+        field = re.search(r": (\w+) = ", str(e))
+        at = "size_" + field.group(1) if field and field.group(1) in _SIZE_KEYS else "sizes"
+        raise StageError(f"{origin(key + at)}: factory {fac.name!r}: {e}") from None
+    try:
         _region(fac.region)
     except (ValueError, KeyError, TypeError) as e:
-        raise StageError(f"{where}: factory {fac.name!r}: {e}") from None
+        raise StageError(f"{origin(key + 'region')}: factory {fac.name!r}: {e}") from None
     names = [m.name for m in spec.materials]
     _check(
         fac.material in names, origin, key + "material", fac.material, "a material of the scene: " + ", ".join(names)

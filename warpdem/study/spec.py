@@ -340,6 +340,11 @@ def varies_per_world(key: str) -> bool:
 # --------------------------------------------------------------------------------------------------
 
 
+FACTOR_MAGNITUDE = 1e90
+"""The largest magnitude of a factor's low or high value: the analysis raises actual values to the third power
+(a cubic model's terms), which must stay finite in float64; no DEM parameter comes near it in SI units."""
+
+
 @dataclass(frozen=True)
 class FactorSpec:
     """One factor: the override ``parameter`` it sets, its actual value at coded -1 (``low``) and +1
@@ -369,6 +374,14 @@ class FactorSpec:
         override_grammar(None, True).parse(self.parameter, where, "parameter", error=StudyError)
         low = spec_number(where, "low", self.low)
         high = spec_number(where, "high", self.high)
+        for k, v in (("low", low), ("high", high)):
+            if not abs(v) <= FACTOR_MAGNITUDE:
+                raise spec_error(
+                    f"{where} ({self.parameter})",
+                    k,
+                    v,
+                    f"a magnitude <= {FACTOR_MAGNITUDE:g} (the analysis takes cubes of actual values)",
+                )
         if low == high:
             raise StudyError(
                 f"{where}: low = {low!r} and high = {high!r} are not allowed; expected two "
@@ -1010,9 +1023,17 @@ def read_toml(path: Path, what: str, error: type[StudyError] = StudyError) -> di
     ``error`` naming the file."""
     try:
         with open(path, "rb") as fh:
-            return tomllib.load(fh)
+            data = fh.read()
     except FileNotFoundError:
         raise error(f"{path}: no such {what} file") from None
+    except IsADirectoryError:
+        raise error(f"{path}: is a folder; expected a {what} file (TOML)") from None
+    try:
+        return tomllib.loads(data.decode("utf-8"))
+    except UnicodeDecodeError as e:
+        raise error(
+            f"{path}: is not UTF-8 text (byte {e.start}); expected a {what} file in TOML, saved as UTF-8"
+        ) from None
     except tomllib.TOMLDecodeError as e:
         raise error(f"{path}: not valid TOML: {e}") from None
 
@@ -1060,13 +1081,15 @@ def fixed_scene(spec, rig_values: Mapping | None = None):
         if is_rig_key(k):
             continue
         try:
-            apply_overrides(base, {k: v})
-        except (StageError, ValueError, KeyError, TypeError) as e:
+            apply_overrides(base, {k: v}, where="[fixed]")
+        except StageError as e:
+            raise StudyError(str(e)) from None
+        except (ValueError, KeyError, TypeError) as e:
             raise StudyError(f"[fixed]: {k} = {v!r} is not allowed: {e}") from None
     return base
 
 
-def check_override(spec, base, key: str, value) -> None:
+def check_override(spec, base, key: str, value, where: str = "--set") -> None:
     """Apply override ``key = value`` to a copy of ``base`` (the scene of :func:`fixed_scene`; a rig parameter is
     checked by the rig's parameters over those ``base`` was authored with). Raises what the scene or the contact
     law raises (``StageError``, ``ValueError``, ``KeyError``, ``TypeError``)."""
@@ -1076,7 +1099,7 @@ def check_override(spec, base, key: str, value) -> None:
         rig_vals = {k: v for k, v in spec.fixed.items() if is_rig_key(k)}
         _rigs().params(base.rig, {**base.authoring, **rig_vals, key: rig_value(spec, key, value)})
     else:
-        apply_overrides(copy.deepcopy(base), {key: value})
+        apply_overrides(copy.deepcopy(base), {key: value}, where=where)
 
 
 def check_scene_overrides(spec: StudySpec) -> None:
@@ -1089,9 +1112,12 @@ def check_scene_overrides(spec: StudySpec) -> None:
     for f in spec.factors:
         col = table[f"{f.name}_actual"]
         for which, v in (("lowest", float(col.min())), ("highest", float(col.max()))):
+            where = f"[[factors]] {f.name!r} at the design's {which} value"
             try:
-                check_override(spec, base, f.parameter, v)
-            except (StageError, ValueError, KeyError, TypeError) as e:
+                check_override(spec, base, f.parameter, v, where)
+            except StageError as e:
+                raise StudyError(str(e)) from None
+            except (ValueError, KeyError, TypeError) as e:
                 raise StudyError(
                     f"[[factors]] {f.name!r}: parameter {f.parameter} = {v!r} (the design's {which} "
                     f"value) is not allowed: {e}"
