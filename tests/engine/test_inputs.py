@@ -123,9 +123,9 @@ def test_vectors_are_three_finite_numbers(value):
 @pytest.mark.parametrize(
     "make, says",
     [
-        (lambda: wd.Material("a", density=True, youngs_modulus=1e7, poisson_ratio=0.3), "density = True"),
-        (lambda: wd.Interaction(restitution=True), "restitution = True"),
-        (lambda: wd.FixedSize(True), "radius = True"),
+        (lambda: wd.Material("a", density=True, youngs_modulus=1e7, poisson_ratio=0.3), "density = true"),
+        (lambda: wd.Interaction(restitution=True), "restitution = true"),
+        (lambda: wd.FixedSize(True), "radius = true"),
     ],
 )
 def test_a_bool_is_not_a_number(make, says):
