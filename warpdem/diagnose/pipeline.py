@@ -56,7 +56,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -66,6 +65,7 @@ import pandas as pd
 
 from warpdem.study import execute
 from warpdem.study import spec as sp
+from warpdem.study.folder import clean_partials, copy_atomic, with_path
 
 from . import candidates as cands
 from . import inference as inf
@@ -951,10 +951,15 @@ def diagnose(
 
     spec, ex = load_diagnosis(source) if not isinstance(source, tuple) else source
     out = Path(out_dir) if out_dir else Path("runs") / "diagnose" / spec.name
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise with_path(e, out) from e
+    # whole copies (a start cut short leaves none, and the next overwrites them); a cut one's temporaries go
+    clean_partials(out)
     if spec.path is not None:
-        shutil.copyfile(spec.path, out / "data.toml")
-        shutil.copyfile(ex.source, out / "experiments.csv")
+        copy_atomic(spec.path, out / "data.toml")
+        copy_atomic(ex.source, out / "experiments.csv")
     study = spec.study(list(ex.responses))
     sims = Simulations(study, out, execute.parse_devices(device), progress, log, stop_after)
     sims.scheduler = scheduler
