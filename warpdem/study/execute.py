@@ -2,6 +2,7 @@
 
 Layout of a study's output folder ``OUT``::
 
+    OUT/.warpdem.lock       while the study runs: who runs it (pid, host, start, command; :mod:`.folder`)
     OUT/study.toml          copy of the study file the runs came from
     OUT/design.csv          the design table (run order, coded and actual values, world seeds, point ids)
     OUT/runs/<point_id>.json one file per finished run: its design row, overrides, responses, metrics
@@ -44,7 +45,7 @@ import pandas as pd
 from warpdem.scene.runner import _json_default
 
 from . import spec as sp
-from .folder import clean_partials, copy_atomic, with_path, write_atomic
+from .folder import copy_atomic, hold, with_path, write_atomic
 
 
 def _write_json(path: Path, data) -> None:
@@ -504,69 +505,67 @@ def run_study(
     """
     study = study if isinstance(study, sp.StudySpec) else sp.load_study(study)
     out = Path(out_dir) if out_dir else Path("runs") / study.name
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise with_path(e, out) from e
-    # the first writes are whole files (a start cut short, by a full disk say, leaves none, and a rerun starts
-    # again); the temporaries of one cut short go first
-    clean_partials(out)
-    log = _logging_to(out / "log.txt", log)
-    _check_folder(out, study, log)
-    log(f"{study.name}: study {study.path or '(in memory)'} on {device}, into {out}")
-    if study.path is not None:
-        copy_atomic(study.path, out / "study.toml")
-    table = sp.design_table(study)
-    write_atomic(out / "design.csv", table.to_csv(index=False))
-    runs_dir = out / "runs"
-    runs_dir.mkdir(exist_ok=True)
-    rows = _study_rows(study, table)
-    devices = parse_devices(device)
-    from .executor import executor_for
+    # the folder's lock (OUT/.warpdem.lock) for the whole study: a second study on it is refused; the first writes
+    # are whole files (a start cut short, by a full disk say, leaves none, and a rerun starts again)
+    with hold(out, f"study {study.name}") as lock:
+        log = _logging_to(out / "log.txt", log)
+        if lock.took_over:
+            log(lock.took_over)
+        _check_folder(out, study, log)
+        log(f"{study.name}: study {study.path or '(in memory)'} on {device}, into {out}")
+        if study.path is not None:
+            copy_atomic(study.path, out / "study.toml")
+        table = sp.design_table(study)
+        write_atomic(out / "design.csv", table.to_csv(index=False))
+        runs_dir = out / "runs"
+        runs_dir.mkdir(exist_ok=True)
+        rows = _study_rows(study, table)
+        devices = parse_devices(device)
+        from .executor import executor_for
 
-    # a cluster is reached (or refused) before anything is counted or drawn
-    ex = executor_for(devices, scheduler, shared_dir)
-    pending = [r for r in rows if not (runs_dir / f"{r['point_id']}.json").exists()]
-    done0 = len(rows) - len(pending)
-    if done0:
-        log(f"{study.name}: {done0} of {len(rows)} runs already finished in {out}; running {len(pending)}")
-    t0 = time.perf_counter()
-    bar = _progress_bar(len(rows), done0, study.name, progress)
-    batches = _batches(study, pending, ex.parallel, merges_scenes(devices)) if pending else []
-    stopped = None
-    with ex:
-        if batches:
-            if getattr(ex, "dashboard", None):
-                log(f"{study.name}: {len(ex.devices)} worker(s), Dask dashboard {ex.dashboard}")
-            stopped = ex.run(
+        # a cluster is reached (or refused) before anything is counted or drawn
+        ex = executor_for(devices, scheduler, shared_dir)
+        pending = [r for r in rows if not (runs_dir / f"{r['point_id']}.json").exists()]
+        done0 = len(rows) - len(pending)
+        if done0:
+            log(f"{study.name}: {done0} of {len(rows)} runs already finished in {out}; running {len(pending)}")
+        t0 = time.perf_counter()
+        bar = _progress_bar(len(rows), done0, study.name, progress)
+        batches = _batches(study, pending, ex.parallel, merges_scenes(devices)) if pending else []
+        stopped = None
+        with ex:
+            if batches:
+                if getattr(ex, "dashboard", None):
+                    log(f"{study.name}: {len(ex.devices)} worker(s), Dask dashboard {ex.dashboard}")
+                stopped = ex.run(
+                    study,
+                    out,
+                    batches,
+                    bar,
+                    t0,
+                    checkpoint_every,
+                    stop_after,
+                    lambda m: log(f"{study.name}: {m}"),
+                    on_saved=lambda: _results_csv(study, out),
+                )
+                _results_csv(study, out)
+            return _finish_study(
                 study,
                 out,
-                batches,
-                bar,
+                rows,
+                done0,
                 t0,
+                bar,
+                batches,
+                stopped,
+                progress,
+                log,
+                ex,
+                analyze_after,
+                verify,
                 checkpoint_every,
                 stop_after,
-                lambda m: log(f"{study.name}: {m}"),
-                on_saved=lambda: _results_csv(study, out),
             )
-            _results_csv(study, out)
-        return _finish_study(
-            study,
-            out,
-            rows,
-            done0,
-            t0,
-            bar,
-            batches,
-            stopped,
-            progress,
-            log,
-            ex,
-            analyze_after,
-            verify,
-            checkpoint_every,
-            stop_after,
-        )
 
 
 def _finish_study(
