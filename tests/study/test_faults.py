@@ -16,12 +16,17 @@ import pytest
 
 from warpdem.errors import BusyError
 from warpdem.study import execute
-from warpdem.study.folder import LOCK_NAME, FolderLock
+from warpdem.study.folder import LOCK_NAME, PARTIAL_SUFFIX, FolderLock
 from warpdem.study.spec import StudyError
 
 from .test_execute import _run, _study
 
 pytest.importorskip("warp")
+
+
+def _disk_full(*args, **kwargs):
+    """Fail as a write to a full disk does where a library finds it (at close): without a file's name."""
+    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
 
 def _full_disk_at(name: str):
@@ -31,7 +36,7 @@ def _full_disk_at(name: str):
 
     def fail(fd):
         if name in os.readlink(f"/proc/self/fd/{fd}"):
-            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            _disk_full()
         return fsync(fd)
 
     return fail
@@ -252,3 +257,64 @@ def test_processes_racing_for_a_stale_lock_take_it_once(tmp_path):
             os.waitpid(pid, 0)
     assert sorted(got) == sorted(b"wbbbbb"), got
     assert not (tmp_path / LOCK_NAME).exists()
+
+
+def test_a_full_disk_deep_in_a_launch_names_the_folder_and_a_rerun_resumes(tmp_path, monkeypatch):
+    """The disk fills as a launch draws its pile (a library's write fails at close, with no file named): the
+    study ends in an OSError naming its output folder (the command line's "OUT: No space left on device", exit
+    code 5), its lock is released, and the same call, with room again, runs the study through."""
+    from warpdem.errors import ExitCode, classify
+    from warpdem.scene import export
+
+    study = _study(tmp_path)
+    out = tmp_path / "out"
+    with monkeypatch.context() as m:
+        m.setattr(export, "side_view_png", _disk_full)
+        with pytest.raises(OSError) as err:
+            _run(study, out, analyze_after=False)
+    assert err.value.errno == errno.ENOSPC and err.value.filename == str(out)
+    assert classify(err.value) == (ExitCode.FILE_SYSTEM, f"{out}: {os.strerror(errno.ENOSPC)}")
+    assert not (out / LOCK_NAME).exists() and not list((out / "runs").glob("*.json"))
+    res = _run(study, out, analyze_after=False)
+    assert res["ran"] == 6 and res["stopped"] is None
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 64 KiB tmpfs mounted at ``tmp_path/disk`` (skips where mounting is not allowed); unmounted after."""
+    import subprocess
+
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mount = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(disk)], capture_output=True)
+    if mount.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {mount.stderr.decode().strip()}")
+
+    def remount(options: str) -> None:
+        subprocess.run(["mount", "-o", f"remount,{options}", str(disk)], check=True, capture_output=True)
+
+    try:
+        yield disk, remount
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+
+
+def test_a_real_full_disk_then_a_read_only_one(small_disk, tmp_path):
+    """On a real 64 KiB file system the study fills the disk in its first launch: an OSError (ENOSPC) naming
+    a path inside the output folder, the lock released. Made read-only, the folder is refused at its lock, named.
+    With room again, the same call runs the study through in the folder the full disk left."""
+    disk, remount = small_disk
+    study = _study(tmp_path)
+    out = disk / "out"
+    with pytest.raises(OSError) as err:
+        _run(study, out, analyze_after=False)
+    assert err.value.errno == errno.ENOSPC and str(err.value.filename).startswith(str(out))
+    assert (out / "study.toml").read_text() == study.path.read_text() and not (out / LOCK_NAME).exists()
+    remount("ro")
+    with pytest.raises(OSError) as err:
+        _run(study, out, analyze_after=False)
+    assert err.value.errno == errno.EROFS and err.value.filename == str(out / LOCK_NAME)
+    remount("rw,size=16m")
+    res = _run(study, out, analyze_after=False)
+    assert res["ran"] == 6 and res["stopped"] is None
+    assert not list(out.rglob(f"*{PARTIAL_SUFFIX}")) and not (out / LOCK_NAME).exists()

@@ -11,12 +11,14 @@ lock cannot both take it over.
 
 :func:`write_atomic` and :func:`copy_atomic` write a whole file or nothing (a temporary name in the same folder,
 fsync, ``os.replace``): a write cut short by a full disk or a kill leaves the old file or none, never an empty
-one. :func:`clean_partials` removes the temporaries such a cut leaves.
+one. :func:`clean_partials` removes the temporaries such a cut leaves, and :func:`naming` gives a file-system
+error raised without a path (a write that fails at ``close``, deep in a library) the folder's.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import shlex
@@ -32,6 +34,11 @@ LOCK_NAME = ".warpdem.lock"
 
 PARTIAL_SUFFIX = ".partial"
 """Ending of :func:`write_atomic`'s temporary files (``.NAME.PID.partial``, next to NAME)."""
+
+FILE_SYSTEM_ERRNOS = frozenset(
+    {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG, errno.EIO}
+)
+"""The errors of a folder that cannot be written: :func:`naming` gives them the folder's path."""
 
 
 def _process_start(pid: int) -> str | None:
@@ -118,6 +125,18 @@ def clean_partials(folder) -> list[Path]:
         with contextlib.suppress(FileNotFoundError):
             p.unlink()
     return found
+
+
+@contextlib.contextmanager
+def naming(folder):
+    """Give a file-system OSError raised inside without a path (a full disk found by ``close`` or ``flush``,
+    deep in a library) the path of ``folder``, so the message says where (:func:`warpdem.errors.classify`)."""
+    try:
+        yield
+    except OSError as e:
+        if e.filename is not None or e.errno not in FILE_SYSTEM_ERRNOS:
+            raise
+        raise with_path(e, folder) from e
 
 
 @contextlib.contextmanager
@@ -273,12 +292,13 @@ class FolderLock:
 def hold(folder, what: str = "warpdem"):
     """Create ``folder`` if need be and hold its lock (:class:`FolderLock`, yielded: its ``took_over`` says
     whether a stale one was taken over) inside; temporaries of a write cut short are removed once the lock is
-    held (:func:`clean_partials`)."""
+    held (:func:`clean_partials`), and a file-system error raised inside without a path names the folder
+    (:func:`naming`)."""
     folder = Path(folder)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise with_path(e, folder) from e
-    with FolderLock(folder, what) as lock:
+    with FolderLock(folder, what) as lock, naming(folder):
         clean_partials(folder)
         yield lock
