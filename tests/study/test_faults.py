@@ -19,7 +19,7 @@ from warpdem.study import execute
 from warpdem.study.folder import LOCK_NAME, PARTIAL_SUFFIX, FolderLock
 from warpdem.study.spec import StudyError
 
-from .test_execute import _run, _study
+from .test_execute import STUDY, _run, _study
 
 pytest.importorskip("warp")
 
@@ -318,3 +318,74 @@ def test_a_real_full_disk_then_a_read_only_one(small_disk, tmp_path):
     res = _run(study, out, analyze_after=False)
     assert res["ran"] == 6 and res["stopped"] is None
     assert not list(out.rglob(f"*{PARTIAL_SUFFIX}")) and not (out / LOCK_NAME).exists()
+
+
+def _group(pgid: int) -> list[int]:
+    """The live processes (not zombies) of process group ``pgid``, from ``/proc``."""
+    pids = []
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            with open(f"/proc/{d}/stat", "rb") as fh:
+                stat = fh.read().decode(errors="replace")
+        except OSError:  # ended meanwhile
+            continue
+        state, _, pgrp = stat[stat.rfind(")") + 2 :].split()[:3]
+        if int(pgrp) == pgid and state != "Z":
+            pids.append(int(d))
+    return pids
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads the process table from /proc (Linux)")
+def test_the_workers_of_a_killed_study_end_with_it(tmp_path):
+    """``warpdem study --device cpu,cpu`` (a LocalCluster: two worker processes, each running a launch) is
+    killed (SIGKILL, no chance to clean up) while its launches run: within 30 s no process of its process group
+    is left, so no orphaned worker goes on computing, or holds the folder. (Dask's nanny gives each worker a
+    pipe from its parent and the worker exits when the pipe closes; this checks it, whatever Dask's version.)"""
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    path = tmp_path / "long.toml"
+    path.write_text(STUDY.format(batch=0, target=0.0, verify=0).replace("duration = 0.3", "duration = 30.0"))
+    out = tmp_path / "out"
+    root = str(Path(__file__).parents[2])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
+    cmd = [sys.executable, "-m", "warpdem.cli", "study", str(path), "--device", "cpu,cpu", "--out", str(out)]
+    with open(tmp_path / "console.txt", "w") as console:
+        parent = subprocess.Popen(
+            [*cmd, "--no-progress", "--no-verify"],
+            stdout=console,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,
+        )
+    left = []
+    try:
+        # running: both launches' folders made by the workers, and three processes at least besides the parent
+        deadline = time.time() + 120
+        while time.time() < deadline and parent.poll() is None:
+            launches = list((out / "launches").glob("*")) if (out / "launches").is_dir() else []
+            if len(launches) == 2 and len(_group(parent.pid)) >= 3:
+                break
+            time.sleep(0.1)
+        assert parent.poll() is None, (tmp_path / "console.txt").read_text()[-3000:]
+        assert len(launches) == 2, "no launch was seen running within 120 s"
+        time.sleep(1.0)  # inside the launches
+        workers = [p for p in _group(parent.pid) if p != parent.pid]
+        assert not list((out / "runs").glob("*.json")), "a launch ended before the kill"
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait()
+        t0 = time.time()
+        while (left := _group(parent.pid)) and time.time() - t0 < 30:
+            time.sleep(0.1)
+        assert not left, f"processes of the killed study still run 30 s after it: {left} (of {workers})"
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+            parent.wait()
+        for pid in _group(parent.pid):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
