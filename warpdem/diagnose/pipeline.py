@@ -56,7 +56,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -66,6 +65,7 @@ import pandas as pd
 
 from warpdem.study import execute
 from warpdem.study import spec as sp
+from warpdem.study.folder import copy_atomic, hold
 
 from . import candidates as cands
 from . import inference as inf
@@ -951,72 +951,78 @@ def diagnose(
 
     spec, ex = load_diagnosis(source) if not isinstance(source, tuple) else source
     out = Path(out_dir) if out_dir else Path("runs") / "diagnose" / spec.name
-    out.mkdir(parents=True, exist_ok=True)
-    if spec.path is not None:
-        shutil.copyfile(spec.path, out / "data.toml")
-        shutil.copyfile(ex.source, out / "experiments.csv")
-    study = spec.study(list(ex.responses))
-    sims = Simulations(study, out, execute.parse_devices(device), progress, log, stop_after)
-    sims.scheduler = scheduler
-    sims.shared_dir = shared_dir
-    t0 = time.perf_counter()
-    prob = _problem(spec, ex)
-    ev = Evaluator(prob, sims, log)
-    base = Model("base", [Dim(p.name, p.parameter, p.low, p.high, p.unit) for p in spec.parameters])
-    result: dict = {"name": spec.name, "out": str(out), "stopped": None}
-    try:
-        # the scatter and the base design need nothing else: one request, so that they share launches
-        sims.run(_scatter_requests(ev, base) + ev.design_requests([base]), "base: scatter and design")
-        prob.seed_var = _sim_scatter(ev, base)
-        (base_eval,) = ev.evaluate([base], "base: confirm")
-        evals = {"base": base_eval}
-        screens, skipped, results, decision = [], {}, [], None
-        if base_eval["adequacy"]["adequate"]:
-            decision = {"verdict": "adequate", "cause": None, "tied": [], "table": []}
-        else:
-            lib, skipped = _library(spec, ex, prob.conditions)
-            screens = screen(ev, base_eval, base_eval["gps"], lib) if lib else []
-            passed = sorted([s for s in screens if s["p"] < spec.alpha], key=lambda s: -s["delta_chi2"])
-            models = []
-            for s in passed:
-                c = next(c for c in lib if c.name == s["candidate"])
-                models.append(Model(c.name, [*base.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c))
-            if models:
-                sims.run(ev.design_requests(models), "candidates: design")
-                failed: dict = {}
-                results = ev.evaluate(models, "candidates: confirm", dropped=failed)
-                for name, why in failed.items():
-                    log(f"{spec.name}: candidate {name} left out: {why}")
-                    skipped[name] = f"recalibrated, then left out: {why}"
-                evals.update({r["model"].name: r for r in results})
-            decision = verdict(base_eval, results, spec.alpha, _seed(spec, "bootstrap"))
-        separating = []
-        if decision["verdict"] == "ambiguous":
-            separating = separating_measurement(prob, evals, decision["tied"])
-        named = decision.get("cause") or (decision["tied"][0] if decision["tied"] else decision.get("best"))
-        gains = gain(prob, base_eval, evals[named], _seed(spec, "gain")) if named else None
-        result.update(
-            write(
-                out,
-                prob,
-                evals,
-                decision,
-                screens=screens,
-                skipped=skipped,
-                separating=separating,
-                gains=gains,
-                checks=step_checks(out / "runs"),
+    # the folder's lock for the whole diagnosis (a second one on it is refused); whole copies (a start cut short
+    # leaves none, and the next overwrites them)
+    with hold(out, f"diagnosis {spec.name}") as lock:
+        if lock.took_over:
+            log(lock.took_over)
+        if spec.path is not None:
+            copy_atomic(spec.path, out / "data.toml")
+            copy_atomic(ex.source, out / "experiments.csv")
+        study = spec.study(list(ex.responses))
+        sims = Simulations(study, out, execute.parse_devices(device), progress, log, stop_after)
+        sims.scheduler = scheduler
+        sims.shared_dir = shared_dir
+        t0 = time.perf_counter()
+        prob = _problem(spec, ex)
+        ev = Evaluator(prob, sims, log)
+        base = Model("base", [Dim(p.name, p.parameter, p.low, p.high, p.unit) for p in spec.parameters])
+        result: dict = {"name": spec.name, "out": str(out), "stopped": None}
+        try:
+            # the scatter and the base design need nothing else: one request, so that they share launches
+            sims.run(_scatter_requests(ev, base) + ev.design_requests([base]), "base: scatter and design")
+            prob.seed_var = _sim_scatter(ev, base)
+            (base_eval,) = ev.evaluate([base], "base: confirm")
+            evals = {"base": base_eval}
+            screens, skipped, results, decision = [], {}, [], None
+            if base_eval["adequacy"]["adequate"]:
+                decision = {"verdict": "adequate", "cause": None, "tied": [], "table": []}
+            else:
+                lib, skipped = _library(spec, ex, prob.conditions)
+                screens = screen(ev, base_eval, base_eval["gps"], lib) if lib else []
+                passed = sorted([s for s in screens if s["p"] < spec.alpha], key=lambda s: -s["delta_chi2"])
+                models = []
+                for s in passed:
+                    c = next(c for c in lib if c.name == s["candidate"])
+                    models.append(
+                        Model(c.name, [*base.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c)
+                    )
+                if models:
+                    sims.run(ev.design_requests(models), "candidates: design")
+                    failed: dict = {}
+                    results = ev.evaluate(models, "candidates: confirm", dropped=failed)
+                    for name, why in failed.items():
+                        log(f"{spec.name}: candidate {name} left out: {why}")
+                        skipped[name] = f"recalibrated, then left out: {why}"
+                    evals.update({r["model"].name: r for r in results})
+                decision = verdict(base_eval, results, spec.alpha, _seed(spec, "bootstrap"))
+            separating = []
+            if decision["verdict"] == "ambiguous":
+                separating = separating_measurement(prob, evals, decision["tied"])
+            named = decision.get("cause") or (decision["tied"][0] if decision["tied"] else decision.get("best"))
+            gains = gain(prob, base_eval, evals[named], _seed(spec, "gain")) if named else None
+            result.update(
+                write(
+                    out,
+                    prob,
+                    evals,
+                    decision,
+                    screens=screens,
+                    skipped=skipped,
+                    separating=separating,
+                    gains=gains,
+                    checks=step_checks(out / "runs"),
+                )
             )
-        )
-    except (RunStopped, Stopped) as e:
-        result["stopped"] = str(e)
-        log(f"{spec.name}: stopped; {e}")
-    finally:
-        sims.close()
-    result["wall_s"] = time.perf_counter() - t0
-    result["worlds"] = len(list((out / "runs").glob("*.json")))
-    result["launches"] = sims.launched
-    return result
+        except (RunStopped, Stopped) as e:
+            result["stopped"] = str(e)
+            log(f"{spec.name}: stopped; {e}")
+        finally:
+            sims.close()
+        result["wall_s"] = time.perf_counter() - t0
+        result["worlds"] = len(list((out / "runs").glob("*.json")))
+        result["launches"] = sims.launched
+        return result
 
 
 def _library(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tuple[list, dict]:

@@ -2,6 +2,7 @@
 
 Layout of a study's output folder ``OUT``::
 
+    OUT/.warpdem.lock       while the study runs: who runs it (pid, host, start, command; :mod:`.folder`)
     OUT/study.toml          copy of the study file the runs came from
     OUT/design.csv          the design table (run order, coded and actual values, world seeds, point ids)
     OUT/runs/<point_id>.json one file per finished run: its design row, overrides, responses, metrics
@@ -34,7 +35,6 @@ import functools
 import json
 import math
 import os
-import shutil
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -46,13 +46,12 @@ from warpdem.engine.types import device_names
 from warpdem.scene.runner import _json_default
 
 from . import spec as sp
+from .folder import copy_atomic, hold, with_path, write_atomic
 
 
 def _write_json(path: Path, data) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w") as fh:
-        json.dump(data, fh, indent=1, default=_json_default)
-    os.replace(tmp, path)
+    """Write ``data`` as JSON to ``path``, whole or not at all (:func:`folder.write_atomic`)."""
+    write_atomic(path, json.dumps(data, indent=1, default=_json_default))
 
 
 def _scene(study: sp.StudySpec, overrides: dict):
@@ -223,14 +222,35 @@ def _progress_bar(total: int, initial: int, desc: str, enabled: bool):
     return tqdm(total=total, initial=initial, desc=desc, unit="run", smoothing=0.0)
 
 
-def _check_folder(out: Path, study: sp.StudySpec) -> None:
-    """An output folder holds one study: refuse to mix another study's runs into it."""
+def _check_folder(out: Path, study: sp.StudySpec, log) -> None:
+    """An output folder holds one study: refuse to mix another study's runs into it. A copy of the study file
+    that names no study (empty or cut short: a first start that failed, on a full disk say) is removed while no
+    run has finished, so that the study starts again; with finished runs it is refused, naming the file."""
     copy_ = out / "study.toml"
-    if copy_.exists():
+    if not copy_.exists():
+        return
+    try:
         with open(copy_, "rb") as fh:
             name = sp.tomllib.load(fh).get("study", {}).get("name")
-        if name != study.name:
-            raise sp.StudyError(f"{out}: holds study {name!r}, not {study.name!r}; choose another --out")
+        reason = None if isinstance(name, str) else "names no study ([study] name)"
+    except (sp.tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        reason = f"is not TOML ({e})"
+    except OSError as e:
+        raise with_path(e, copy_) from e
+    if reason is not None:
+        if copy_.stat().st_size == 0:
+            reason = "is empty"
+        done = len(list((out / "runs").glob("*.json")))
+        if done:
+            raise sp.StudyError(
+                f"{copy_}: {reason}, yet {out / 'runs'} holds {done} finished run(s); put back the study file they "
+                f"ran (cp STUDY.toml {copy_}) and run again, or choose another --out"
+            )
+        log(f"{copy_}: {reason} and no run has finished (a first start cut short): starting again")
+        copy_.unlink()
+        return
+    if name != study.name:
+        raise sp.StudyError(f"{out}: holds study {name!r}, not {study.name!r}; choose another --out")
 
 
 def world_states(batch: list[dict], records: list[dict]) -> dict:
@@ -385,8 +405,11 @@ def _logging_to(path: Path, log):
     def both(msg: str) -> None:
         if log is not None:
             log(msg)
-        with open(path, "a", encoding="utf-8") as fh:
-            fh.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {msg}\n")
+        try:
+            with open(path, "a", encoding="utf-8") as fh:
+                fh.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {msg}\n")
+        except OSError as e:  # a full disk shows at close, without the file's name
+            raise with_path(e, path) from e
 
     return both
 
@@ -464,63 +487,67 @@ def run_study(
     """
     study = study if isinstance(study, sp.StudySpec) else sp.load_study(study)
     out = Path(out_dir) if out_dir else Path("runs") / study.name
-    out.mkdir(parents=True, exist_ok=True)
-    _check_folder(out, study)
-    log = _logging_to(out / "log.txt", log)
-    log(f"{study.name}: study {study.path or '(in memory)'} on {device}, into {out}")
-    if study.path is not None:
-        shutil.copyfile(study.path, out / "study.toml")
-    table = sp.design_table(study)
-    table.to_csv(out / "design.csv", index=False)
-    runs_dir = out / "runs"
-    runs_dir.mkdir(exist_ok=True)
-    rows = _study_rows(study, table)
-    devices = parse_devices(device)
-    from .executor import executor_for
+    # the folder's lock (OUT/.warpdem.lock) for the whole study: a second study on it is refused; the first writes
+    # are whole files (a start cut short, by a full disk say, leaves none, and a rerun starts again)
+    with hold(out, f"study {study.name}") as lock:
+        log = _logging_to(out / "log.txt", log)
+        if lock.took_over:
+            log(lock.took_over)
+        _check_folder(out, study, log)
+        log(f"{study.name}: study {study.path or '(in memory)'} on {device}, into {out}")
+        if study.path is not None:
+            copy_atomic(study.path, out / "study.toml")
+        table = sp.design_table(study)
+        write_atomic(out / "design.csv", table.to_csv(index=False))
+        runs_dir = out / "runs"
+        runs_dir.mkdir(exist_ok=True)
+        rows = _study_rows(study, table)
+        devices = parse_devices(device)
+        from .executor import executor_for
 
-    # a cluster is reached (or refused) before anything is counted or drawn
-    ex = executor_for(devices, scheduler, shared_dir)
-    pending = [r for r in rows if not (runs_dir / f"{r['point_id']}.json").exists()]
-    done0 = len(rows) - len(pending)
-    if done0:
-        log(f"{study.name}: {done0} of {len(rows)} runs already finished in {out}; running {len(pending)}")
-    t0 = time.perf_counter()
-    bar = _progress_bar(len(rows), done0, study.name, progress)
-    batches = _batches(study, pending, ex.parallel, merges_scenes(devices)) if pending else []
-    stopped = None
-    with ex:
-        if batches:
-            if getattr(ex, "dashboard", None):
-                log(f"{study.name}: {len(ex.devices)} worker(s), Dask dashboard {ex.dashboard}")
-            stopped = ex.run(
+        # a cluster is reached (or refused) before anything is counted or drawn
+        ex = executor_for(devices, scheduler, shared_dir)
+        pending = [r for r in rows if not (runs_dir / f"{r['point_id']}.json").exists()]
+        done0 = len(rows) - len(pending)
+        if done0:
+            log(f"{study.name}: {done0} of {len(rows)} runs already finished in {out}; running {len(pending)}")
+        t0 = time.perf_counter()
+        bar = _progress_bar(len(rows), done0, study.name, progress)
+        batches = _batches(study, pending, ex.parallel, merges_scenes(devices)) if pending else []
+        stopped = None
+        with ex:
+            if batches:
+                if getattr(ex, "dashboard", None):
+                    log(f"{study.name}: {len(ex.devices)} worker(s), Dask dashboard {ex.dashboard}")
+                stopped = ex.run(
+                    study,
+                    out,
+                    batches,
+                    bar,
+                    t0,
+                    checkpoint_every,
+                    stop_after,
+                    lambda m: log(f"{study.name}: {m}"),
+                    on_saved=lambda: _results_csv(study, out),
+                )
+                _results_csv(study, out)
+            return _finish_study(
                 study,
                 out,
-                batches,
-                bar,
+                rows,
+                done0,
                 t0,
+                bar,
+                batches,
+                stopped,
+                progress,
+                log,
+                ex,
+                analyze_after,
+                verify,
                 checkpoint_every,
                 stop_after,
-                lambda m: log(f"{study.name}: {m}"),
-                on_saved=lambda: _results_csv(study, out),
             )
-            _results_csv(study, out)
-        return _finish_study(
-            study,
-            out,
-            rows,
-            done0,
-            t0,
-            bar,
-            batches,
-            stopped,
-            progress,
-            log,
-            ex,
-            analyze_after,
-            verify,
-            checkpoint_every,
-            stop_after,
-        )
 
 
 def _finish_study(
@@ -723,7 +750,7 @@ CHECK_WORDS = {
 
 
 def _results_csv(study, out: Path) -> None:
-    load_results(out, study).to_csv(out / "results.csv", index=False)
+    write_atomic(out / "results.csv", load_results(out, study).to_csv(index=False))
 
 
 def external_runs(path, study: sp.StudySpec) -> pd.DataFrame:
