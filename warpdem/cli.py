@@ -6,6 +6,7 @@ import argparse
 import json
 import os
 import sys
+import warnings
 
 from .errors import ExitCode, InputError, classify
 
@@ -565,6 +566,9 @@ def main(argv=None) -> int:
     except SystemExit as e:  # argparse has printed its usage message; a caller of main() gets the code back
         return int(e.code or 0)
     debug = args.debug or os.environ.get("WARPDEM_DEBUG", "") not in ("", "0")
+    shown = warnings.showwarning
+    if not debug:  # a physics warning is a line for the user, not a source location
+        warnings.showwarning = lambda message, *a, **k: print(f"warning: {message}", file=sys.stderr)
     try:
         return int(args.fn(args))
     except (Exception, KeyboardInterrupt) as e:
@@ -573,6 +577,8 @@ def main(argv=None) -> int:
         code, message = classify(e)
         print(f"error: {message}", file=sys.stderr)
         return int(code)
+    finally:
+        warnings.showwarning = shown
 
 
 if __name__ == "__main__":

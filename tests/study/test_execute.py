@@ -420,7 +420,7 @@ def test_scenes_of_other_grains_share_a_launch_on_gpus(tmp_path):
 def test_runs_that_may_be_wrong_are_flagged(finished, tmp_path):
     """run_checks reads each finished run: the tiny study's 0.3 s piles are still moving when they stop (the
     funnel stops once settled), which it says of every run, in the log and the report's notes. A run edited to
-    lose 3 of its 40 spheres (7.5 %, over 2 %), to fail its measurement, to press faster than quasi-static and to
+    lose 3 of its 40 spheres (7.5 %, over 2 %: the run's own warning), to fail its measurement, to press faster than quasi-static and to
     step above the stable step gets each of those flags with its figures; one that lost none gets no such flag."""
     import shutil
 
@@ -435,20 +435,23 @@ def test_runs_that_may_be_wrong_are_flagged(finished, tmp_path):
     pid = execute.load_results(out, study)["point_id"][1]
     path = out / "runs" / f"{pid}.json"
     rec = json.loads(path.read_text())
-    rec["metrics"].update(removed=3, inertial_number_max=0.02, angle_error="no pile")
+    from warpdem.scene import suspect
+
+    lost = suspect.world_warnings(3, 40, 0.1, (1e-5, 1e-5), None, 0.0)
+    rec["metrics"].update(removed=3, inertial_number_max=0.02, angle_error="no pile", warnings=lost)
     rec["responses"]["height"] = None
     rec["info"]["step_warning"] = "the step reached 1.20 of the stable step"
     path.write_text(json.dumps(rec))
     flags = [f for f in execute.run_checks(out, study) if f["run"] == 2]
     details = {f["check"]: f["detail"] for f in flags}
-    assert details["lost"] == "3 of 40 particles (7.5 %) left the domain"
+    assert details["lost"].startswith("3 of 40 bodies (7.5 %) left the domain")
     assert details["measurement"] == "no height (pile_height_m): no pile"
     assert details["inertial"].startswith("inertial number 0.02, above the quasi-static 0.001")
     assert details["step"] == "the step reached 1.20 of the stable step"
     assert not any(f["check"] == "lost" for f in execute.run_checks(out, study) if f["run"] != 2)
     execute.analyze(out, study)
     report = (out / "analysis" / "report.md").read_text()
-    assert "- Check: lost particles: run 2: 3 of 40 particles (7.5 %) left the domain." in report
+    assert "- Check: lost particles: run 2: 3 of 40 bodies (7.5 %) left the domain" in report
     assert "- Check: did not settle: runs 1, 2, 3, 4, 5, 6" in report
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 
 import numpy as np
 import warp as wp
@@ -11,7 +12,7 @@ import warp as wp
 from warpdem.errors import InputError
 from warpdem.kernels.params import PairParams
 
-from . import analytic
+from . import analytic, suspect
 from .checks import vec3
 from .keys import VARY, OverrideKey
 from .materials import INTERACTION_ENUMS, Interaction, InteractionTable, Material, pair_table
@@ -562,6 +563,20 @@ class ModelBuilder:
         return np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) and a[2:5] == b[2:5] and a[5] == b[5]
 
     # finalise --------------------------------------------------------------------------------
+    def _warn_start_overlaps(self) -> None:
+        """Warn when spheres of different bodies overlap as placed (every world starts from these places; a
+        dynamic factory's spheres are placed apart when released)."""
+        active = np.asarray(self._active, dtype=bool) & (np.asarray(self._glued) < 0)
+        n = len(self._r)
+        clump = np.asarray(self._clump, dtype=np.int64)
+        body = np.where(clump >= 0, clump, n + np.arange(n))[active]
+        x = np.asarray(self._x, dtype=np.float64).reshape(-1, 3)[active]
+        r = np.asarray(self._r, dtype=np.float64)[active]
+        found = suspect.overlaps(x, r, np.zeros(len(r), dtype=np.int64), body, 1)
+        words = suspect.start_overlap_words({k: v[0] for k, v in found.items()})
+        if words:
+            warnings.warn(words, stacklevel=3)
+
     def finalize(self, device: str = "cpu") -> Model:
         """Build the Model on ``device`` ("cpu" or "cuda[:n]"): this builder's worlds, then those of each
         :meth:`stack` ed builder."""
@@ -571,6 +586,8 @@ class ModelBuilder:
         for g in groups:
             if g.sphere_count == 0:
                 raise InputError("finalize: the scene has no sphere")
+        for g in groups:
+            g._warn_start_overlaps()
         device = str(wp.get_device(device))
         W = sum(g.world_count for g in groups)
         world0 = np.cumsum([0] + [g.world_count for g in groups])

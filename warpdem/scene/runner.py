@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from warpdem.engine import suspect
 from warpdem.engine.types import host
 from warpdem.errors import InputError
 
@@ -56,22 +57,58 @@ def _host(model):
     return h
 
 
-def _kinetic_energy(model, state, h) -> np.ndarray:
-    """Mean translational kinetic energy per active particle [J] in each world, shape (world_count,)."""
+def _motion(model, state, h) -> tuple[np.ndarray, np.ndarray]:
+    """Mean translational kinetic energy per active particle [J] and the fastest particle's speed [m/s], in each
+    world: two arrays of shape (world_count,)."""
     W = model.world_count
     act = host(state.sphere_active).astype(bool)
     v = host(state.sphere_v)
     sel = act & h["free"]
     e = np.zeros(W)
     n = np.zeros(W)
-    np.add.at(e, h["world"][sel], 0.5 * h["mass"][sel] * np.sum(v[sel] ** 2, axis=1))
+    fastest = np.zeros(W)
+    v2 = np.sum(v[sel] ** 2, axis=1)
+    np.add.at(e, h["world"][sel], 0.5 * h["mass"][sel] * v2)
     np.add.at(n, h["world"][sel], 1)
+    np.maximum.at(fastest, h["world"][sel], v2)
     if model.clump_count:
         cv = host(state.clump_v)
         cact = act[h["clump_first"]]
-        np.add.at(e, h["clump_world"][cact], 0.5 * h["clump_mass"][cact] * np.sum(cv[cact] ** 2, axis=1))
+        c2 = np.sum(cv[cact] ** 2, axis=1)
+        np.add.at(e, h["clump_world"][cact], 0.5 * h["clump_mass"][cact] * c2)
         np.add.at(n, h["clump_world"][cact], 1)
-    return e / np.maximum(n, 1)
+        np.maximum.at(fastest, h["clump_world"][cact], c2)
+    return e / np.maximum(n, 1), np.sqrt(fastest)
+
+
+def _overlaps(model, state, h) -> dict:
+    """:func:`warpdem.scene.suspect.overlaps` of the active particle spheres (glued wall coats left out)."""
+    act = host(state.sphere_active).astype(bool) & (h["glued"] < 0)
+    n = len(h["radius"])
+    body = np.where(h["clump"] >= 0, h["clump"], n + np.arange(n))
+    x = host(state.sphere_x).astype(np.float64)
+    found = suspect.overlaps(x[act], h["radius"][act], h["world"][act], body[act], model.world_count)
+    return {k: v.tolist() for k, v in found.items()}
+
+
+def _bodies(model, state, h) -> np.ndarray:
+    """Active bodies (free spheres and clumps) in each world, shape (world_count,)."""
+    act = host(state.sphere_active).astype(bool)
+    n = np.bincount(h["world"][act & h["free"]], minlength=model.world_count)
+    if model.clump_count:
+        n = n + np.bincount(h["clump_world"][act[h["clump_first"]]], minlength=model.world_count)
+    return n
+
+
+def _warning_lines(metrics: list[dict], skip=()) -> list[str]:
+    """One line per kind of warning of a launch's worlds (but those of ``skip``): the worlds and the first one's
+    words."""
+    lines = []
+    for check in dict.fromkeys(x["check"] for mw in metrics for x in mw["warnings"] if x["check"] not in skip):
+        hit = [(mw["world"], x["detail"]) for mw in metrics for x in mw["warnings"] if x["check"] == check]
+        worlds = "world " if len(hit) == 1 else f"{len(hit)} worlds, e.g. world "
+        lines.append(f"{worlds}{hit[0][0]}: {hit[0][1]}" if len(metrics) > 1 else hit[0][1])
+    return lines
 
 
 def _particle_mask(state, h, world: int) -> np.ndarray:
@@ -589,6 +626,11 @@ def run_scene_iter(
                 _start_unloading(spec, model, solver, piston, series["unload_start_s"])
             series.setdefault("tick_wall_s", [])
             series.setdefault("rebuilds", [])
+    if resumed_from is None:
+        series["start_overlap"] = _overlaps(model, state, h)
+    series.setdefault("step_travel", [])
+    # radii of the smallest particle sphere a body may move per step (suspect.STEP_TRAVEL_MAX)
+    r_small = float(h["radius"][h["glued"] < 0].min()) if np.any(h["glued"] < 0) else 1.0
     t_ckpt = time.perf_counter()
     rebuilds_total = solver.rebuild_count
     if writer is not None:
@@ -611,7 +653,8 @@ def run_scene_iter(
         imp = host(state.wall_impulse)
         force = (imp - impulse_prev) / max(t - t_prev, 1e-300)
         impulse_prev, t_prev = imp.copy(), t
-        ke = _kinetic_energy(model, state, h)
+        ke, fastest = _motion(model, state, h)
+        series["step_travel"].append((fastest * solver.dt / r_small).tolist())
         if m.outlet_height is not None:
             series.setdefault("discharged_kg", []).append(_discharged_mass(model, state, h, m.outlet_height).tolist())
         series["time"].append(t)
@@ -703,9 +746,22 @@ def run_scene_iter(
     removed = host(state.world_removed)
     thresholds = np.repeat(settle_energies, [world_count] + [g.world_count for g in also])
     ke_series = np.asarray(series["kinetic_energy"], dtype=np.float64).reshape(len(series["time"]), W)
+    dt_range = [min(series["dt_s"], default=solver.dt), max(series["dt_s"], default=solver.dt)]
+    end_overlap = _overlaps(model, state, h)
+    bodies = _bodies(model, state, h) + removed
+    travel = np.asarray(series["step_travel"], dtype=np.float64).reshape(-1, W).max(axis=0, initial=0.0)
+    start = series.get("start_overlap")
     for w in range(W):
         # removed: bodies that left the scene's domain (e.g. rolled off the plate's edge)
         mw = {"world": w, "time_s": state.time, "stop": stop_reason, "removed": int(removed[w])}
+        mw["warnings"] = suspect.world_warnings(
+            int(removed[w]),
+            int(bodies[w]),
+            float(travel[w]),
+            dt_range,
+            None if start is None else {k: v[w] for k, v in start.items()},
+            float(end_overlap["deepest"][w]),
+        )
         if np.isfinite(settled_s[w]):
             # held since it settled: its state is that instant's, whatever its launch-mates did after
             mw.update(time_s=float(settled_s[w]), stop="settled")
@@ -730,7 +786,6 @@ def run_scene_iter(
         elif m.kind == "drum":
             mw.update(_drum_metrics(series, h, w))
         metrics.append(mw)
-    dt_range = [min(series["dt_s"], default=solver.dt), max(series["dt_s"], default=solver.dt)]
     info = {
         "rig": spec.rig,
         "device": str(device),
@@ -759,6 +814,9 @@ def run_scene_iter(
             f"{solver.options.dt_levels}): figures from those ticks are not to be trusted; lower run.dt_fraction"
         )
         warnings.warn(info["step_warning"], stacklevel=2)
+    info["warnings"] = _warning_lines(metrics)
+    for line in _warning_lines(metrics, skip=("start_overlap",)):  # finalize() warned of those already
+        warnings.warn(line, stacklevel=2)
     result = RunResult(metrics, info, series)
     if out is not None:
         files = {}

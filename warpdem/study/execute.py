@@ -650,11 +650,6 @@ def load_results(out, study: sp.StudySpec | None = None, metrics: dict | None = 
     return table
 
 
-LOST_FRACTION_MAX = 0.02
-"""Share of a run's particles that may leave the scene's domain (rolled off the plate, thrown out) before the
-run is flagged: beyond it the measured pile or bed is not the one the factories made."""
-
-
 def _checks_of(rec: dict, scene, study: sp.StudySpec) -> list[tuple[str, str]]:
     """(check, detail) of one run's record (see :func:`run_checks`); ``scene`` is the run's SceneSpec."""
     from warpdem.scene.measure import QUASI_STATIC_INERTIAL_NUMBER
@@ -668,11 +663,8 @@ def _checks_of(rec: dict, scene, study: sp.StudySpec) -> list[tuple[str, str]]:
             found.append(("measurement", f"no {r.name} ({r.measure})" + (f": {why}" if why else "")))
     if scene.run.settle_energy > 0 and m.get("stop", info.get("stop")) == "duration":
         found.append(("unsettled", f"still moving at the end of its {m.get('time_s', scene.run.duration):.3g} s"))
-    counts = [fac.count for fac in scene.factories]
-    total = sum(counts) if counts and None not in counts else m.get("particles", 0) + m.get("removed", 0)
-    removed = int(m.get("removed", 0))
-    if total and removed > LOST_FRACTION_MAX * total:
-        found.append(("lost", f"{removed} of {total} particles ({100 * removed / total:.1f} %) left the domain"))
+    # the run's own physics warnings (warpdem.scene.suspect): lost bodies, too long a step, overlaps
+    found += [(x["check"], x["detail"]) for x in m.get("warnings", [])]
     inertial = m.get("inertial_number_max")
     if inertial is not None and inertial > QUASI_STATIC_INERTIAL_NUMBER:
         found.append(
@@ -690,8 +682,9 @@ def _checks_of(rec: dict, scene, study: sp.StudySpec) -> list[tuple[str, str]]:
 def run_checks(out, study: sp.StudySpec | None = None) -> list[dict]:
     """What may make a finished run's numbers wrong, per run of ``out`` (run, point_id, check, detail), in run
     order: ``measurement`` (a response it could not measure, with the metric's own error), ``unsettled`` (a scene
-    that stops once settled ran to its duration instead), ``lost`` (more than :data:`LOST_FRACTION_MAX` of its
-    particles left the domain), ``inertial`` (a press faster than
+    that stops once settled ran to its duration instead), ``lost`` (more than :data:`warpdem.scene.suspect.LOST_FRACTION_MAX` of its
+    bodies left the domain), ``fast``, ``start_overlap`` and ``soft`` (the run's own warnings, see
+    :mod:`warpdem.scene.suspect`), ``inertial`` (a press faster than
     :data:`warpdem.scene.measure.QUASI_STATIC_INERTIAL_NUMBER`) and ``step`` (the step exceeded the stable step
     in some tick)."""
     out = Path(out)
@@ -743,6 +736,9 @@ CHECK_WORDS = {
     "measurement": "measurement failed",
     "unsettled": "did not settle",
     "lost": "lost particles",
+    "fast": "too long a step for the speed",
+    "start_overlap": "overlaps at the start",
+    "soft": "deep overlaps",
     "inertial": "not quasi-static",
     "step": "step above the stable step",
 }

@@ -1,0 +1,55 @@
+"""Warnings of suspect physics (warpdem.engine.suspect): overlaps measured against the geometry, the thresholds
+applied as documented, and the warnings of a real run: a pour too fast for its step, a material too soft, two
+spheres placed on top of each other."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+import warpdem as wd
+from warpdem.engine import suspect
+
+
+def test_overlaps_are_the_geometry():
+    """Two unit spheres 1.9 apart overlap by 0.1 of a radius; the same pair in two different worlds, or as two
+    spheres of one clump, does not count; coincident centres are counted as such."""
+    x = np.array([[0, 0, 0], [1.9, 0, 0], [10, 0, 0], [11.5, 0, 0], [20, 0, 0], [20, 0, 0]], dtype=float)
+    r = np.array([1, 1, 1, 1, 0.5, 0.5])
+    world = np.array([0, 0, 0, 1, 1, 1])
+    body = np.array([0, 1, 2, 3, 4, 5])
+    got = suspect.overlaps(x, r, world, body, 2)
+    assert got["deepest"][0] == pytest.approx(0.1) and got["pairs"].tolist() == [1, 1]
+    assert got["deepest"][1] == pytest.approx(2.0) and got["coincident"].tolist() == [0, 1]
+    # spheres 2 (world 0) and 3 (world 1) are 1.5 apart: different worlds never touch
+    same_body = suspect.overlaps(x[:2], r[:2], world[:2], np.array([7, 7]), 1)
+    assert same_body["deepest"][0] == 0.0 and same_body["pairs"][0] == 0
+
+
+def test_thresholds():
+    """A world loses up to LOST_FRACTION_MAX of its bodies quietly; a body may move STEP_TRAVEL_MAX radii per
+    step; the end overlap may reach OVERLAP_MAX: just past each, one warning of its kind."""
+    quiet = suspect.world_warnings(2, 100, 0.5, (1e-5, 1e-5), {"deepest": 0.01, "pairs": 0, "coincident": 0}, 0.1)
+    assert quiet == []
+    loud = suspect.world_warnings(3, 100, 0.51, (1e-5, 2e-5), {"deepest": 0.5, "pairs": 2, "coincident": 1}, 0.11)
+    assert [w["check"] for w in loud] == ["lost", "fast", "start_overlap", "soft"]
+    assert loud[0]["detail"].startswith("3 of 100 bodies (3.0 %) left the domain")
+    assert "0.51 radii" in loud[1]["detail"] and "dt 2e-05 s" in loud[1]["detail"]
+    assert "2 pairs" in loud[2]["detail"] and "1 of them with coincident centres" in loud[2]["detail"]
+    assert "11 %" in loud[3]["detail"]
+
+
+def test_coincident_spheres_warn_at_finalize():
+    """Two spheres placed at one point: finalize warns (they would push in no direction and stay together);
+    two spheres apart do not."""
+    def builder(second):
+        b = wd.ModelBuilder()
+        b.add_material(wd.Material("m", density=1000, shear_modulus=1e7, poisson_ratio=0.3))
+        b.add_spheres([(0, 0, 0), second], radius=0.001, material="m")
+        return b
+
+    with pytest.warns(UserWarning, match="1 pairs .* coincident centres"):
+        builder((0, 0, 0))._warn_start_overlaps()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        builder((0.003, 0, 0))._warn_start_overlaps()

@@ -1,0 +1,131 @@
+"""Signs that a run's physics may be wrong although nothing failed: bodies lost through the domain, a step so
+large that bodies jump past their neighbours, overlaps at the start and deep overlaps (a material too soft).
+
+Pure functions of host arrays. :meth:`warpdem.ModelBuilder.finalize` warns of overlaps at the start;
+:mod:`warpdem.scene.runner` writes what it finds into each world's metrics (``warnings``: a list of {"check",
+"detail"}) and warns, and a study's run checks list it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+LOST_FRACTION_MAX = 0.02
+"""The fraction of a world's bodies that may leave its domain without a warning (a pile loses a few over its
+plate's edge; more means bodies passed through a wall, or a domain too small)."""
+STEP_TRAVEL_MAX = 0.5
+"""The most a body may move in one step, in radii of the smallest sphere: the neighbour lists are rebuilt when
+a body has moved half its skin (0.4 radii by default), and a body that moves further than this between steps
+meets a contact already deep, or passes a thin wall."""
+START_OVERLAP_MAX = 0.01
+"""The deepest overlap two spheres of different bodies may start with, as a fraction of the smaller radius: a
+deeper one releases its elastic energy at the first step and launches both."""
+OVERLAP_MAX = 0.1
+"""The deepest overlap at the end of a run, as a fraction of the smaller radius, before the run is flagged as
+too soft: Hertz contact theory holds for overlaps of a few per cent of the radius."""
+COINCIDENT = 1e-6
+"""Centres closer than this fraction of the smaller radius coincide: the contact normal is undefined, and the
+two spheres push on each other in no direction, so they stay together for ever."""
+
+
+def overlaps(x: np.ndarray, r: np.ndarray, world: np.ndarray, body: np.ndarray, world_count: int) -> dict:
+    """The deepest overlap between spheres of different bodies, per world.
+
+    Args:
+        x: sphere centres (n, 3) [m]; r: radii (n,) [m]; world: world of each sphere (n,); body: an id shared by
+            the spheres of one rigid body (a clump's spheres), distinct otherwise (n,).
+    Returns:
+        {"deepest": (world_count,) overlap / smaller radius [-] (0 without contacts), "pairs": (world_count,)
+        count of pairs deeper than :data:`START_OVERLAP_MAX`, "coincident": (world_count,) count of pairs whose
+        centres coincide}.
+    """
+    from scipy.spatial import cKDTree
+
+    deepest = np.zeros(world_count)
+    pairs = np.zeros(world_count, dtype=np.int64)
+    coincident = np.zeros(world_count, dtype=np.int64)
+    if len(r) < 2:
+        return {"deepest": deepest, "pairs": pairs, "coincident": coincident}
+    # the worlds share one space: a fourth coordinate far apart per world keeps their spheres from pairing
+    span = float(np.ptp(x, axis=0).max()) + 4.0 * float(r.max()) + 1.0
+    pts = np.column_stack([x, world.astype(np.float64) * 10.0 * span])
+    ij = cKDTree(pts).query_pairs(2.0 * float(r.max()), output_type="ndarray")
+    if len(ij) == 0:
+        return {"deepest": deepest, "pairs": pairs, "coincident": coincident}
+    i, j = ij[:, 0], ij[:, 1]
+    keep = body[i] != body[j]
+    i, j = i[keep], j[keep]
+    d = np.linalg.norm(x[i] - x[j], axis=1)
+    small = np.minimum(r[i], r[j])
+    depth = (r[i] + r[j] - d) / small
+    w = world[i]
+    np.maximum.at(deepest, w, np.maximum(depth, 0.0))
+    np.add.at(pairs, w, depth > START_OVERLAP_MAX)
+    np.add.at(coincident, w, d < COINCIDENT * small)
+    return {"deepest": deepest, "pairs": pairs, "coincident": coincident}
+
+
+def start_overlap_words(found: dict) -> str | None:
+    """One world's :func:`overlaps` at the start ({"deepest", "pairs", "coincident"} of that world) in words, or
+    None when no pair is deeper than :data:`START_OVERLAP_MAX`."""
+    if not (found["pairs"] or found["coincident"]):
+        return None
+    words = (
+        f"{int(found['pairs'])} pairs of spheres of different bodies overlap at the start (the deepest by "
+        f"{100 * found['deepest']:.3g} % of the smaller radius)"
+    )
+    if found["coincident"]:
+        words += f", {int(found['coincident'])} of them with coincident centres (they push in no direction and stay together)"
+    return words + ": place the spheres apart"
+
+
+def world_warnings(
+    removed: int,
+    bodies: int,
+    step_travel: float,
+    dt_range: tuple[float, float],
+    start: dict | None,
+    end_deepest: float,
+) -> list[dict]:
+    """The warnings of one world: {"check": lost | fast | start_overlap | soft, "detail": words}.
+
+    Args:
+        removed: bodies that left the domain; bodies: bodies released in the world (removed included).
+        step_travel: the largest distance a body moved in one step over the run, in radii of the smallest sphere.
+        dt_range: the smallest and largest step of the run [s].
+        start: this world's entry of :func:`overlaps` at the start ({"deepest", "pairs", "coincident"}), None
+            for a run resumed from a checkpoint saved before this check existed.
+        end_deepest: the deepest overlap at the end / smaller radius.
+    """
+    out = []
+    if bodies and removed > LOST_FRACTION_MAX * bodies:
+        out.append(
+            {
+                "check": "lost",
+                "detail": f"{removed} of {bodies} bodies ({100 * removed / bodies:.1f} %) left the domain and were "
+                "removed: more than a pile loses over its plate's edge; bodies may have passed through a wall (too "
+                "fast for the step: lower run.dt_fraction) or the domain is too small",
+            }
+        )
+    if step_travel > STEP_TRAVEL_MAX:
+        out.append(
+            {
+                "check": "fast",
+                "detail": f"a body moved {step_travel:.3g} radii of the smallest sphere in one step (dt "
+                f"{dt_range[1]:.3g} s), more than {STEP_TRAVEL_MAX:g}: contacts are met late and thin walls can be "
+                "passed; lower run.dt_fraction (a soft material's Rayleigh step is long)",
+            }
+        )
+    words = None if start is None else start_overlap_words(start)
+    if words:
+        out.append({"check": "start_overlap", "detail": words})
+    if end_deepest > OVERLAP_MAX:
+        out.append(
+            {
+                "check": "soft",
+                "detail": f"the deepest contact overlaps by {100 * end_deepest:.3g} % of the smaller radius at the end, "
+                f"more than {100 * OVERLAP_MAX:g} %: Hertz contact holds for small overlaps; a stiffer shear modulus "
+                "(or a smaller load) keeps them small",
+            }
+        )
+    return out
