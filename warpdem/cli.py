@@ -156,16 +156,19 @@ def cmd_run(args) -> int:
             bar.set_postfix_str(msg)
             bar.refresh()
 
+    from .study.folder import naming
+
     try:
-        res = _named_scene(args.scene, run_scene)(
-            spec,
-            device=args.device,
-            out_dir=out,
-            frames=not args.no_frames,
-            progress=progress,
-            checkpoint_every=args.checkpoint,
-            stop_after=args.stop_after,
-        )
+        with naming(out):
+            res = _named_scene(args.scene, run_scene)(
+                spec,
+                device=args.device,
+                out_dir=out,
+                frames=not args.no_frames,
+                progress=progress,
+                checkpoint_every=args.checkpoint,
+                stop_after=args.stop_after,
+            )
     except RunStopped as e:
         print(str(e), file=sys.stderr)
         return ExitCode.STOPPED

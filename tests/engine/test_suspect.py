@@ -42,6 +42,7 @@ def test_thresholds():
 def test_coincident_spheres_warn_at_finalize():
     """Two spheres placed at one point: finalize warns (they would push in no direction and stay together);
     two spheres apart do not."""
+
     def builder(second):
         b = wd.ModelBuilder()
         b.add_material(wd.Material("m", density=1000, shear_modulus=1e7, poisson_ratio=0.3))

@@ -435,7 +435,7 @@ def test_runs_that_may_be_wrong_are_flagged(finished, tmp_path):
     pid = execute.load_results(out, study)["point_id"][1]
     path = out / "runs" / f"{pid}.json"
     rec = json.loads(path.read_text())
-    from warpdem.scene import suspect
+    from warpdem.engine import suspect
 
     lost = suspect.world_warnings(3, 40, 0.1, (1e-5, 1e-5), None, 0.0)
     rec["metrics"].update(removed=3, inertial_number_max=0.02, angle_error="no pile", warnings=lost)
