@@ -82,7 +82,7 @@ def _motion(model, state, h) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _overlaps(model, state, h) -> dict:
-    """:func:`warpdem.scene.suspect.overlaps` of the active particle spheres (glued wall coats left out)."""
+    """:func:`warpdem.engine.suspect.overlaps` of the active particle spheres (glued wall coats left out)."""
     act = host(state.sphere_active).astype(bool) & (h["glued"] < 0)
     n = len(h["radius"])
     body = np.where(h["clump"] >= 0, h["clump"], n + np.arange(n))

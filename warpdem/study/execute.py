@@ -663,7 +663,7 @@ def _checks_of(rec: dict, scene, study: sp.StudySpec) -> list[tuple[str, str]]:
             found.append(("measurement", f"no {r.name} ({r.measure})" + (f": {why}" if why else "")))
     if scene.run.settle_energy > 0 and m.get("stop", info.get("stop")) == "duration":
         found.append(("unsettled", f"still moving at the end of its {m.get('time_s', scene.run.duration):.3g} s"))
-    # the run's own physics warnings (warpdem.scene.suspect): lost bodies, too long a step, overlaps
+    # the run's own physics warnings (warpdem.engine.suspect): lost bodies, too long a step, overlaps
     found += [(x["check"], x["detail"]) for x in m.get("warnings", [])]
     inertial = m.get("inertial_number_max")
     if inertial is not None and inertial > QUASI_STATIC_INERTIAL_NUMBER:
@@ -682,9 +682,9 @@ def _checks_of(rec: dict, scene, study: sp.StudySpec) -> list[tuple[str, str]]:
 def run_checks(out, study: sp.StudySpec | None = None) -> list[dict]:
     """What may make a finished run's numbers wrong, per run of ``out`` (run, point_id, check, detail), in run
     order: ``measurement`` (a response it could not measure, with the metric's own error), ``unsettled`` (a scene
-    that stops once settled ran to its duration instead), ``lost`` (more than :data:`warpdem.scene.suspect.LOST_FRACTION_MAX` of its
+    that stops once settled ran to its duration instead), ``lost`` (more than :data:`warpdem.engine.suspect.LOST_FRACTION_MAX` of its
     bodies left the domain), ``fast``, ``start_overlap`` and ``soft`` (the run's own warnings, see
-    :mod:`warpdem.scene.suspect`), ``inertial`` (a press faster than
+    :mod:`warpdem.engine.suspect`), ``inertial`` (a press faster than
     :data:`warpdem.scene.measure.QUASI_STATIC_INERTIAL_NUMBER`) and ``step`` (the step exceeded the stable step
     in some tick)."""
     out = Path(out)
