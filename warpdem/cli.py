@@ -40,13 +40,8 @@ def _table(title, columns, rows):
 
 
 def _quiet_warp(device: str = "cpu"):
-    import warp as wp
-
     from .engine.types import init_warp
 
-    wp.config.quiet = True
-    if hasattr(wp.config, "log_level"):  # Warp >= 1.19 prints its banner and module loads by log level
-        wp.config.log_level = wp.LOG_WARNING
     init_warp(device)
 
 

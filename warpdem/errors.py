@@ -71,6 +71,11 @@ class FileSystemError(WarpdemError, OSError):
     exit_code = ExitCode.FILE_SYSTEM
 
 
+class PhysicsWarning(UserWarning):
+    """A run whose physics is suspect although nothing stopped it (:mod:`warpdem.engine.suspect`): lost bodies,
+    too long a step, overlaps."""
+
+
 def classify(exc: BaseException) -> tuple[ExitCode, str]:
     """The exit code and one-line message (without "error: ") for ``exc`` as the command line reports it."""
     if isinstance(exc, KeyboardInterrupt):

@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import warp as wp
 
-from warpdem.errors import InputError
+from warpdem.errors import InputError, PhysicsWarning
 from warpdem.kernels.params import PairParams
 
 from . import analytic, suspect
@@ -575,7 +575,7 @@ class ModelBuilder:
         found = suspect.overlaps(x, r, np.zeros(len(r), dtype=np.int64), body, 1)
         words = suspect.start_overlap_words({k: v[0] for k, v in found.items()})
         if words:
-            warnings.warn(words, stacklevel=3)
+            warnings.warn(words, PhysicsWarning, stacklevel=3)
 
     def finalize(self, device: str = "cpu") -> Model:
         """Build the Model on ``device`` ("cpu" or "cuda[:n]"): this builder's worlds, then those of each

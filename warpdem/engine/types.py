@@ -99,8 +99,12 @@ def _init_quietly(gpu: bool) -> None:
 
 
 def init_warp(device: str = "cpu") -> None:
-    """Initialise Warp for work on ``device`` (any device option, e.g. ``cpu,cpu`` or ``cuda:all``), refusing one
+    """Initialise Warp for work on ``device`` (any device option, e.g. ``cpu,cpu`` or ``cuda:all``), without its
+    banner and module-load lines (the command line and its worker processes print their own), refusing a device
     that is malformed or absent (:func:`device_names`)."""
+    wp.config.quiet = True
+    if hasattr(wp.config, "log_level"):  # Warp >= 1.19 prints its banner and module loads by log level
+        wp.config.log_level = wp.LOG_WARNING
     _init_quietly(gpu="cuda" in str(device))
     device_names(device, "--device")
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from warpdem.engine import suspect
 from warpdem.engine.types import host
-from warpdem.errors import InputError
+from warpdem.errors import InputError, PhysicsWarning
 
 from . import measure as ms
 from .stage import SceneSpec, StageError, build, unload_keyframes
@@ -509,6 +509,8 @@ def run_scene_iter(
             to one value per world (a design point per world; all worlds share geometry and walls);
             ``world_seeds`` one dynamic-factory placement seed per world (0: the factory's own).
         frames: write the time-sampled USD / VTK of world 0 (every ``run.output_interval``).
+        quiet: record the physics warnings (``info.step_warning``, ``info.warnings``) without warning of them
+            (a study lists them among its run checks).
         progress: callable(fraction in [0, 1], message) called at each output tick.
         checkpoint_every: with ``out_dir`` and no frames, save the run's whole state to
             ``out_dir/checkpoint.npz`` at the first output tick after this many wall seconds (0: never);
@@ -813,10 +815,11 @@ def run_scene_iter(
             f"below 1; dt {dt_range[0]:.3g} to {dt_range[1]:.3g} s, dt_levels "
             f"{solver.options.dt_levels}): figures from those ticks are not to be trusted; lower run.dt_fraction"
         )
-        warnings.warn(info["step_warning"], stacklevel=2)
+        if not quiet:
+            warnings.warn(info["step_warning"], PhysicsWarning, stacklevel=2)
     info["warnings"] = _warning_lines(metrics)
-    for line in _warning_lines(metrics, skip=("start_overlap",)):  # finalize() warned of those already
-        warnings.warn(line, stacklevel=2)
+    for line in [] if quiet else _warning_lines(metrics, skip=("start_overlap",)):  # finalize() warned of those
+        warnings.warn(line, PhysicsWarning, stacklevel=2)
     result = RunResult(metrics, info, series)
     if out is not None:
         files = {}

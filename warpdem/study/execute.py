@@ -197,6 +197,7 @@ def run_batch_iter(
         checkpoint_every=checkpoint_every,
         stop_after=stop_after,
         also=groups[1:],
+        quiet=True,  # the run checks list the warnings, once per study
     )
     info = dict(res.info)
     out: list = [None] * len(rows)
