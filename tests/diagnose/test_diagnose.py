@@ -152,6 +152,7 @@ def _cohesive_rows(gamma: float, mu_r: float, rng) -> list[dict]:
     return syn.noisy_rows(exps, mets, NOISE, rng)
 
 
+@pytest.mark.slow  # about 8 minutes of one core: the suite's longest test, so CI runs it in its slow step
 def test_cohesion_is_named(tmp_path):
     """JKR cohesion hidden in lifting-cylinder angles of repose measured at three grain sizes (rolling friction
     0.1, the base model's one free parameter): the diagnosis names cohesion (not plasticity or wall friction, the
