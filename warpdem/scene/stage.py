@@ -322,6 +322,15 @@ def _ident(name: str) -> str:
     return Tf.MakeValidIdentifier(name)
 
 
+def _usd_reason(error, undecodable: str) -> str:
+    """USD's error text on one line, or ``undecodable`` where it quotes bytes Python cannot print (a file that
+    is not UTF-8)."""
+    try:
+        return " ".join(str(error).split())
+    except UnicodeDecodeError:
+        return undecodable
+
+
 def _usd_write(path, write):
     """``write()``, with USD's refusal to write ``path`` (a folder missing or a file in the way, no permission, a
     full disk) raised as FileSystemError naming the path."""
@@ -330,10 +339,7 @@ def _usd_write(path, write):
     try:
         return write()
     except Tf.ErrorException as e:
-        try:
-            reason = " ".join(str(e).split())
-        except UnicodeDecodeError:
-            reason = "USD could not write it"
+        reason = _usd_reason(e, "USD could not write it")
         tail = reason[reason.rfind(": '") + 3 :].rstrip("'") if ": '" in reason else reason
         raise FileSystemError(f"{path}: cannot be written: {tail[:300]}") from None
 
@@ -645,10 +651,7 @@ def open_stage(path) -> Usd.Stage:  # noqa: F821 (pxr is imported where it is us
     try:
         stage = Usd.Stage.Open(path)
     except Tf.ErrorException as e:
-        try:
-            reason = " ".join(str(e).split())
-        except UnicodeDecodeError:  # USD quotes the file's bytes, and Python cannot print them
-            reason = "it is not UTF-8 text or USD's binary format"
+        reason = _usd_reason(e, "it is not UTF-8 text or USD's binary format")
         for marker in ("Failed to open layer", "Could not open", "syntax error", "Error"):
             if marker in reason:
                 reason = reason[reason.index(marker) :]

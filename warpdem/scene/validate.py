@@ -68,15 +68,13 @@ def check_scene(spec: SceneSpec, origin: Origin = plain_origin) -> SceneSpec:
         _check_factory(spec, fac, origin)
     for wall in spec.walls:
         _check_wall(spec, wall, origin)
-    g = np.asarray(spec.gravity, dtype=float) if _numbers(spec.gravity) else None
-    _check(
-        g is not None and g.shape == (3,) and np.all(np.isfinite(g)),
-        origin,
-        "gravity",
-        spec.gravity,
-        "three finite numbers [m/s^2]",
-    )
+    _check(_finite_vector(spec.gravity, 3), origin, "gravity", spec.gravity, "three finite numbers [m/s^2]")
     return spec
+
+
+def _finite_vector(value, n: int) -> bool:
+    """True for ``n`` finite numbers (a sequence or an array of shape (n,))."""
+    return _numbers(value) and np.asarray(value).shape == (n,) and bool(np.all(np.isfinite(np.asarray(value, float))))
 
 
 def _numbers(value) -> bool:
@@ -161,8 +159,7 @@ def _check_measure(spec: SceneSpec, origin: Origin) -> None:
         _check(horizontal, origin, "measure.drum_axis", a, "a horizontal direction (x, y, 0), not (0, 0, 0)")
     for f, n in (("center", 2), ("drum_center", 3), ("drum_axis", 3)):
         v = getattr(m, f)
-        ok = _numbers(v) and np.asarray(v).shape == (n,) and bool(np.all(np.isfinite(np.asarray(v, dtype=float))))
-        _check(ok, origin, "measure." + f, v, f"{n} finite numbers")
+        _check(_finite_vector(v, n), origin, "measure." + f, v, f"{n} finite numbers")
     ends = m.phase_ends
     _check(
         len(ends) == len(m.phase_names),
@@ -190,8 +187,7 @@ def _check_factory(spec: SceneSpec, fac, origin: Origin) -> None:
             _number(origin, key + f, v, lambda x: x > 0, f"a value > 0 {unit} or unset")
     _number(origin, key + "start_time", fac.start_time, lambda v: v >= 0, "a time >= 0 s")
     v = fac.initial_velocity
-    ok = _numbers(v) and np.asarray(v).shape == (3,) and bool(np.all(np.isfinite(np.asarray(v, dtype=float))))
-    _check(ok, origin, key + "initial_velocity", v, "three finite numbers [m/s]")
+    _check(_finite_vector(v, 3), origin, key + "initial_velocity", v, "three finite numbers [m/s]")
     _check((fac.count is None) != (fac.mass is None), origin, key + "count", fac.count, "exactly one of count or mass")
     if fac.mode == "dynamic":
         _check(
