@@ -577,16 +577,18 @@ class ModelBuilder:
         if words:
             warnings.warn(words, PhysicsWarning, stacklevel=3)
 
-    def finalize(self, device: str = "cpu") -> Model:
+    def finalize(self, device: str = "cpu", warn_overlaps: bool = True) -> Model:
         """Build the Model on ``device`` ("cpu" or "cuda[:n]"): this builder's worlds, then those of each
-        :meth:`stack` ed builder."""
+        :meth:`stack` ed builder. ``warn_overlaps``: warn when spheres of different bodies overlap as placed
+        (:mod:`warpdem.engine.suspect`; a caller that checks the state itself, as the scene runner, passes
+        False)."""
         if not self.materials:
             raise InputError("finalize: no material defined; call add_material first")
         groups = [self, *self._stacked]
         for g in groups:
             if g.sphere_count == 0:
                 raise InputError("finalize: the scene has no sphere")
-        for g in groups:
+        for g in groups if warn_overlaps else ():
             g._warn_start_overlaps()
         device = str(wp.get_device(device))
         W = sum(g.world_count for g in groups)

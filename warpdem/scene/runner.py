@@ -100,11 +100,10 @@ def _bodies(model, state, h) -> np.ndarray:
     return n
 
 
-def _warning_lines(metrics: list[dict], skip=()) -> list[str]:
-    """One line per kind of warning of a launch's worlds (but those of ``skip``): the worlds and the first one's
-    words."""
+def _warning_lines(metrics: list[dict]) -> list[str]:
+    """One line per kind of warning of a launch's worlds: the worlds and the first one's words."""
     lines = []
-    for check in dict.fromkeys(x["check"] for mw in metrics for x in mw["warnings"] if x["check"] not in skip):
+    for check in dict.fromkeys(x["check"] for mw in metrics for x in mw["warnings"]):
         hit = [(mw["world"], x["detail"]) for mw in metrics for x in mw["warnings"] if x["check"] == check]
         worlds = "world " if len(hit) == 1 else f"{len(hit)} worlds, e.g. world "
         lines.append(f"{worlds}{hit[0][0]}: {hit[0][1]}" if len(metrics) > 1 else hit[0][1])
@@ -546,7 +545,7 @@ def run_scene_iter(
     builder = build(spec, world_count, variations, world_seeds)
     for g in also:
         builder.stack(build(g.spec, g.world_count, g.variations, g.world_seeds))
-    model = builder.finalize(device)
+    model = builder.finalize(device, warn_overlaps=False)  # the state's own check below records them per world
     yield model.sphere_count
     run, settle_energies = launch_run([spec, *(g.spec for g in also)])
     # each world is measured by its own scene's measure (a fill's core is sized by its grains)
@@ -818,7 +817,7 @@ def run_scene_iter(
         if not quiet:
             warnings.warn(info["step_warning"], PhysicsWarning, stacklevel=2)
     info["warnings"] = _warning_lines(metrics)
-    for line in [] if quiet else _warning_lines(metrics, skip=("start_overlap",)):  # finalize() warned of those
+    for line in [] if quiet else info["warnings"]:
         warnings.warn(line, PhysicsWarning, stacklevel=2)
     result = RunResult(metrics, info, series)
     if out is not None:
