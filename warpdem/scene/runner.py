@@ -572,6 +572,7 @@ def run_scene_iter(
     m = spec.measure
     piston = names.index(m.piston) if m.kind == "press" else None
     phase_ends = list(m.phase_ends) if m.kind == "impacts" else []
+    first_window = m.first_contact_window if m.kind == "impacts" else 0.0
     packing_time = m.packing_time if m.kind == "angle_of_repose" and m.packing_time > 0 else None
     phase_snap = []
     # tick_wall_s and rebuilds say where the wall time of a long run went (a dense pile, a flowing stream)
@@ -629,6 +630,8 @@ def run_scene_iter(
             series.setdefault("rebuilds", [])
     if resumed_from is None:
         series["start_overlap"] = _overlaps(model, state, h)
+        if first_window > 0:
+            series["first_contact"] = {k: [None] * W for k in ("after_s", "seen_s", "end_s", "snap")}
     series.setdefault("step_travel", [])
     # radii of the smallest particle sphere a body may move per step (suspect.STEP_TRAVEL_MAX)
     r_small = float(h["radius"][h["glued"] < 0].min()) if np.any(h["glued"] < 0) else 1.0
@@ -666,6 +669,11 @@ def run_scene_iter(
             series["piston_force"].append(float(force[planes + piston, 2]))
             xb, rb = _particles(model, state, h, 0)
             series["bed_top"].append(float(np.percentile(xb[:, 2] + rb, 99)) if len(rb) else 0.0)
+        if first_window > 0:
+            phase_end = any(abs(t - te) <= eps for te in phase_ends)
+            t_before = series["time"][-2] if len(series["time"]) > 1 else 0.0
+            window_end = first_window - eps
+            _first_contacts(series["first_contact"], model, names, m, state, t, t_before, window_end, phase_end)
         for te in phase_ends:
             if abs(t - te) <= eps and len(phase_snap) < len(phase_ends):
                 phase_snap.append(
@@ -784,6 +792,11 @@ def run_scene_iter(
             mw.update(_press_metrics(spec, model, state, h, w, z, f, series))
         elif m.kind == "impacts":
             mw["phases"] = _impact_metrics(model, names, m, phase_snap, w)
+            if first_window > 0:
+                first = _first_contact_metrics(model, names, m, series["first_contact"], w)
+                if "phase" in first:
+                    mw["phases"]["first_contacts"] = first.pop("phase")
+                mw.update(first)
         elif m.kind == "drum":
             mw.update(_drum_metrics(series, h, w))
         metrics.append(mw)
@@ -1131,27 +1144,78 @@ def _piston_radius(model, name) -> float:
 
 def _impact_metrics(model, names, m, snaps, w) -> dict:
     """Per phase and wall: impact summary from the snapshots taken at each phase end."""
+    return {name: _wall_impacts(model, names, m, snap, w) for name, snap in zip(m.phase_names, snaps)}
+
+
+def _wall_impacts(model, names, m, snap, w) -> dict:
+    """Per measured wall: world ``w``'s impact summary from a snapshot of the face records (count, energy,
+    speed; each shape (worlds, faces))."""
     from warpdem.engine.geometry import face_areas
 
     start = host(model.wall_face_start)
-    out = {}
-    for name, snap in zip(m.phase_names, snaps):
-        phase = {}
-        for wall in m.walls:
-            k = names.index(wall)
-            sl = slice(start[k], start[k + 1])
-            mesh = model.wall_meshes[k]
-            area = face_areas(host(mesh.points).astype(np.float64), host(mesh.indices).reshape(-1, 3))
-            s = ms.impact_summary(snap["count"][w, sl], snap["energy"][w, sl], snap["speed"][w, sl], face_area=area)
-            # per-face arrays live in the USD primvars and impacts.npz; metrics.json keeps the summary
-            phase[wall] = {k: v for k, v in s.items() if not (isinstance(v, (list, np.ndarray)) and len(v) > 10)}
-            phase[wall]["faces"] = {
-                "count": snap["count"][w, sl],
-                "energy_j": snap["energy"][w, sl],
-                "max_speed_m_s": snap["speed"][w, sl],
-            }
-        out[name] = phase
-    return out
+    phase = {}
+    for wall in m.walls:
+        k = names.index(wall)
+        sl = slice(start[k], start[k + 1])
+        mesh = model.wall_meshes[k]
+        area = face_areas(host(mesh.points).astype(np.float64), host(mesh.indices).reshape(-1, 3))
+        s = ms.impact_summary(snap["count"][w, sl], snap["energy"][w, sl], snap["speed"][w, sl], face_area=area)
+        # per-face arrays live in the USD primvars and impacts.npz; metrics.json keeps the summary
+        phase[wall] = {k: v for k, v in s.items() if not (isinstance(v, (list, np.ndarray)) and len(v) > 10)}
+        phase[wall]["faces"] = {
+            "count": snap["count"][w, sl],
+            "energy_j": snap["energy"][w, sl],
+            "max_speed_m_s": snap["speed"][w, sl],
+        }
+    return phase
+
+
+def _measured_faces(model, names, m) -> np.ndarray:
+    """Indices of the faces of the measured walls (``m.walls``) in the face records."""
+    start = host(model.wall_face_start)
+    return np.concatenate([np.arange(start[k], start[k + 1]) for k in (names.index(w) for w in m.walls)])
+
+
+def _first_contacts(book, model, names, m, state, t, t_before, window, phase_end) -> None:
+    """At an output tick ``t`` [s] (the one before at ``t_before``): for each world, note the first tick that sees
+    an impact on the measured walls, and copy the face records at the first tick at least ``window`` s after it
+    (the window less half a step: ticks land within that of their time), or at a phase end that is about to
+    reset them if that comes first. ``book`` (the run's series, checkpointed as JSON): per world
+    ``after_s``, ``seen_s`` and ``end_s`` [s] and ``snap`` (count, energy, speed of every face, as lists)."""
+    pending = [w for w, e in enumerate(book["end_s"]) if e is None]
+    if not pending:
+        return
+    count = host(state.face_impact_count)
+    faces = _measured_faces(model, names, m)
+    snap = None
+    for w in pending:
+        if book["seen_s"][w] is None:
+            if count[w, faces].sum() == 0:
+                continue
+            book["after_s"][w], book["seen_s"][w] = t_before, t
+        if t >= book["seen_s"][w] + window or phase_end:
+            if snap is None:
+                snap = {
+                    "count": count,
+                    "energy": host(state.face_impact_energy),
+                    "speed": host(state.face_impact_speed),
+                }
+            book["end_s"][w] = t
+            book["snap"][w] = {k: v[w].tolist() for k, v in snap.items()}
+
+
+def _first_contact_metrics(model, names, m, book, w) -> dict:
+    """World ``w``'s ``first_contacts`` phase (``phases.first_contacts.WALL.KEY``, the impacts from the start to
+    ``first_contacts_s.end_s``) and when: the first impact came after ``after_s`` and by ``seen_s``; or
+    ``first_contacts_error``."""
+    if book["snap"][w] is None:
+        why = "no impact on the measured walls" if book["seen_s"][w] is None else "the run ended inside the window"
+        return {"first_contacts_error": f"{why} ({', '.join(m.walls)})"}
+    snap = {k: np.asarray(v)[None, :] for k, v in book["snap"][w].items()}
+    return {
+        "first_contacts_s": {k: book[k][w] for k in ("after_s", "seen_s", "end_s")},
+        "phase": _wall_impacts(model, names, m, snap, 0),
+    }
 
 
 def _final_npz(out: Path, model, state, h) -> dict:

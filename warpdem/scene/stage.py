@@ -151,6 +151,11 @@ class MeasureSpec:
     walls: list = field(default_factory=list)
     phase_names: list = field(default_factory=list)
     phase_ends: list = field(default_factory=list)
+    first_contact_window: float = 0.0
+    """Impacts: how long [s] after the first impact on ``walls`` the impacts are also summed as the phase
+    ``first_contacts`` (not reset, so the first phase still counts them): the first grains' fall, apart from
+    the pile that builds up after. The window starts at the output tick that first sees an impact, so it
+    covers up to one output interval more; 0: not split."""
     packing_time: float = 0.0
     """Angle of repose: the time [s] at which the bed's packing fraction and bulk density are measured, in the
     container it was poured into (the lifting cylinder before it lifts); 0: not measured."""
@@ -403,6 +408,10 @@ def write_stage(spec: SceneSpec, path=None):
         wp_.CreateAttribute(NS + "measure:phaseNames", Sdf.ValueTypeNames.StringArray).Set(list(m.phase_names))
         wp_.CreateAttribute(NS + "measure:phaseEnds", Sdf.ValueTypeNames.DoubleArray).Set(
             [float(t) for t in m.phase_ends]
+        )
+    if m.first_contact_window > 0:
+        wp_.CreateAttribute(NS + "measure:firstContactWindow", Sdf.ValueTypeNames.Double).Set(
+            float(m.first_contact_window)
         )
 
     scene = UsdPhysics.Scene.Define(stage, "/World/PhysicsScene")
@@ -722,6 +731,7 @@ def read_stage(path_or_stage) -> SceneSpec:
         backstop_height=r.get(world, NS + "measure:backstopHeight", required=False, default=0.0),
         phase_names=r.get(world, NS + "measure:phaseNames", "string[]", required=False, default=[]),
         phase_ends=r.get(world, NS + "measure:phaseEnds", "double[]", required=False, default=[]),
+        first_contact_window=r.get(world, NS + "measure:firstContactWindow", required=False, default=0.0),
         packing_time=r.get(world, NS + "measure:packingTime", required=False, default=0.0),
         packing_radius=r.get(world, NS + "measure:packingRadius", required=False, default=0.0),
         packing_margin=r.get(world, NS + "measure:packingMargin", required=False, default=2.0),

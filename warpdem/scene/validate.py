@@ -146,6 +146,7 @@ def _check_measure(spec: SceneSpec, origin: Origin) -> None:
         ("packing_margin", lambda v: v >= 0, "a margin >= 0 diameters (of a particle)"),
         ("unload_speed", lambda v: v >= 0, "a speed >= 0 m/s (0: no unloading)"),
         ("hold_time", lambda v: v >= 0, "a time >= 0 s"),
+        ("first_contact_window", lambda v: v >= 0, "a time >= 0 s (0: not split)"),
         ("drum_radius", lambda v: v > 0 if m.kind == "drum" else v >= 0, "a radius > 0 m"),
         ("average_from", lambda v: v >= 0, "a time >= 0 s"),
     ):
