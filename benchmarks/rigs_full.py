@@ -1,8 +1,11 @@
 """Full-size runs of the four rigs (the README's GPU wall times): prints one line per rig and writes each
 run's metrics.json and final.npz under OUT/<rig>/ (no USD/VTK frames: the GPU machine has no usd-core).
 
-    python benchmarks/rigs_full.py --device cuda --out OUT [--rig funnel --rig die_press ...] [--set rig.k=v]
+    python benchmarks/rigs_full.py --device cuda --out OUT [--rig funnel --rig die_press ...] [--set RIG.KEY=VALUE]
         [--smoke] [--stop-after SECONDS]
+
+``--set RIG.KEY=VALUE`` sets a rig parameter (``die_press.surface_energy=0.5``) or any other override
+``warpdem run --set`` takes (``die_press.interaction.feed.feed.static_friction=0.6``) on that rig's scene.
 
 ``--smoke`` runs the CPU smoke size instead; ``--stop-after`` saves a checkpoint and exits 3 before a run would
 pass that many wall seconds (the same command resumes it), so a long run fits a device's time limit.
@@ -15,8 +18,10 @@ import time
 
 import warp as wp
 
+from warpdem.engine.keys import is_rig_key
 from warpdem.scene import rigs
 from warpdem.scene.runner import RunStopped, run_scene
+from warpdem.scene.stage import apply_overrides
 
 wp.config.quiet = True
 
@@ -24,7 +29,7 @@ p = argparse.ArgumentParser()
 p.add_argument("--device", default="cuda")
 p.add_argument("--out", default="runs/full")
 p.add_argument("--rig", action="append")
-p.add_argument("--set", action="append", default=[], help="RIG.param=value")
+p.add_argument("--set", action="append", default=[], help="RIG.KEY=VALUE")
 p.add_argument("--smoke", action="store_true", help="the CPU smoke size")
 p.add_argument("--stop-after", type=float, default=0.0, help="wall seconds; 0: no limit")
 a = p.parse_args()
@@ -36,7 +41,9 @@ for rig in a.rig or list(rigs.RIGS):
         r, name = k.split(".", 1)
         if r == rig:
             values[name] = v
-    spec = rigs.spec(rig, values, smoke=a.smoke)
+    rig_values = {k: v for k, v in values.items() if is_rig_key(k)}
+    spec = rigs.spec(rig, rig_values, smoke=a.smoke)
+    apply_overrides(spec, {k: v for k, v in values.items() if k not in rig_values})
     t0 = time.perf_counter()
     last = [0.0]
 
