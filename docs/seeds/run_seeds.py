@@ -1,0 +1,128 @@
+"""Seeds 001 and 002 end to end on a 4-GPU machine (issue 23), as two lanes run side by side; resumable.
+
+    python docs/seeds/run_seeds.py --root DIR --budget SECONDS [--dry-run]
+
+Lane A (seed 001, cuda:0): the wet-feed Plackett-Burman, the central composite with its verification replicates,
+then the die press at the central composite's chosen optimum (or its closest point when the target is out of
+reach). Lane B (seed 002, cuda:1,2,3 through the distributed executor): the 2^(5-1) screening, the Box-Behnken
+with its verification run, then the truck tipper (first contacts split from the rest of the loading).
+
+Every step is a ``warpdem`` command that resumes where it stopped: each gets ``--stop-after`` the time left of
+``--budget`` and exits 3 when it stops, which ends its lane for this call. Run the same command again (on the
+same machine, whose DIR is kept) to go on. The results land in DIR/<step>/; this script prints each command and
+its exit code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+PRESS_KEYS = {
+    "X1": "interaction.feed.feed.rolling_friction",
+    "X2": "interaction.feed.feed.static_friction",
+    "X3": "interaction.feed.feed.surface_energy",
+}
+"""The central composite's factors (wetfeed_ccd.toml, the funnel's grain-grain pair) as the die press's feed-feed
+pair; the CCD's fixed values are the press's own (restitution 0.15, the steel pair's 0.1, 0.2 and 0.45)."""
+
+
+def ccd_optimum(root: Path) -> dict:
+    """The central composite's calibrated values of its factors, as press overrides: the chosen optimum (the
+    verification's), or the analysis's closest point when no point reaches the target."""
+    summary = json.loads((root / "wetfeed_ccd" / "analysis" / "summary.json").read_text())["aor_deg"]
+    point = summary.get("chosen") or summary.get("closest")
+    if not point:
+        raise SystemExit("the central composite's analysis has neither a chosen nor a closest point")
+    return {key: float(point[f]) for f, key in PRESS_KEYS.items()}
+
+
+def study(name: str, devices: str, root: Path) -> list:
+    """A study's command line (without ``--stop-after``)."""
+    cmd = ["-m", "warpdem.cli", "study", f"studies/{name}.toml", "--device", devices]
+    return cmd + ["--out", str(root / name), "--no-progress"]
+
+
+def rig(name: str, device: str, root: Path, sets=()) -> list:
+    """A full-size rig run (benchmarks/rigs_full.py: the GPU machine has no usd-core to read a stage); its
+    results land in ``root/name``."""
+    cmd = ["benchmarks/rigs_full.py", "--rig", name, "--device", device, "--out", str(root)]
+    for k, v in sets:
+        cmd += ["--set", f"{name}.{k}={v:.6g}"]
+    return cmd
+
+
+def lane_a(root: Path) -> list:
+    return [
+        ("wetfeed_pb", study("wetfeed_pb", "cuda:0", root)),
+        ("wetfeed_ccd", study("wetfeed_ccd", "cuda:0", root)),
+        ("die_press", lambda: rig("die_press", "cuda:0", root, ccd_optimum(root).items())),
+    ]
+
+
+def lane_b(root: Path) -> list:
+    devices = "cuda:1,cuda:2,cuda:3"
+    return [
+        ("phosphate_ffd", study("phosphate_ffd", devices, root)),
+        ("phosphate_bbd", study("phosphate_bbd", devices, root)),
+        ("truck_tipper", rig("truck_tipper", "cuda:3", root)),
+    ]
+
+
+def run_lane(name: str, steps: list, root: Path, deadline: float, dry: bool, log) -> None:
+    for step, args in steps:
+        done = root / f"{step}.done"
+        if done.exists():
+            log(f"[{name}] {step}: done before")
+            continue
+        left = int(deadline - time.time())
+        if left < 30:
+            log(f"[{name}] {step}: {left} s left, not started")
+            return
+        if callable(args) and dry:
+            log(f"[{name}] {step}: at the central composite's optimum, once it is analysed")
+            continue
+        argv = args() if callable(args) else args
+        cmd = [sys.executable, *argv, "--stop-after", str(left)]
+        log(f"[{name}] {step}: {' '.join(cmd)}")
+        if dry:
+            continue
+        t0 = time.time()
+        with open(root / f"{step}.log", "a") as fh:
+            rc = subprocess.call(cmd, stdout=fh, stderr=subprocess.STDOUT)
+        log(f"[{name}] {step}: exit {rc} after {time.time() - t0:.1f} s")
+        if rc != 0:
+            return
+        done.write_text(f"{time.time() - t0:.1f}\n")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--root", type=Path, required=True)
+    ap.add_argument("--budget", type=float, required=True, help="wall seconds for this call")
+    ap.add_argument("--dry-run", action="store_true")
+    a = ap.parse_args(argv)
+    a.root.mkdir(parents=True, exist_ok=True)
+    deadline = time.time() + a.budget
+    lock = threading.Lock()
+
+    def log(msg):
+        with lock:
+            print(time.strftime("%H:%M:%S"), msg, flush=True)
+
+    lanes = [("A", lane_a(a.root)), ("B", lane_b(a.root))]
+    threads = [threading.Thread(target=run_lane, args=(n, s, a.root, deadline, a.dry_run, log)) for n, s in lanes]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
