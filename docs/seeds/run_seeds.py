@@ -1,11 +1,13 @@
-"""Seeds 001 and 002 end to end on a 4-GPU machine (issue 23), as two lanes run side by side; resumable.
+"""Seeds 001 and 002 end to end on several GPUs (issue 23), as two lanes run side by side; resumable.
 
-    python docs/seeds/run_seeds.py --root DIR --budget SECONDS [--dry-run]
+    python docs/seeds/run_seeds.py --root DIR --budget SECONDS [--lane-a cuda:0] [--lane-b cuda:1,cuda:2,cuda:3]
+        [--dry-run]
 
-Lane A (seed 001, cuda:0): the wet-feed Plackett-Burman, the central composite with its verification replicates,
-then the die press at the central composite's chosen optimum (or its closest point when the target is out of
-reach). Lane B (seed 002, cuda:1,2,3 through the distributed executor): the 2^(5-1) screening, the Box-Behnken
-with its verification run, then the truck tipper (first contacts split from the rest of the loading).
+Lane A (seed 001, one device): the wet-feed Plackett-Burman, the central composite with its verification
+replicates, then the die press at the central composite's chosen optimum (or its closest point when the target
+is out of reach). Lane B (seed 002, its devices through the distributed executor): the 2^(5-1) screening, the
+Box-Behnken with its verification run, then the truck tipper (first contacts split from the rest of the loading)
+on its last device. The lanes may share a device: the wet feed's small worlds leave most of a GPU idle.
 
 Every step is a ``warpdem`` command that resumes where it stopped: each gets ``--stop-after`` the time left of
 ``--budget`` and exits 3 when it stops, which ends its lane for this call. Run the same command again (on the
@@ -57,20 +59,19 @@ def rig(name: str, device: str, root: Path, sets=()) -> list:
     return cmd
 
 
-def lane_a(root: Path) -> list:
+def lane_a(root: Path, device: str) -> list:
     return [
-        ("wetfeed_pb", study("wetfeed_pb", "cuda:0", root)),
-        ("wetfeed_ccd", study("wetfeed_ccd", "cuda:0", root)),
-        ("die_press", lambda: rig("die_press", "cuda:0", root, ccd_optimum(root).items())),
+        ("wetfeed_pb", study("wetfeed_pb", device, root)),
+        ("wetfeed_ccd", study("wetfeed_ccd", device, root)),
+        ("die_press", lambda: rig("die_press", device, root, ccd_optimum(root).items())),
     ]
 
 
-def lane_b(root: Path) -> list:
-    devices = "cuda:1,cuda:2,cuda:3"
+def lane_b(root: Path, devices: str) -> list:
     return [
         ("phosphate_ffd", study("phosphate_ffd", devices, root)),
         ("phosphate_bbd", study("phosphate_bbd", devices, root)),
-        ("truck_tipper", rig("truck_tipper", "cuda:3", root)),
+        ("truck_tipper", rig("truck_tipper", devices.split(",")[-1], root)),
     ]
 
 
@@ -105,6 +106,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--root", type=Path, required=True)
     ap.add_argument("--budget", type=float, required=True, help="wall seconds for this call")
+    ap.add_argument("--lane-a", default="cuda:0", help="seed 001's device")
+    ap.add_argument("--lane-b", default="cuda:1,cuda:2,cuda:3", help="seed 002's devices")
     ap.add_argument("--dry-run", action="store_true")
     a = ap.parse_args(argv)
     a.root.mkdir(parents=True, exist_ok=True)
@@ -115,7 +118,7 @@ def main(argv=None) -> int:
         with lock:
             print(time.strftime("%H:%M:%S"), msg, flush=True)
 
-    lanes = [("A", lane_a(a.root)), ("B", lane_b(a.root))]
+    lanes = [("A", lane_a(a.root, a.lane_a)), ("B", lane_b(a.root, a.lane_b))]
     threads = [threading.Thread(target=run_lane, args=(n, s, a.root, deadline, a.dry_run, log)) for n, s in lanes]
     for t in threads:
         t.start()
