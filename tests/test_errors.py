@@ -711,6 +711,12 @@ def test_bad_input_is_a_clear_error(case: Case, corpus: Corpus, tmp_path, capsys
             lambda c: c.run_set("material.grain.shear_modulus=10"),
             ("fast", ("radii of the smallest sphere in one step", "lower run.dt_fraction")),
         ),
+        # the funnel's outlet 1 mm above the plate: any pile reaches it
+        (
+            "pile-at-outlet",
+            lambda c: c.run_set("measure.outlet_height=0.001"),
+            ("outlet", ("reached the funnel's outlet", "raise outlet_height")),
+        ),
     ],
 )
 def test_suspect_runs_warn(name, argv, words, corpus, tmp_path, capsys):

@@ -39,6 +39,14 @@ def test_thresholds():
     assert "11 %" in loud[3]["detail"]
 
 
+def test_outlet_threshold():
+    """A pile whose top comes within one particle diameter of its funnel's outlet is flagged, one just below is
+    not; the words give both heights in mm."""
+    assert suspect.outlet_warning(0.0989, 0.1, 0.001) is None
+    hit = suspect.outlet_warning(0.0991, 0.1, 0.001)
+    assert hit["check"] == "outlet" and "(99 mm)" in hit["detail"] and "(100 mm)" in hit["detail"]
+
+
 def test_coincident_spheres_warn_at_finalize():
     """Two spheres placed at one point: finalize warns (they would push in no direction and stay together);
     two spheres apart do not."""

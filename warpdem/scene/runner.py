@@ -784,6 +784,9 @@ def run_scene_iter(
             mw.update(measure_pile(*_particles(model, state, h, w), m))
             if m.outlet_height is not None:
                 mw.update(_discharge_metrics(series, w))
+                found = suspect.outlet_warning(m.base_height + mw["pile_height_m"], m.outlet_height, 2 * r_small)
+                if found is not None:
+                    mw["warnings"].append(found)
             if packing_time is not None:
                 mw.update(series.get("packing", [{"packing_error": "the run ended before the packing time"}] * W)[w])
         elif m.kind == "press":

@@ -684,10 +684,10 @@ def run_checks(out, study: sp.StudySpec | None = None) -> list[dict]:
     """What may make a finished run's numbers wrong, per run of ``out`` (run, point_id, check, detail), in run
     order: ``measurement`` (a response it could not measure, with the metric's own error), ``unsettled`` (a scene
     that stops once settled ran to its duration instead), ``lost`` (more than :data:`warpdem.engine.suspect.LOST_FRACTION_MAX` of its
-    bodies left the domain), ``fast``, ``start_overlap`` and ``soft`` (the run's own warnings, see
+    bodies left the domain), ``fast``, ``start_overlap``, ``soft`` and ``outlet`` (the run's own warnings, see
     :mod:`warpdem.engine.suspect`), ``inertial`` (a press faster than
-    :data:`warpdem.scene.measure.QUASI_STATIC_INERTIAL_NUMBER`) and ``step`` (the step exceeded the stable step
-    in some tick)."""
+    :data:`warpdem.scene.measure.QUASI_STATIC_INERTIAL_NUMBER`), ``step`` (the step exceeded the stable step
+    in some tick) and ``outlet`` (a pile that grew up to its funnel's outlet, the run's own warning)."""
     out = Path(out)
     study = study or sp.load_study(out / "study.toml", check_scene=False)
     flags, scene = [], _scene_cache(study)
@@ -742,6 +742,7 @@ CHECK_WORDS = {
     "soft": "deep overlaps",
     "inertial": "not quasi-static",
     "step": "step above the stable step",
+    "outlet": "pile reached the funnel",
 }
 """How the report and the console name each of :func:`run_checks`' checks."""
 
