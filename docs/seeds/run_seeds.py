@@ -1,13 +1,13 @@
 """Seeds 001 and 002 end to end on several GPUs (issue 23), as two lanes run side by side; resumable.
 
-    python docs/seeds/run_seeds.py --root DIR --budget SECONDS [--lane-a cuda:0] [--lane-b cuda:1,cuda:2,cuda:3]
-        [--dry-run]
+    python docs/seeds/run_seeds.py --root DIR --budget SECONDS [--lane DEVICES=STEP,STEP,... ...] [--dry-run]
 
-Lane A (seed 001, one device): the wet-feed Plackett-Burman, the central composite with its verification
-replicates, then the die press at the central composite's chosen optimum (or its closest point when the target
-is out of reach). Lane B (seed 002, its devices through the distributed executor): the 2^(5-1) screening, the
-Box-Behnken with its verification run, then the truck tipper (first contacts split from the rest of the loading)
-on its last device. The lanes may share a device: the wet feed's small worlds leave most of a GPU idle.
+The steps: seed 001's wet-feed Plackett-Burman (wetfeed_pb), central composite with its verification replicates
+(wetfeed_ccd), then the die press at the central composite's chosen optimum, or its closest point when the target
+is out of reach (die_press); seed 002's 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run
+(phosphate_bbd) and the truck tipper, first contacts split from the rest of the loading (truck_tipper). A lane
+runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
+side by side and may share a device. The default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the other three.
 
 Every step is a ``warpdem`` command that resumes where it stopped: each gets ``--stop-after`` the time left of
 ``--budget`` and exits 3 when it stops, which ends its lane for this call. Run the same command again (on the
@@ -59,20 +59,27 @@ def rig(name: str, device: str, root: Path, sets=()) -> list:
     return cmd
 
 
-def lane_a(root: Path, device: str) -> list:
-    return [
-        ("wetfeed_pb", study("wetfeed_pb", device, root)),
-        ("wetfeed_ccd", study("wetfeed_ccd", device, root)),
-        ("die_press", lambda: rig("die_press", device, root, ccd_optimum(root).items())),
-    ]
+STEPS = {
+    "wetfeed_pb": lambda dev, root: study("wetfeed_pb", dev, root),
+    "wetfeed_ccd": lambda dev, root: study("wetfeed_ccd", dev, root),
+    # at the central composite's optimum: built when the step starts, after the composite has run
+    "die_press": lambda dev, root: lambda: rig("die_press", dev.split(",")[-1], root, ccd_optimum(root).items()),
+    "phosphate_ffd": lambda dev, root: study("phosphate_ffd", dev, root),
+    "phosphate_bbd": lambda dev, root: study("phosphate_bbd", dev, root),
+    "truck_tipper": lambda dev, root: rig("truck_tipper", dev.split(",")[-1], root),
+}
+"""Each step's command line on a lane's devices (a rig run takes the lane's last device)."""
+
+LANES = ["cuda:0=wetfeed_pb,wetfeed_ccd,die_press", "cuda:1,cuda:2,cuda:3=phosphate_ffd,phosphate_bbd,truck_tipper"]
+"""The default lanes, for a 4-GPU machine: DEVICES=STEP,STEP,... each."""
 
 
-def lane_b(root: Path, devices: str) -> list:
-    return [
-        ("phosphate_ffd", study("phosphate_ffd", devices, root)),
-        ("phosphate_bbd", study("phosphate_bbd", devices, root)),
-        ("truck_tipper", rig("truck_tipper", devices.split(",")[-1], root)),
-    ]
+def parse_lane(text: str, root: Path) -> list:
+    devices, _, names = text.partition("=")
+    unknown = [n for n in names.split(",") if n not in STEPS]
+    if not devices or not names or unknown:
+        raise SystemExit(f"--lane {text!r}: expected DEVICES=STEP,STEP,... with steps from {', '.join(STEPS)}")
+    return [(n, STEPS[n](devices, root)) for n in names.split(",")]
 
 
 def run_lane(name: str, steps: list, root: Path, deadline: float, dry: bool, log) -> None:
@@ -106,8 +113,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--root", type=Path, required=True)
     ap.add_argument("--budget", type=float, required=True, help="wall seconds for this call")
-    ap.add_argument("--lane-a", default="cuda:0", help="seed 001's device")
-    ap.add_argument("--lane-b", default="cuda:1,cuda:2,cuda:3", help="seed 002's devices")
+    ap.add_argument("--lane", action="append", help=f"DEVICES=STEP,STEP,... (default: {' '.join(LANES)})")
     ap.add_argument("--dry-run", action="store_true")
     a = ap.parse_args(argv)
     a.root.mkdir(parents=True, exist_ok=True)
@@ -118,7 +124,7 @@ def main(argv=None) -> int:
         with lock:
             print(time.strftime("%H:%M:%S"), msg, flush=True)
 
-    lanes = [("A", lane_a(a.root, a.lane_a)), ("B", lane_b(a.root, a.lane_b))]
+    lanes = [(chr(65 + k), parse_lane(t, a.root)) for k, t in enumerate(a.lane or LANES)]
     threads = [threading.Thread(target=run_lane, args=(n, s, a.root, deadline, a.dry_run, log)) for n, s in lanes]
     for t in threads:
         t.start()
