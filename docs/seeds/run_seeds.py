@@ -13,6 +13,10 @@ Every step is a ``warpdem`` command that resumes where it stopped: each gets ``-
 ``--budget`` and exits 3 when it stops, which ends its lane for this call. Run the same command again (on the
 same machine, whose DIR is kept) to go on. The results land in DIR/<step>/; this script prints each command and
 its exit code.
+
+To bring the results back from a GPU machine, pack DIR without the launches' checkpoints
+(``tar czf OUT/seeds.tgz -C DIR --exclude='checkpoint*.npz' .``): the studies' ``runs/*.npz`` final states are
+what ``warpdem analyze --remeasure`` reads again, and the wet feed's are small.
 """
 
 from __future__ import annotations
