@@ -632,6 +632,7 @@ def run_scene_iter(
         series["start_overlap"] = _overlaps(model, state, h)
         if first_window > 0:
             series["first_contact"] = {k: [None] * W for k in ("after_s", "seen_s", "end_s", "snap")}
+    first_faces = _measured_faces(model, names, m) if first_window > 0 else None
     series.setdefault("step_travel", [])
     # radii of the smallest particle sphere a body may move per step (suspect.STEP_TRAVEL_MAX)
     r_small = float(h["radius"][h["glued"] < 0].min()) if np.any(h["glued"] < 0) else 1.0
@@ -672,8 +673,7 @@ def run_scene_iter(
         if first_window > 0:
             phase_end = any(abs(t - te) <= eps for te in phase_ends)
             t_before = series["time"][-2] if len(series["time"]) > 1 else 0.0
-            window_end = first_window - eps
-            _first_contacts(series["first_contact"], model, names, m, state, t, t_before, window_end, phase_end)
+            _first_contacts(series["first_contact"], state, first_faces, t, t_before, first_window - eps, phase_end)
         for te in phase_ends:
             if abs(t - te) <= eps and len(phase_snap) < len(phase_ends):
                 phase_snap.append(
@@ -796,10 +796,10 @@ def run_scene_iter(
         elif m.kind == "impacts":
             mw["phases"] = _impact_metrics(model, names, m, phase_snap, w)
             if first_window > 0:
-                first = _first_contact_metrics(model, names, m, series["first_contact"], w)
-                if "phase" in first:
-                    mw["phases"]["first_contacts"] = first.pop("phase")
-                mw.update(first)
+                phase, when = _first_contact_metrics(model, names, m, series["first_contact"], w)
+                if phase is not None:
+                    mw["phases"]["first_contacts"] = phase
+                mw.update(when)
         elif m.kind == "drum":
             mw.update(_drum_metrics(series, h, w))
         metrics.append(mw)
@@ -1179,9 +1179,9 @@ def _measured_faces(model, names, m) -> np.ndarray:
     return np.concatenate([np.arange(start[k], start[k + 1]) for k in (names.index(w) for w in m.walls)])
 
 
-def _first_contacts(book, model, names, m, state, t, t_before, window, phase_end) -> None:
+def _first_contacts(book, state, faces, t, t_before, window, phase_end) -> None:
     """At an output tick ``t`` [s] (the one before at ``t_before``): for each world, note the first tick that sees
-    an impact on the measured walls, and copy the face records at the first tick at least ``window`` s after it
+    an impact on the measured walls (their ``faces``, :func:`_measured_faces`), and copy the face records at the first tick at least ``window`` s after it
     (the window less half a step: ticks land within that of their time), or at a phase end that is about to
     reset them if that comes first. ``book`` (the run's series, checkpointed as JSON): per world
     ``after_s``, ``seen_s`` and ``end_s`` [s] and ``snap`` (count, energy, speed of every face, as lists)."""
@@ -1189,7 +1189,6 @@ def _first_contacts(book, model, names, m, state, t, t_before, window, phase_end
     if not pending:
         return
     count = host(state.face_impact_count)
-    faces = _measured_faces(model, names, m)
     snap = None
     for w in pending:
         if book["seen_s"][w] is None:
@@ -1207,18 +1206,16 @@ def _first_contacts(book, model, names, m, state, t, t_before, window, phase_end
             book["snap"][w] = {k: v[w].tolist() for k, v in snap.items()}
 
 
-def _first_contact_metrics(model, names, m, book, w) -> dict:
+def _first_contact_metrics(model, names, m, book, w) -> tuple[dict | None, dict]:
     """World ``w``'s ``first_contacts`` phase (``phases.first_contacts.WALL.KEY``, the impacts from the start to
-    ``first_contacts_s.end_s``) and when: the first impact came after ``after_s`` and by ``seen_s``; or
-    ``first_contacts_error``."""
+    ``first_contacts_s.end_s``) and the metrics that say when: ``first_contacts_s`` (the first impact came after
+    ``after_s`` and by ``seen_s``); or (None, ``first_contacts_error``)."""
     if book["snap"][w] is None:
         why = "no impact on the measured walls" if book["seen_s"][w] is None else "the run ended inside the window"
-        return {"first_contacts_error": f"{why} ({', '.join(m.walls)})"}
+        return None, {"first_contacts_error": f"{why} ({', '.join(m.walls)})"}
     snap = {k: np.asarray(v)[None, :] for k, v in book["snap"][w].items()}
-    return {
-        "first_contacts_s": {k: book[k][w] for k in ("after_s", "seen_s", "end_s")},
-        "phase": _wall_impacts(model, names, m, snap, 0),
-    }
+    when = {"first_contacts_s": {k: book[k][w] for k in ("after_s", "seen_s", "end_s")}}
+    return _wall_impacts(model, names, m, snap, 0), when
 
 
 def _final_npz(out: Path, model, state, h) -> dict:
