@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -298,6 +299,22 @@ def test_two_processes_stop_and_resume(finished, tmp_path):
         rec = json.loads((out2 / "runs" / f"{pid}.json").read_text())
         assert 0 < rec["info"]["resumed_from_s"] < 0.3
     assert list(execute.load_results(out1, study)["height"]) == list(execute.load_results(out2, study)["height"])
+
+
+def test_verification_replicates_spread_over_devices(finished, tmp_path):
+    """On 'cpu,cpu' the 2 verification replicates are two launches, one per process (a full-size replicate
+    fills a GPU): stopped at once, each saves its own checkpoint; the rerun finishes both."""
+    study, done, _ = finished
+    out = tmp_path / "out"  # the design runs without another test's verification
+    shutil.copytree(done, out, ignore=shutil.ignore_patterns("verification"))
+    path = tmp_path / "tiny.toml"
+    path.write_text(STUDY.format(batch=0, target=float(execute.load_results(out, study)["height"].median()), verify=2))
+    study2 = load_study(path)
+    res = _run(study2, out, device="cpu,cpu", stop_after=1e-6)
+    assert res["stopped"].startswith("verification:") and res["ran"] == 0
+    assert len(list((out / "verification" / "launches").glob("*/checkpoint.npz"))) == 2
+    res = _run(study2, out, device="cpu,cpu")
+    assert res["stopped"] is None and len(res["verification"]["values"]) == 2
 
 
 def test_press_runs_one_world_per_launch(tmp_path):

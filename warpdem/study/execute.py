@@ -1155,8 +1155,8 @@ def run_verification(
     executor=None,
 ) -> dict | None:
     """Verification replicates at the chosen optimum of the first response with a target: ``replicates``
-    runs (world seeds 1..n, so they differ from each other) as one launch, on ``executor`` (the study's; by
-    default ``device`` in this process); writes ``out/verification/verification.json`` with each value, the
+    runs (world seeds 1..n, so they differ from each other) as one launch per device of ``executor`` (the
+    study's; by default ``device`` in this process); writes ``out/verification/verification.json`` with each value, the
     mean, SD and relative error against the target, and appends them to the report. Resumes like the design
     runs (one file per replicate); the launch checkpoints into ``out/verification/launches/<id>/`` and, with
     ``stop_after``
@@ -1206,11 +1206,14 @@ def run_verification(
                     },
                 )
 
+        ex = executor or InProcess(device)
+        # replicates of a full-size scene fill a GPU each: spread them over the executor's devices
+        batches = _batches(study, pending, ex.parallel)
         bar = _progress_bar(len(pending), 0, f"{study.name} verification", progress)
         try:
-            # the verification folder holds its launch (OUT/verification/launches/<id>)
-            stopped = (executor or InProcess(device)).run(
-                study, vdir, [pending], bar, time.perf_counter(), checkpoint_every, stop_after, log, save=save
+            # the verification folder holds its launches (OUT/verification/launches/<id>)
+            stopped = ex.run(
+                study, vdir, batches, bar, time.perf_counter(), checkpoint_every, stop_after, log, save=save
             )
         finally:
             if bar is not None:
