@@ -5,7 +5,8 @@
 The steps: seed 001's wet-feed Plackett-Burman (wetfeed_pb), central composite with its verification replicates
 (wetfeed_ccd), then the die press at the central composite's chosen optimum, or its closest point when the target
 is out of reach (die_press); seed 002's 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run
-(phosphate_bbd) and the truck tipper, first contacts split from the rest of the loading (truck_tipper). A lane
+(phosphate_bbd) and the truck tipper, first contacts split from the rest of the loading (truck_tipper; with the
+bucket turning over 6 s, truck_tipper_slow). A lane
 runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
 side by side and may share a device. The default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the other three.
 
@@ -71,6 +72,11 @@ STEPS = {
     "phosphate_ffd": lambda dev, root: study("phosphate_ffd", dev, root),
     "phosphate_bbd": lambda dev, root: study("phosphate_bbd", dev, root),
     "truck_tipper": lambda dev, root: rig("truck_tipper", dev.split(",")[-1], root),
+    # the same tipper with the bucket turning over 6 s instead of 1.5 s: the first contacts' speed falls towards
+    # the free fall from the lip as the turn slows (tipper_dump.py), which seed 002 does not give
+    "truck_tipper_slow": lambda dev, root: rig(
+        "truck_tipper", dev.split(",")[-1], root / "truck_tipper_slow", [("dump_duration", 6.0)]
+    ),
 }
 """Each step's command line on a lane's devices (a rig run takes the lane's last device)."""
 
