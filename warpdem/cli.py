@@ -330,8 +330,15 @@ def cmd_diagnose(args) -> int:
         f"{res.get('separating_measurement')} to separate them",
         "unexplained": "UNEXPLAINED: the base model misfits and no candidate explains it",
     }
-    print(words[res["verdict"]])
-    g = res.get("gain") or {}
+    # a reach diagnosis (no more measured values than free parameters) words its own verdicts
+    print(res.get("verdict_words") or words[res["verdict"]])
+    if res.get("mode") == "reach":
+        for name, g in (res.get("gain") or {}).items():
+            z = g["z_rms"]
+            print(f"misfit on the data fitted, base -> base + {name}: {z['base']:.3g} -> {z['extended']:.3g} SD")
+        if res.get("separating_measurement"):
+            print(f"measure {res['separating_measurement']} to tell them apart")
+    g = (res.get("gain") or {}) if res.get("mode") != "reach" else {}
     for r, x in (g.get("rmse") or {}).items():
         print(
             f"held-out RMSE of {r}: base {x['base']:.4g}, extended {x['extended']:.4g} ({100 * x['reduction']:.0f} % lower)"

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from warpdem.diagnose import DiagnoseError, DiagnosisSpec, Experiments, ParameterSpec, load_diagnosis
+from warpdem.diagnose.data import training_values
 from warpdem.scene import rigs
 from warpdem.scene.runner import COMMON_METRICS, MEASURE_METRICS, METRIC_NEEDS, measured_metrics
 from warpdem.study.spec import MEASURES, StudyError, check_scene_overrides, design_table
@@ -359,11 +360,11 @@ BAD = [
         ["line 3", "bulk_density_kg_m3 = 600.0", "measure.packing_time", "gate_time > 0"],
     ),
     (
-        "fewer-than-parameters",
-        [("[experiments]", _TWO + "\n[experiments]")],
-        "id,angle_fit_deg\na,20\na,21\nb,22\n",
+        "no-training-value",
+        [],
+        "id,split,angle_fit_deg\na,test,20\nb,train,\n",
         "experiments.csv",
-        ["fewer experiments than free parameters", "2 measured value(s)", "2 free parameter(s) (mu_s, mu_r)"],
+        ["no training experiment has a measured value of angle_fit_deg", "expected at least one"],
     ),
     (
         "non-numeric-cell",
@@ -548,11 +549,37 @@ def test_cli_reports_a_bad_data_file_without_a_traceback(tmp_path, capsys):
 
 
 def test_repository_data_files():
-    """The data files under studies/diagnose load as written (the worked example) or are refused as they must be:
-    seed 000 has one measured angle, which cannot test a model with a free parameter."""
+    """The data files under studies/diagnose load as written: the worked example, and seed 000's one measured
+    angle, no more values than its one free parameter, which the diagnosis takes as a reach question."""
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "press_plasticity.toml")
     assert spec.rig == "die_press" and list(ex.responses) == ["residual_set_ratio"]
-    with pytest.raises(DiagnoseError) as err:
-        load_diagnosis(ROOT / "studies" / "diagnose" / "seed000_pellets.toml")
-    msg = str(err.value)
-    assert "seed000_pellets.csv: fewer experiments than free parameters" in msg and "1 measured value(s)" in msg
+    spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed000_pellets.toml")
+    assert training_values(ex) == 1 == len(spec.parameters)
+
+
+def test_cli_prints_a_reach_verdict(monkeypatch, capsys):
+    """A reach diagnosis (one measured value) prints its own verdict line, each reaching candidate's misfit on the
+    data fitted, and the measurement that separates them; no held-out line, since there is none."""
+    from warpdem.cli import main
+    from warpdem.diagnose import pipeline
+
+    res = {
+        "mode": "reach",
+        "verdict": "not_identifiable",
+        "verdict_words": "NOT IDENTIFIABLE: out of reach of the base model; cohesion, plasticity each reach the data",
+        "gain": {
+            n: {"z_rms": {"base": 10.4, "extended": z}, "rmse": {}} for n, z in (("cohesion", 1.4), ("plasticity", 1.1))
+        },
+        "separating_measurement": "bulk_density_kg_m3",
+        "stopped": None,
+        "worlds": 42,
+        "launches": 6,
+        "wall_s": 12.0,
+        "out": "o",
+    }
+    monkeypatch.setattr(pipeline, "diagnose", lambda *a, **k: res)
+    assert main(["diagnose", "any.toml", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("NOT IDENTIFIABLE: out of reach of the base model; cohesion, plasticity")
+    assert "base -> base + cohesion: 10.4 -> 1.4 SD" in out and "measure bulk_density_kg_m3" in out
+    assert "held-out" not in out

@@ -89,8 +89,8 @@ any other column
     true/false for a boolean one). Every row has a value, the same for every row of an id; a condition may not
     set a key that ``[fixed]`` or a free parameter sets.
 
-There must be more measured values (training experiments x the responses each has a value of) than free
-parameters.
+With no more measured values (training experiments x the responses each has a value of) than free parameters,
+a calibration fits any data it can reach, so the diagnosis asks only which models reach them (:mod:`.reach`).
 
 Curves (``[experiments] curves``): for each experiment whose file exists, a CSV with the numeric columns
 ``displacement_m`` [m] and ``force_n`` [N] (at least two rows) and an optional ``branch`` (``load`` or
@@ -728,16 +728,19 @@ def _condition_value(at: str, c: str, text: str, kind: str):
     return v
 
 
-def _check_enough(spec: DiagnosisSpec, exps: Experiments) -> None:
+def training_values(exps: Experiments) -> int:
+    """The measured values a calibration fits: the training experiments x the responses each has a value of.
+    No more of them than free parameters: the diagnosis can test only whether the models reach the data
+    (:mod:`.reach`)."""
     train = exps.table[exps.table["split"] == "train"]
-    n = int(train.groupby("id", sort=False)[list(exps.responses)].count().gt(0).to_numpy().sum())
-    k = len(spec.parameters)
-    if n <= k:
+    return int(train.groupby("id", sort=False)[list(exps.responses)].count().gt(0).to_numpy().sum())
+
+
+def _check_enough(spec: DiagnosisSpec, exps: Experiments) -> None:
+    if training_values(exps) == 0:
         raise DiagnoseError(
-            f"{exps.source}: fewer experiments than free parameters: {n} measured value(s) (training experiments "
-            f"x the responses each has a value of) for {k} free parameter(s) ({', '.join(spec.parameter_names)}); "
-            "expected more measured values than free parameters (add experiments or responses, or fix a "
-            "parameter in [fixed])"
+            f"{exps.source}: no training experiment has a measured value of {', '.join(exps.responses)}; "
+            "expected at least one (a row with split = train and a number in a response column)"
         )
 
 

@@ -36,6 +36,9 @@ Stages (every simulated world is stored as it finishes, ``OUT/runs/<id>.json``, 
    left out, the model recalibrated on the rest (on the surrogates) and simulated at the left-out condition.
    Per experiment: squared standardised error and Gaussian negative log-likelihood, from real simulations.
 
+Data with no more measured values than free parameters (a seed's one angle) allow no adequacy test and no
+held-out comparison: the diagnosis then asks only which models reach the data (:mod:`.reach`).
+
 The naming rule (:func:`verdict`), fixed here and never tuned to a data set. One model *beats* another on the
 held-out data when its summed held-out log predictive likelihood exceeds the other's by more than
 :data:`EVIDENCE` (2 ln K > 6: "strong" evidence on Kass & Raftery's 1995 scale). The noise enters through
@@ -69,7 +72,7 @@ from warpdem.study.folder import copy_atomic, hold
 
 from . import candidates as cands
 from . import inference as inf
-from .data import DiagnoseError, DiagnosisSpec, Experiments, load_diagnosis
+from .data import DiagnoseError, DiagnosisSpec, Experiments, load_diagnosis, training_values
 
 LAUNCH_LEVELS = 5
 """Values a design takes along a parameter that cannot vary per world (0, 1/4, ..., 1 of its range): each value is
@@ -468,6 +471,22 @@ class Evaluator:
         k_all[mask] = np.maximum(k, 1)
         return r, self.prob.budget(k_all)[mask]
 
+    def roughness(self, gps: dict) -> None:
+        """Set the problem's ``rough_var`` from the base model's surrogates ``gps`` (on its design alone)."""
+        # the world seeds measure the scatter a factory's placement gives; a model whose response is not
+        # smooth in its parameters (contact networks rearrange) scatters over them too, which the surrogates'
+        # white-noise term measures. One pile scatters by the larger; the excess over the seeds' is fixed at
+        # a parameter point, so averaging seeds there does not shrink it. Measured on the space-filling design
+        # alone: a refit's confirming runs repeat one parameter point over world seeds, and where the scene
+        # ignores the seed (a press) their equal values drove the white-noise term, and with it every
+        # model's budget, to nothing (roughness SD 0.0017 against the design's 0.022)
+        prob = self.prob
+        for r in self.responses:
+            seed = prob.seed_var[r]
+            nug = float(np.nanmean([gps[(c, r)].noise_sd ** 2 for c in range(len(prob.conditions))]))
+            nug = nug if np.isfinite(nug) else 0.0
+            prob.rough_var[r] = max(nug - seed, 0.0)
+
     def fit(self, model: Model, extra: dict | None = None) -> dict:
         """The first half of :meth:`evaluate`, which needs only the design simulations: surrogates and their
         accuracy, the calibration on the training data and on each held-out fold's, and the ``requests`` of
@@ -476,18 +495,7 @@ class Evaluator:
         prob = self.prob
         gps, acc = self.surrogates(model, f"{model.name}: design", extra)
         if model.candidate is None and not extra:
-            # the world seeds measure the scatter a factory's placement gives; a model whose response is not
-            # smooth in its parameters (contact networks rearrange) scatters over them too, which the surrogates'
-            # white-noise term measures. One pile scatters by the larger; the excess over the seeds' is fixed at
-            # a parameter point, so averaging seeds there does not shrink it. Measured on the space-filling design
-            # alone: a refit's confirming runs repeat one parameter point over world seeds, and where the scene
-            # ignores the seed (a press) their equal values drove the white-noise term, and with it every
-            # model's budget, to nothing (roughness SD 0.0017 against the design's 0.022)
-            for r in self.responses:
-                seed = prob.seed_var[r]
-                nug = float(np.nanmean([gps[(c, r)].noise_sd ** 2 for c in range(len(prob.conditions))]))
-                nug = nug if np.isfinite(nug) else 0.0
-                prob.rough_var[r] = max(nug - seed, 0.0)
+            self.roughness(gps)
         cal = self.calibrate(model, gps, prob.train, "all")
         u_map = np.asarray(cal["map"], dtype=float)
         folds = self.folds()
@@ -947,8 +955,6 @@ def diagnose(
     the whole diagnosis; ``shared_dir`` as for a study."""
     from warpdem.scene.runner import RunStopped
 
-    from .report import write
-
     spec, ex = load_diagnosis(source) if not isinstance(source, tuple) else source
     out = Path(out_dir) if out_dir else Path("runs") / "diagnose" / spec.name
     # the folder's lock for the whole diagnosis (a second one on it is refused); whole copies (a start cut short
@@ -972,48 +978,10 @@ def diagnose(
             # the scatter and the base design need nothing else: one request, so that they share launches
             sims.run(_scatter_requests(ev, base) + ev.design_requests([base]), "base: scatter and design")
             prob.seed_var = _sim_scatter(ev, base)
-            (base_eval,) = ev.evaluate([base], "base: confirm")
-            evals = {"base": base_eval}
-            screens, skipped, results, decision = [], {}, [], None
-            if base_eval["adequacy"]["adequate"]:
-                decision = {"verdict": "adequate", "cause": None, "tied": [], "table": []}
+            if training_values(ex) <= len(spec.parameters):
+                result.update(_reach(ev, base, spec, ex, out, log))
             else:
-                lib, skipped = _library(spec, ex, prob.conditions)
-                screens = screen(ev, base_eval, base_eval["gps"], lib) if lib else []
-                passed = sorted([s for s in screens if s["p"] < spec.alpha], key=lambda s: -s["delta_chi2"])
-                models = []
-                for s in passed:
-                    c = next(c for c in lib if c.name == s["candidate"])
-                    models.append(
-                        Model(c.name, [*base.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c)
-                    )
-                if models:
-                    sims.run(ev.design_requests(models), "candidates: design")
-                    failed: dict = {}
-                    results = ev.evaluate(models, "candidates: confirm", dropped=failed)
-                    for name, why in failed.items():
-                        log(f"{spec.name}: candidate {name} left out: {why}")
-                        skipped[name] = f"recalibrated, then left out: {why}"
-                    evals.update({r["model"].name: r for r in results})
-                decision = verdict(base_eval, results, spec.alpha, _seed(spec, "bootstrap"))
-            separating = []
-            if decision["verdict"] == "ambiguous":
-                separating = separating_measurement(prob, evals, decision["tied"])
-            named = decision.get("cause") or (decision["tied"][0] if decision["tied"] else decision.get("best"))
-            gains = gain(prob, base_eval, evals[named], _seed(spec, "gain")) if named else None
-            result.update(
-                write(
-                    out,
-                    prob,
-                    evals,
-                    decision,
-                    screens=screens,
-                    skipped=skipped,
-                    separating=separating,
-                    gains=gains,
-                    checks=step_checks(out / "runs"),
-                )
-            )
+                result.update(_full(ev, base, spec, ex, out, log))
         except (RunStopped, Stopped) as e:
             result["stopped"] = str(e)
             log(f"{spec.name}: stopped; {e}")
@@ -1023,6 +991,60 @@ def diagnose(
         result["worlds"] = len(list((out / "runs").glob("*.json")))
         result["launches"] = sims.launched
         return result
+
+
+def _full(ev: Evaluator, base: Model, spec: DiagnosisSpec, ex: Experiments, out: Path, log) -> dict:
+    """Stages 2 to 5 of the module docstring once the noise budget is set; writes the report, returns the
+    diagnosis."""
+    from .report import write
+
+    prob, sims = ev.prob, ev.sims
+    (base_eval,) = ev.evaluate([base], "base: confirm")
+    evals = {"base": base_eval}
+    screens, skipped, results, decision = [], {}, [], None
+    if base_eval["adequacy"]["adequate"]:
+        decision = {"verdict": "adequate", "cause": None, "tied": [], "table": []}
+    else:
+        lib, skipped = _library(spec, ex, prob.conditions)
+        screens = screen(ev, base_eval, base_eval["gps"], lib) if lib else []
+        passed = sorted([s for s in screens if s["p"] < spec.alpha], key=lambda s: -s["delta_chi2"])
+        models = []
+        for s in passed:
+            c = next(c for c in lib if c.name == s["candidate"])
+            models.append(Model(c.name, [*base.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c))
+        if models:
+            sims.run(ev.design_requests(models), "candidates: design")
+            failed: dict = {}
+            results = ev.evaluate(models, "candidates: confirm", dropped=failed)
+            for name, why in failed.items():
+                log(f"{spec.name}: candidate {name} left out: {why}")
+                skipped[name] = f"recalibrated, then left out: {why}"
+            evals.update({r["model"].name: r for r in results})
+        decision = verdict(base_eval, results, spec.alpha, _seed(spec, "bootstrap"))
+    separating = []
+    if decision["verdict"] == "ambiguous":
+        separating = separating_measurement(prob, evals, decision["tied"])
+    named = decision.get("cause") or (decision["tied"][0] if decision["tied"] else decision.get("best"))
+    gains = gain(prob, base_eval, evals[named], _seed(spec, "gain")) if named else None
+    return write(
+        out,
+        prob,
+        evals,
+        decision,
+        screens=screens,
+        skipped=skipped,
+        separating=separating,
+        gains=gains,
+        checks=step_checks(out / "runs"),
+    )
+
+
+def _reach(ev: Evaluator, base: Model, spec: DiagnosisSpec, ex: Experiments, out: Path, log) -> dict:
+    """The diagnosis of data with no more measured values than free parameters (:mod:`.reach`)."""
+    from . import reach
+
+    results, decision = reach.run(ev, base, spec, ex, log)
+    return reach.write(out, ev.prob, results, decision, checks=step_checks(out / "runs"))
 
 
 def _library(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tuple[list, dict]:

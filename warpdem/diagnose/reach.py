@@ -1,0 +1,399 @@
+"""What a diagnosis can say when the data hold no more measured values than the model has free parameters (a
+seed's one angle of repose): whether the base model reaches the data at all, and which candidates do.
+
+With n measured values and k >= n free parameters a calibration fits any data the model can reach, exactly, so
+no adequacy test and no held-out comparison exists (:mod:`.pipeline` needs more values than parameters). What
+one number can still test is reach. Stages (the simulations stored and reused as in :mod:`.pipeline`):
+
+1. **Noise budget and the base model's design**, as in a full diagnosis (:mod:`.pipeline`, stages 1 and 2).
+2. **Reach of a model.** On its surrogates, the point that brings the data closest (the maximum of the Gaussian
+   likelihood, :func:`inference.calibrate` without sampling) and, over a dense space-filling cover of the
+   parameter box, the range each measured value's prediction spans and the part of the box whose predictions fit
+   (chi-square over the n values with n degrees of freedom, p >= alpha: nothing is subtracted for fitted
+   parameters, since the test asks whether any point fits, and one that fits exactly scores 0). Then real
+   simulations at the closest point (the confirming world seeds): the same chi-square from their means against
+   the noise budget. The model **reaches** the data when that confirmed p-value is at least alpha.
+3. **The verdict** (:data:`VERDICTS`). The base reaches the data: NOT TESTABLE (no evidence of a model error, and
+   none could show in these data). It does not: every candidate of the library is taken through stage 2 with
+   its parameter added. One reaches: it is the only one (named by reach alone, never by held-out data, which
+   one value cannot give); several: NOT IDENTIFIABLE, with the measurement that best separates them
+   (:func:`pipeline.separating_measurement`); none: UNEXPLAINED. Each model that reaches the data gives its
+   predictions of the measurements the data lack (:func:`predictions`): the held-out test to make next.
+
+The gain of a candidate is measured on the confirming simulations at each model's closest point: the base's
+misfit against the candidate's, in the response's unit and in noise-budget SDs. It is a gain on the data fitted,
+not on held-out data; the report says so.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from . import candidates as cands
+from . import inference as inf
+
+DENSE = 4096
+"""Points of the space-filling cover of a model's parameter box on which its reach is read off its surrogates."""
+
+VERDICTS = ("not_testable", "only_one_reaches", "not_identifiable", "unexplained")
+"""The verdicts of a reach diagnosis (diagnosis.json's ``verdict``, with ``mode`` "reach")."""
+
+WORDS = {
+    "not_testable": "NOT TESTABLE: the base model reaches the data; no evidence of a model error, and with no more "
+    "measured values than free parameters none could show",
+    "only_one_reaches": "OUT OF REACH of the base model; only {names} reaches the data (named by reach alone: one "
+    "value per free parameter leaves no held-out test)",
+    "not_identifiable": "NOT IDENTIFIABLE: out of reach of the base model; {names} each reach the data, and these "
+    "data cannot tell them apart",
+    "unexplained": "UNEXPLAINED: out of reach of the base model and of every candidate tried",
+}
+"""One line per verdict (``{names}``: the candidates that reach the data), for the report and the CLI."""
+
+
+def fit(ev, model) -> dict:
+    """Stage 2 on the surrogates: the closest point ``u`` (d,) in the unit box, its surrogate chi-square and
+    p-value, the span (low, high) of each training value's prediction over the box, the part of each parameter's
+    range (physical units) where the prediction fits, and the confirming simulations' ``requests``."""
+    from scipy import stats
+
+    from .pipeline import _seed
+
+    prob, mask = ev.prob, ev.prob.train
+    gps, _ = ev.surrogates(model, f"{model.name}: design")
+    if model.candidate is None:
+        ev.roughness(gps)
+    y = prob.obs.loc[mask, "mean"].to_numpy(dtype=float)
+    var = prob.budget(np.inf)[mask]
+    u = np.asarray(ev.calibrate(model, gps, mask, "reach", sample=False)["map"], dtype=float)
+    d = len(model.dims)
+    U = np.vstack([inf.space_filling(DENSE, d, _seed(ev.spec, f"reach:{model.name}")), ev.design(model), u[None]])
+    mean, gvar = ev.predictor(gps, mask)(U)
+    chi = (((y - mean) ** 2) / (var + gvar)).sum(axis=1)
+    fits = stats.chi2.sf(chi, len(y)) >= ev.spec.alpha
+    region = {
+        dim.name: (dim.value(U[fits, j].min()), dim.value(U[fits, j].max())) if fits.any() else None
+        for j, dim in enumerate(model.dims)
+    }
+    return {
+        "model": model,
+        "u": u,
+        "surrogate_chi2": float(chi[-1]),
+        "surrogate_p": float(stats.chi2.sf(chi[-1], len(y))),
+        "span": [(float(lo), float(hi)) for lo, hi in zip(mean.min(axis=0), mean.max(axis=0))],
+        "region": region,
+        "requests": ev.confirm_requests(model, u, range(len(prob.conditions))),
+    }
+
+
+def finish(ev, fitted: dict) -> dict:
+    """Stage 2's confirmation, once ``fitted["requests"]`` have run: the simulated means at the closest point,
+    residuals and their noise-budget variances over the training values, the confirmed chi-square, p-value and
+    whether the model reaches the data."""
+    from scipy import stats
+
+    prob, mask, model = ev.prob, ev.prob.train, fitted["model"]
+    conf = ev.confirm(model, fitted["u"], range(len(prob.conditions)), f"{model.name}: confirm")
+    r, var = ev.residuals(conf, mask)
+    sim, k = ev._sim_means(conf, mask)
+    ok = np.isfinite(r)
+    chi = float(np.sum(r[ok] ** 2 / var[ok]))
+    p = float(stats.chi2.sf(chi, int(ok.sum()))) if ok.any() else math.nan
+    return {
+        **{key: fitted[key] for key in ("model", "u", "surrogate_chi2", "surrogate_p", "span", "region")},
+        "theta": {dim.name: dim.value(x) for dim, x in zip(model.dims, fitted["u"])},
+        "confirm": conf,
+        "simulated": sim,
+        "simulations": k,
+        "residual": r,
+        "variance": var,
+        "chi2": chi,
+        "p": p,
+        "reaches": bool(ok.all() and p >= ev.spec.alpha),
+    }
+
+
+def _z_rms(res: dict) -> float:
+    z2 = res["residual"] ** 2 / res["variance"]
+    return float(math.sqrt(np.nanmean(z2)))
+
+
+def gain(ev, base: dict, ext: dict) -> dict:
+    """The misfit at each model's closest point, from its confirming simulations: RMS of the residuals per
+    response (its unit) and of the standardised residuals, base and extended, and the reduction."""
+    obs = ev.prob.obs[ev.prob.train]
+    out = {"z_rms": {"base": _z_rms(base), "extended": _z_rms(ext)}, "rmse": {}, "on": "the data fitted"}
+    zb, ze = out["z_rms"]["base"], out["z_rms"]["extended"]
+    out["z_rms"]["reduction"] = 1.0 - ze / zb if zb > 0 else math.nan
+    for r in dict.fromkeys(obs["response"]):
+        m = (obs["response"] == r).to_numpy()
+        b = float(math.sqrt(np.nanmean(base["residual"][m] ** 2)))
+        e = float(math.sqrt(np.nanmean(ext["residual"][m] ** 2)))
+        out["rmse"][r] = {"base": b, "extended": e, "reduction": 1.0 - e / b if b > 0 else math.nan}
+    return out
+
+
+def run(ev, base_model, spec, ex, skipped_log) -> tuple[dict, dict]:
+    """Stages 2 and 3 (the noise budget is set): {model name: result} and the decision {"verdict",
+    "reaching", "cause", "skipped", "separating", "gains"}."""
+    from .data import DiagnoseError
+    from .pipeline import Dim, Model, _library, separating_measurement
+
+    sims = ev.sims
+    base_fit = fit(ev, base_model)
+    sims.run(base_fit["requests"], "base: confirm")
+    results = {"base": finish(ev, base_fit)}
+    decision = {
+        "verdict": "not_testable",
+        "reaching": [],
+        "cause": None,
+        "skipped": {},
+        "separating": [],
+        "predictions": {},
+    }
+    if results["base"]["reaches"]:
+        decision["gains"] = {}
+        return results, decision
+    lib, skipped = _library(spec, ex, ev.prob.conditions)
+    models = [
+        Model(c.name, [*base_model.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c) for c in lib
+    ]
+    if models:
+        sims.run(ev.design_requests(models), "candidates: design")
+    fitted = []
+    for m in models:
+        try:
+            fitted.append(fit(ev, m))
+        except DiagnoseError as e:  # a candidate at the edge of its range may pack no measurable core
+            skipped[m.name] = f"its design could not be measured: {e}"
+            skipped_log(f"{spec.name}: candidate {m.name} left out: {e}")
+    if fitted:
+        sims.run([q for f in fitted for q in f["requests"]], "candidates: confirm")
+    for f in fitted:
+        results[f["model"].name] = finish(ev, f)
+    reaching = [n for n, r in results.items() if n != "base" and r["reaches"]]
+    verdict = "unexplained" if not reaching else "only_one_reaches" if len(reaching) == 1 else "not_identifiable"
+    decision.update(
+        verdict=verdict,
+        reaching=reaching,
+        cause=reaching[0] if len(reaching) == 1 else None,
+        skipped=skipped,
+        # the base at its closest point misses the data, so only models that reach them are worth separating
+        separating=separating_measurement(ev.prob, results, reaching) if len(reaching) > 1 else [],
+        predictions={n: predictions(ev, results[n]) for n in reaching},
+        gains={n: gain(ev, results["base"], results[n]) for n in reaching},
+    )
+    return results, decision
+
+
+def predictions(ev, res: dict) -> dict:
+    """What a model that reaches the data predicts, at its closest point, for the measurements the data lack
+    (:data:`pipeline.SEPARATING`): {measurement: {"mean", "sd", "runs"}} over the confirming simulations at the
+    training conditions. A second measurement held out against these is the test one value cannot give."""
+    from .pipeline import SEPARATING, response
+
+    conds = sorted(set(ev.prob.obs.loc[ev.prob.train, "condition"]))
+    out = {}
+    for metric in SEPARATING:
+        if metric in ev.responses:
+            continue
+        v = np.array([response(m, metric) for c in conds for m in res["confirm"][c]["metrics"]], dtype=float)
+        v = v[np.isfinite(v)]
+        if len(v):
+            out[metric] = {
+                "mean": float(v.mean()),
+                "sd": float(v.std(ddof=1)) if len(v) > 1 else math.nan,
+                "runs": len(v),
+            }
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# report
+# --------------------------------------------------------------------------------------------------
+
+
+def _num(x, digits: int = 4) -> str:
+    return "–" if x is None or not np.isfinite(x) else f"{x:.{digits}g}"
+
+
+def _model_json(res: dict) -> dict:
+    return {
+        "parameters": res["theta"],
+        "reaching_region": res["region"],
+        "span": res["span"],
+        "surrogate": {"chi2": res["surrogate_chi2"], "p": res["surrogate_p"]},
+        "simulated": [float(x) for x in res["simulated"]],
+        "simulations": [int(x) for x in res["simulations"]],
+        "residual": [float(x) for x in res["residual"]],
+        "z": [float(x) for x in res["residual"] / np.sqrt(res["variance"])],
+        "chi2": res["chi2"],
+        "p": res["p"],
+        "reaches": res["reaches"],
+    }
+
+
+def _plot(out: Path, prob, results: dict) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    obs = prob.obs[prob.train].reset_index(drop=True)
+    files = []
+    names = list(results)
+    for i, o in obs.iterrows():
+        fig, ax = plt.subplots(figsize=(6, 0.6 * len(names) + 1.6))
+        sd = math.sqrt(max(o["var_one"], prob.sim_var.get(o["response"], 0.0)) / o["n"])
+        ax.axvspan(o["mean"] - 2 * sd, o["mean"] + 2 * sd, color="0.85", label="measured, 2 SE")
+        ax.axvline(o["mean"], color="k")
+        for y, n in enumerate(names):
+            lo, hi = results[n]["span"][i]
+            ax.plot([lo, hi], [y, y], lw=6, color="C0" if results[n]["reaches"] else "C3", solid_capstyle="butt")
+            ax.plot(results[n]["simulated"][i], y, "kD")
+        ax.set_yticks(range(len(names)), names)
+        ax.set_xlabel(f"{o['response']} (bar: the surrogate's span over the parameter box; diamond: simulated)")
+        ax.set_title(f"Reach of each model: experiment {o['id']}")
+        ax.legend(fontsize=8, loc="lower right")
+        fig.tight_layout()
+        f = out / f"reach_{o['response']}_{i}.png"
+        fig.savefig(f, dpi=110)
+        plt.close(fig)
+        files.append(f.name)
+    return files
+
+
+def write(out: Path, prob, results: dict, decision: dict, checks=None) -> dict:
+    """Write report.md, diagnosis.json and the reach pictures into ``out``; return diagnosis.json's content."""
+    from warpdem.scene.runner import _json_default
+
+    out = Path(out)
+    spec = prob.spec
+    names = ", ".join(decision["reaching"])
+    diag = {
+        "name": spec.name,
+        "mode": "reach",
+        "verdict": decision["verdict"],
+        "verdict_words": WORDS[decision["verdict"]].format(names=names),
+        "cause": decision["cause"],
+        "cause_words": cands.CAUSES.get(decision["cause"] or "", None),
+        "reaching": decision["reaching"],
+        "tied": decision["reaching"] if decision["verdict"] == "not_identifiable" else [],
+        "separating_measurement": decision["separating"][0]["measurement"] if decision["separating"] else None,
+        "separating": decision["separating"],
+        "predictions": decision["predictions"],
+        "measured_values": int(prob.train.sum()),
+        "free_parameters": len(spec.parameters),
+        "noise": {
+            "simulation_sd": {r: math.sqrt(v) for r, v in prob.sim_var.items()},
+            "seed_sd": {r: math.sqrt(v) for r, v in prob.seed_var.items()},
+        },
+        "base": _model_json(results["base"]),
+        "extended": {n: _model_json(r) for n, r in results.items() if n != "base"},
+        "not_applicable": decision["skipped"],
+        "gain": decision["gains"],
+        "pictures": _plot(out, prob, results),
+        "checks": checks,
+    }
+    with open(out / "diagnosis.json", "w") as fh:
+        json.dump(diag, fh, indent=1, default=_json_default)
+    (out / "report.md").write_text(_markdown(prob, results, diag))
+    return diag
+
+
+def _markdown(prob, results: dict, diag: dict) -> str:
+    spec, obs = prob.spec, prob.obs[prob.train].reset_index(drop=True)
+    title = spec.title or spec.name
+    lines = [
+        f"# Diagnosis: {title}",
+        "",
+        f"**{diag['verdict_words']}.**",
+        "",
+        f"The data hold {diag['measured_values']} measured value(s) for {diag['free_parameters']} free parameter(s), so a "
+        "calibration would fit any value the model can reach, exactly: no adequacy test or held-out comparison "
+        "exists. This diagnosis asks which models reach the data (chi-square over the measured values, p >= "
+        f"{spec.alpha}, at real simulations of each model's closest point).",
+        "",
+        "## Reach of each model",
+        "",
+        "| model | response | measured (SD of the mean) | span over the box (surrogate) | closest point | "
+        "simulated there (runs) | z | p | reaches |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, res in results.items():
+        point = ", ".join(f"{k} {_num(v)}" for k, v in res["theta"].items())
+        for i, o in obs.iterrows():
+            sd = math.sqrt(max(o["var_one"], prob.sim_var.get(o["response"], 0.0)) / o["n"])
+            lo, hi = res["span"][i]
+            z = res["residual"][i] / math.sqrt(res["variance"][i])
+            lines.append(
+                f"| {name} | {o['response']} | {_num(o['mean'])} ({_num(sd, 2)}) | {_num(lo)}–{_num(hi)} | {point} | "
+                f"{_num(res['simulated'][i])} ({int(res['simulations'][i])}) | {_num(z, 3)} | {_num(res['p'], 2)} | "
+                f"{'yes' if res['reaches'] else 'no'} |"
+            )
+    reaching = diag["reaching"]
+    if reaching:
+        lines += [
+            "",
+            "## The candidates that reach the data",
+            "",
+            "Each candidate's own parameter reaches the data over the range below (on its surrogates, with the "
+            "base parameters free): an interval, not an estimate, since one value per free parameter fixes none.",
+            "",
+            "| candidate | its parameter's range that fits | at the closest point | misfit RMS base → extended (SDs) |",
+            "|---|---|---|---|",
+        ]
+        for n in reaching:
+            res, g = results[n], diag["gain"][n]
+            region = res["region"].get(n)
+            span = f"{_num(region[0])}–{_num(region[1])}" if region else "–"
+            zr = g["z_rms"]
+            lines.append(
+                f"| {cands.CAUSES.get(n, n)} | {span} | {_num(res['theta'][n])} | "
+                f"{_num(zr['base'], 3)} → {_num(zr['extended'], 3)} |"
+            )
+        lines += [
+            "",
+            "The gain is on the data fitted (the confirming simulations at each model's closest point), not on "
+            "held-out data: with one value per free parameter none is left to hold out.",
+        ]
+    if reaching:
+        lines += [
+            "",
+            "## What would settle it",
+            "",
+            "A second measurement of the same material, held out against what each model that reaches the data "
+            "predicts for it at its closest point (mean ± SD of the confirming simulations):",
+            "",
+            "| measurement | " + " | ".join(f"base + {n} predicts" for n in reaching) + " |",
+            "|---|" + "---|" * len(reaching),
+        ]
+        for metric in dict.fromkeys(m for n in reaching for m in diag["predictions"][n]):
+            cells = []
+            for n in reaching:
+                p = diag["predictions"][n].get(metric)
+                cells.append(f"{_num(p['mean'])} ± {_num(p['sd'], 2)}" if p else "–")
+            lines.append(f"| {metric} | " + " | ".join(cells) + " |")
+        if diag["separating"]:
+            lines += [
+                "",
+                "The measurements that best tell them apart (difference of the means over its standard error): "
+                + ", ".join(f"{s['measurement']} (z {_num(s['z'], 3)})" for s in diag["separating"][:3])
+                + ".",
+            ]
+    elif diag["verdict"] == "not_testable":
+        lines += [
+            "",
+            "## What would test it",
+            "",
+            "More measured values than free parameters: a second response of the same material (its bulk density, "
+            "say) or the same response at a second condition (grain size, plate, fill).",
+        ]
+    if diag["not_applicable"]:
+        lines += ["", "## Candidates not tried", ""]
+        lines += [f"- {n}: {why}" for n, why in diag["not_applicable"].items()]
+    lines += ["", *[f"![{p}]({p})" for p in diag["pictures"]], ""]
+    return "\n".join(lines)
