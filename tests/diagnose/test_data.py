@@ -549,12 +549,14 @@ def test_cli_reports_a_bad_data_file_without_a_traceback(tmp_path, capsys):
 
 
 def test_repository_data_files():
-    """The data files under studies/diagnose load as written: the worked example, and seed 000's one measured
-    angle, no more values than its one free parameter, which the diagnosis takes as a reach question."""
+    """The data files under studies/diagnose load as written: the worked example, and seeds 000's and 001's one
+    measured angle each, no more values than free parameters, which the diagnosis takes as a reach question."""
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "press_plasticity.toml")
     assert spec.rig == "die_press" and list(ex.responses) == ["residual_set_ratio"]
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed000_pellets.toml")
     assert training_values(ex) == 1 == len(spec.parameters)
+    spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed001_wetfeed.toml")
+    assert training_values(ex) == 1 and spec.parameter_names == ["X1", "X2", "X3"]
 
 
 def test_cli_prints_a_reach_verdict(monkeypatch, capsys):
