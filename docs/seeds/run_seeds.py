@@ -11,13 +11,14 @@ runs its steps in order on its devices (a study on several goes through the dist
 side by side and may share a device. The default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the other three.
 
 Every step is a ``warpdem`` command that resumes where it stopped: each gets ``--stop-after`` the time left of
-``--budget`` and exits 3 when it stops, which ends its lane for this call. Run the same command again (on the
-same machine, whose DIR is kept) to go on. The results land in DIR/<step>/; this script prints each command and
-its exit code.
+``--budget`` less :data:`STOP_MARGIN` and exits 3 when it stops, which ends its lane for this call. Run the same
+command again (on the same machine, whose DIR is kept) to go on. The results land in DIR/<step>/; this script
+prints each command and its exit code.
 
 To bring the results back from a GPU machine, pack DIR without the launches' checkpoints
 (``tar czf OUT/seeds.tgz -C DIR --exclude='checkpoint*.npz' .``): the studies' ``runs/*.npz`` final states are
-what ``warpdem analyze --remeasure`` reads again, and the wet feed's are small.
+what ``warpdem analyze --remeasure`` reads again. The wet feed's are small; the lifting cylinder's are about 2 MB
+each (the Box-Behnken's pack was 64 MB, over a call's 16 MiB a file: split it, or leave ``*.npz`` out).
 """
 
 from __future__ import annotations
@@ -29,6 +30,14 @@ import sys
 import threading
 import time
 from pathlib import Path
+
+STOP_MARGIN = 90
+"""Seconds a step may run beyond its ``--stop-after``: a study's clock starts once its Dask cluster is up (on a
+fresh machine the workers also compile the kernels first), and once it has run out each launch goes on to its next
+output tick, saves its checkpoint and the cluster shuts down. On 4 H200s, with no margin, ``--budget 500`` (plus
+the wheels' install) took 543 s, and ``--budget 530`` overran a 600 s call, which lost the machine and its
+checkpoints. Wrapping the script in ``timeout`` keeps the pack that follows: a killed launch loses at most its
+last minute, since launches checkpoint every 60 s."""
 
 PRESS_KEYS = {
     "X1": "interaction.feed.feed.rolling_friction",
@@ -98,7 +107,7 @@ def run_lane(name: str, steps: list, root: Path, deadline: float, dry: bool, log
         if done.exists():
             log(f"[{name}] {step}: done before")
             continue
-        left = int(deadline - time.time())
+        left = int(deadline - time.time()) - STOP_MARGIN
         if left < 30:
             log(f"[{name}] {step}: {left} s left, not started")
             return
