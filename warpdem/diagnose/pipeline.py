@@ -228,6 +228,13 @@ class Model:
     shared: dict = field(default_factory=dict)
     candidate: cands.Candidate | None = None
 
+    @classmethod
+    def extended(cls, base: Model, cand: cands.Candidate) -> Model:
+        """``base`` plus the candidate ``cand``, whose parameter is the last dimension."""
+        return cls(
+            cand.name, [*base.dims, Dim(cand.name, cand.key, cand.low, cand.high, cand.unit)], dict(cand.shared), cand
+        )
+
     def overrides(self, u) -> dict:
         """The overrides of the model at unit-cube point ``u`` (d,)."""
         out = dict(self.shared)
@@ -1011,7 +1018,7 @@ def _full(ev: Evaluator, base: Model, spec: DiagnosisSpec, ex: Experiments, out:
         models = []
         for s in passed:
             c = next(c for c in lib if c.name == s["candidate"])
-            models.append(Model(c.name, [*base.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c))
+            models.append(Model.extended(base, c))
         if models:
             sims.run(ev.design_requests(models), "candidates: design")
             failed: dict = {}

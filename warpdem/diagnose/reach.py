@@ -136,11 +136,11 @@ def gain(ev, base: dict, ext: dict) -> dict:
     return out
 
 
-def run(ev, base_model, spec, ex, skipped_log) -> tuple[dict, dict]:
+def run(ev, base_model, spec, ex, log) -> tuple[dict, dict]:
     """Stages 2 and 3 (the noise budget is set): {model name: result} and the decision {"verdict",
     "reaching", "cause", "skipped", "separating", "gains"}."""
     from .data import DiagnoseError
-    from .pipeline import Dim, Model, _library, separating_measurement
+    from .pipeline import Model, _library, separating_measurement
 
     sims = ev.sims
     base_fit = fit(ev, base_model)
@@ -158,9 +158,7 @@ def run(ev, base_model, spec, ex, skipped_log) -> tuple[dict, dict]:
         decision["gains"] = {}
         return results, decision
     lib, skipped = _library(spec, ex, ev.prob.conditions)
-    models = [
-        Model(c.name, [*base_model.dims, Dim(c.name, c.key, c.low, c.high, c.unit)], dict(c.shared), c) for c in lib
-    ]
+    models = [Model.extended(base_model, c) for c in lib]
     if models:
         sims.run(ev.design_requests(models), "candidates: design")
     fitted = []
@@ -169,7 +167,7 @@ def run(ev, base_model, spec, ex, skipped_log) -> tuple[dict, dict]:
             fitted.append(fit(ev, m))
         except DiagnoseError as e:  # a candidate at the edge of its range may pack no measurable core
             skipped[m.name] = f"its design could not be measured: {e}"
-            skipped_log(f"{spec.name}: candidate {m.name} left out: {e}")
+            log(f"{spec.name}: candidate {m.name} left out: {e}")
     if fitted:
         sims.run([q for f in fitted for q in f["requests"]], "candidates: confirm")
     for f in fitted:
