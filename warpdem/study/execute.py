@@ -476,8 +476,8 @@ def run_study(
     disabled, the analysis (:func:`analyze`) and the verification
     runs at the chosen optimum. ``device`` may name several devices (:func:`parse_devices`): the runs are then
     split into one launch per device, run at once on a local Dask cluster, one worker per device; the
-    verification runs (one launch) go to the same executor. With ``stop_after`` (wall seconds, 0: none) the study stops by itself
-    once that much wall time has passed: a launch then saves its checkpoint at its next output tick, no
+    verification runs go to the same executor. With ``stop_after`` (wall seconds from the call, the cluster's start
+    included; 0: none) the study stops by itself once that much wall time has passed: a launch then saves its checkpoint at its next output tick, no
     further launch starts, and ``stopped`` in the result says where; the same call resumes. Returns
     {"out", "runs", "ran", "skipped", "wall_s", "batches", "analysis", "verification", "stopped"}.
 
@@ -486,6 +486,9 @@ def run_study(
     what kind of device the launches are cut for. ``shared_dir``: a folder every worker of that cluster can
     write; launches checkpoint there, so a launch retried on another worker resumes instead of restarting.
     """
+    # the wall-time limit counts from here, as a diagnosis's does: a Dask cluster's start (its workers' first kernel
+    # compile on a fresh machine) is wall time too, and left out it made a 530 s limit overrun a 600 s device call
+    t0 = time.perf_counter()
     study = study if isinstance(study, sp.StudySpec) else sp.load_study(study)
     out = Path(out_dir) if out_dir else Path("runs") / study.name
     # the folder's lock (OUT/.warpdem.lock) for the whole study: a second study on it is refused; the first writes
@@ -512,7 +515,6 @@ def run_study(
         done0 = len(rows) - len(pending)
         if done0:
             log(f"{study.name}: {done0} of {len(rows)} runs already finished in {out}; running {len(pending)}")
-        t0 = time.perf_counter()
         bar = _progress_bar(len(rows), done0, study.name, progress)
         batches = _batches(study, pending, ex.parallel, merges_scenes(devices)) if pending else []
         stopped = None
