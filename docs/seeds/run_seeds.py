@@ -6,7 +6,8 @@ The steps: seed 001's wet-feed Plackett-Burman (wetfeed_pb), central composite w
 (wetfeed_ccd), then the die press at the central composite's chosen optimum, or its closest point when the target
 is out of reach (die_press); seed 002's 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run
 (phosphate_bbd) and the truck tipper, first contacts split from the rest of the loading (truck_tipper; with the
-bucket turning over 6 s, truck_tipper_slow). A lane
+bucket turning over 6 s, truck_tipper_slow); the reach diagnoses of seeds 000 and 001's one angle each
+(seed000_reach, seed001_reach: ``warpdem diagnose studies/diagnose/seed00N_*.toml``). A lane
 runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
 side by side and may share a device. The default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the other three.
 
@@ -32,11 +33,11 @@ import time
 from pathlib import Path
 
 STOP_MARGIN = 90
-"""Seconds a step may run beyond its ``--stop-after``: a study's clock starts once its Dask cluster is up (on a
-fresh machine the workers also compile the kernels first), and once it has run out each launch goes on to its next
-output tick, saves its checkpoint and the cluster shuts down. On 4 H200s, with no margin, ``--budget 500`` (plus
-the wheels' install) took 543 s, and ``--budget 530`` overran a 600 s call, which lost the machine and its
-checkpoints. Wrapping the script in ``timeout`` keeps the pack that follows: a killed launch loses at most its
+"""Seconds a step may run beyond its ``--stop-after``: once it has run out each launch goes on to its next output
+tick, saves its checkpoint and the cluster shuts down, and the pack that follows needs time too. On 4 H200s, with
+no margin (and a study's clock then started only once its Dask cluster was up, the workers' first kernel compile
+included), ``--budget 500`` (plus the wheels' install) took 543 s, and ``--budget 530`` overran a 600 s call, which
+lost the machine and its checkpoints. Wrapping the script in ``timeout`` keeps the pack that follows: a killed launch loses at most its
 last minute, since launches checkpoint every 60 s."""
 
 PRESS_KEYS = {
@@ -64,6 +65,12 @@ def study(name: str, devices: str, root: Path) -> list:
     return cmd + ["--out", str(root / name), "--no-progress"]
 
 
+def diagnosis(name: str, devices: str, root: Path) -> list:
+    """A diagnosis's command line (without ``--stop-after``): studies/diagnose/NAME.toml into ``root/name``."""
+    cmd = ["-m", "warpdem.cli", "diagnose", f"studies/diagnose/{name}.toml", "--device", devices]
+    return cmd + ["--out", str(root / name), "--no-progress"]
+
+
 def rig(name: str, device: str, root: Path, sets=()) -> list:
     """A full-size rig run (benchmarks/rigs_full.py: the GPU machine has no usd-core to read a stage); its
     results land in ``root/name``."""
@@ -80,6 +87,9 @@ STEPS = {
     "die_press": lambda dev, root: lambda: rig("die_press", dev.split(",")[-1], root, ccd_optimum(root).items()),
     "phosphate_ffd": lambda dev, root: study("phosphate_ffd", dev, root),
     "phosphate_bbd": lambda dev, root: study("phosphate_bbd", dev, root),
+    # seeds 000 and 001 give one angle each, out of their base models' reach: which candidates reach it
+    "seed000_reach": lambda dev, root: diagnosis("seed000_pellets", dev, root),
+    "seed001_reach": lambda dev, root: diagnosis("seed001_wetfeed", dev, root),
     "truck_tipper": lambda dev, root: rig("truck_tipper", dev.split(",")[-1], root),
     # the same tipper with the bucket turning over 6 s instead of 1.5 s: the first contacts' speed falls towards
     # the free fall from the lip as the turn slows (tipper_dump.py), which seed 002 does not give
