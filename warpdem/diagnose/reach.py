@@ -244,7 +244,7 @@ def _plot(out: Path, prob, results: dict) -> list[str]:
     files = []
     names = list(results)
     for i, o in obs.iterrows():
-        fig, ax = plt.subplots(figsize=(6, 0.6 * len(names) + 1.6))
+        fig, ax = plt.subplots(figsize=(6, 0.6 * len(names) + 2.0))
         sd = math.sqrt(max(o["var_one"], prob.sim_var.get(o["response"], 0.0)) / o["n"])
         ax.axvspan(o["mean"] - 2 * sd, o["mean"] + 2 * sd, color="0.85", label="measured, 2 SE")
         ax.axvline(o["mean"], color="k")
@@ -253,8 +253,12 @@ def _plot(out: Path, prob, results: dict) -> list[str]:
             ax.plot([lo, hi], [y, y], lw=6, color="C0" if results[n]["reaches"] else "C3", solid_capstyle="butt")
             ax.plot(results[n]["simulated"][i], y, "kD")
         ax.set_yticks(range(len(names)), names)
-        ax.set_xlabel(f"{o['response']} (bar: the surrogate's span over the parameter box; diamond: simulated)")
-        ax.set_title(f"Reach of each model: experiment {o['id']}")
+        ax.set_xlabel(o["response"])
+        ax.set_title(
+            f"Reach of each model, experiment {o['id']}\nbar: its surrogate's span over the parameter box "
+            "(blue: reaches);\ndiamond: simulated at its closest point",
+            fontsize=9,
+        )
         ax.legend(fontsize=8, loc="lower right")
         fig.tight_layout()
         f = out / f"reach_{o['response']}_{i}.png"
