@@ -338,11 +338,12 @@ def cmd_diagnose(args) -> int:
             print(f"misfit on the data fitted, base -> base + {name}: {z['base']:.3g} -> {z['extended']:.3g} SD")
         if res.get("separating_measurement"):
             print(f"measure {res['separating_measurement']} to tell them apart")
-    g = (res.get("gain") or {}) if res.get("mode") != "reach" else {}
-    for r, x in (g.get("rmse") or {}).items():
-        print(
-            f"held-out RMSE of {r}: base {x['base']:.4g}, extended {x['extended']:.4g} ({100 * x['reduction']:.0f} % lower)"
-        )
+    else:
+        for r, x in ((res.get("gain") or {}).get("rmse") or {}).items():
+            print(
+                f"held-out RMSE of {r}: base {x['base']:.4g}, extended {x['extended']:.4g} "
+                f"({100 * x['reduction']:.0f} % lower)"
+            )
     print(
         f"{res['worlds']} simulated worlds ({res['launches']} launches now) in {res['wall_s']:.1f} s on {args.device}; "
         f"report: {res['out']}/report.md"

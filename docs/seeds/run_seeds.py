@@ -37,8 +37,8 @@ STOP_MARGIN = 90
 tick, saves its checkpoint and the cluster shuts down, and the pack that follows needs time too. On 4 H200s, with
 no margin (and a study's clock then started only once its Dask cluster was up, the workers' first kernel compile
 included), ``--budget 500`` (plus the wheels' install) took 543 s, and ``--budget 530`` overran a 600 s call, which
-lost the machine and its checkpoints. Wrapping the script in ``timeout`` keeps the pack that follows: a killed launch loses at most its
-last minute, since launches checkpoint every 60 s."""
+lost the machine and its checkpoints. Wrapping the script in ``timeout`` keeps the pack that follows: a killed
+launch loses at most its last minute, since launches checkpoint every 60 s."""
 
 PRESS_KEYS = {
     "X1": "interaction.feed.feed.rolling_friction",

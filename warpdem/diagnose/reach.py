@@ -73,7 +73,8 @@ def fit(ev, model) -> dict:
     U = np.vstack([inf.space_filling(DENSE, d, _seed(ev.spec, f"reach:{model.name}")), ev.design(model), u[None]])
     mean, gvar = ev.predictor(gps, mask)(U)
     chi = (((y - mean) ** 2) / (var + gvar)).sum(axis=1)
-    fits = stats.chi2.sf(chi, len(y)) >= ev.spec.alpha
+    p = stats.chi2.sf(chi, len(y))
+    fits = p >= ev.spec.alpha
     region = {
         dim.name: (dim.value(U[fits, j].min()), dim.value(U[fits, j].max())) if fits.any() else None
         for j, dim in enumerate(model.dims)
@@ -82,7 +83,7 @@ def fit(ev, model) -> dict:
         "model": model,
         "u": u,
         "surrogate_chi2": float(chi[-1]),
-        "surrogate_p": float(stats.chi2.sf(chi[-1], len(y))),
+        "surrogate_p": float(p[-1]),
         "span": [(float(lo), float(hi)) for lo, hi in zip(mean.min(axis=0), mean.max(axis=0))],
         "region": region,
         "requests": ev.confirm_requests(model, u, range(len(prob.conditions))),
@@ -153,9 +154,9 @@ def run(ev, base_model, spec, ex, log) -> tuple[dict, dict]:
         "skipped": {},
         "separating": [],
         "predictions": {},
+        "gains": {},
     }
     if results["base"]["reaches"]:
-        decision["gains"] = {}
         return results, decision
     lib, skipped = _library(spec, ex, ev.prob.conditions)
     models = [Model.extended(base_model, c) for c in lib]

@@ -477,8 +477,9 @@ def run_study(
     runs at the chosen optimum. ``device`` may name several devices (:func:`parse_devices`): the runs are then
     split into one launch per device, run at once on a local Dask cluster, one worker per device; the
     verification runs go to the same executor. With ``stop_after`` (wall seconds from the call, the cluster's start
-    included; 0: none) the study stops by itself once that much wall time has passed: a launch then saves its checkpoint at its next output tick, no
-    further launch starts, and ``stopped`` in the result says where; the same call resumes. Returns
+    included; 0: none) the study stops by itself once that much wall time has passed: a launch then saves its
+    checkpoint at its next output tick, no further launch starts, and ``stopped`` in the result says where; the same
+    call resumes. Returns
     {"out", "runs", "ran", "skipped", "wall_s", "batches", "analysis", "verification", "stopped"}.
 
     ``scheduler`` (else the environment variable ``WARPDEM_SCHEDULER``): the address of a Dask scheduler
@@ -1158,9 +1159,9 @@ def run_verification(
 ) -> dict | None:
     """Verification replicates at the chosen optimum of the first response with a target: ``replicates``
     runs (world seeds 1..n, so they differ from each other) as one launch per device of ``executor`` (the
-    study's; by default ``device`` in this process); writes ``out/verification/verification.json`` with each value, the
-    mean, SD and relative error against the target, and appends them to the report. Resumes like the design
-    runs (one file per replicate); the launch checkpoints into ``out/verification/launches/<id>/`` and, with
+    study's; by default ``device`` in this process); writes ``out/verification/verification.json`` with each
+    value, the mean, SD and relative error against the target, and appends them to the report. Resumes like the
+    design runs (one file per replicate); each launch checkpoints into ``out/verification/launches/<id>/`` and, with
     ``stop_after``
     (wall seconds), returns {"stopped": message} once it has saved its checkpoint."""
     out = Path(out)
