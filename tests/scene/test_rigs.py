@@ -1231,6 +1231,19 @@ def test_run_resumes_from_checkpoint_bit_identical(tmp_path):
     assert c.info["resumed_from_s"] is None
 
 
+def test_checkpoint_fingerprint_names_the_device_kind_not_its_ordinal():
+    """A launch resumed by a later call may run on another GPU of the machine (Dask picks the worker): its
+    checkpoint must still be its own there, while a CPU run never takes a CUDA run's checkpoint."""
+    spec = rigs.spec("funnel", {"count": 60, "duration": 0.2}, smoke=True)
+
+    def fp(device):
+        return runner._fingerprint(spec, device, 2, None, [0, 1])
+
+    assert fp("cuda:0") == fp("cuda:1") == fp("cuda")
+    assert fp("cpu") != fp("cuda:0")
+    assert runner._fingerprint(spec, "cuda:0", 3, None, [0, 1, 2]) != fp("cuda:0")
+
+
 SMALL_PRESS = {"die_diameter": 0.005, "fill_height": 0.006, "inlet_diameter": 0.008, "gap": 0.001, "settle_time": 0.05}
 """A 94-sphere smoke press (warpdem.diagnose.synthetic.PRESS_RIG's geometry): for tests of the run machinery."""
 

@@ -67,3 +67,34 @@ def test_clump_integration_one_thread_or_a_block_per_clump():
     assert speed > 1e-3, "the clumps should be moving"
     assert np.abs(out[0][0] - out[1][0]).max() <= 1e-5 * speed
     assert np.abs(out[0][1] - out[1][1]).max() <= 1e-5 * np.abs(out[0][1]).max()
+
+
+@requires_cuda
+def test_checkpoint_resumes_on_another_cuda_device(tmp_path):
+    """A run stopped on cuda:0 resumes from its checkpoint when the next call names another CUDA device (the
+    last one, or "cuda"), and ends where the uninterrupted run on cuda:0 ends."""
+    import numpy as np
+    import warp as wp
+
+    from warpdem.scene import rigs, runner
+
+    spec = rigs.spec("funnel", {"count": 60, "duration": 0.2}, smoke=True)
+    a = runner.run_scene(spec, "cuda:0", out_dir=tmp_path / "a", frames=False, checkpoint_every=1e-9)
+
+    class Crash(Exception):
+        pass
+
+    def kill(frac, msg):
+        if frac > 0.5:
+            raise Crash
+
+    with pytest.raises(Crash):
+        runner.run_scene(spec, "cuda:0", out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9, progress=kill)
+    other = f"cuda:{wp.get_cuda_device_count() - 1}" if wp.get_cuda_device_count() > 1 else "cuda"
+    b = runner.run_scene(spec, other, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9)
+    assert b.info["resumed_from_s"] is not None and 0.05 < b.info["resumed_from_s"] < 0.2
+    assert b.info["steps"] == a.info["steps"]
+    xa = np.load(tmp_path / "a" / "final.npz")["sphere_x"]
+    xb = np.load(tmp_path / "b" / "final.npz")["sphere_x"]
+    # the same kind of GPU runs the same kernels: the resumed run ends bit-identical
+    assert np.array_equal(xa, xb)

@@ -28,6 +28,7 @@ __all__ = [
     "State",
     "host",
     "DEVICE_FORMS",
+    "device_kind",
     "device_names",
     "init_warp",
 ]
@@ -35,6 +36,12 @@ __all__ = [
 
 DEVICE_FORMS = "'cpu', 'cuda', 'cuda:N', 'cuda:all', or a comma-separated list of these (e.g. 'cuda:0,cuda:1')"
 """What a device option may say (``--device``; ``device=`` of the study and diagnosis functions)."""
+
+
+def device_kind(device: str) -> str:
+    """The kind of a device name: "cuda" for "cuda" or "cuda:N", else "cpu". A run's results depend on it, not
+    on the ordinal (the same kernels on the same kind of GPU give the same numbers)."""
+    return "cuda" if str(device).startswith("cuda") else "cpu"
 
 
 def device_names(device: str, where: str = "device") -> list[str]:

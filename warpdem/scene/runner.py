@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from warpdem.engine import suspect
-from warpdem.engine.types import host
+from warpdem.engine.types import device_kind, host
 from warpdem.errors import InputError, PhysicsWarning
 
 from . import measure as ms
@@ -863,12 +863,15 @@ def run_scene_iter(
 
 
 def _fingerprint(spec, device, world_count, variations, world_seeds, also=()) -> str:
-    """Hash of what a run is made of: a checkpoint only resumes the run it was saved from."""
+    """Hash of what a run is made of: a checkpoint only resumes the run it was saved from. The device counts by
+    its kind only: a study's launch resumed by another call may land on another GPU of the machine (Dask picks
+    the worker), and with the ordinal in the hash it restarted from nothing (seed 001's reach diagnosis, on 2
+    H200s, lost two launches of 185 s that way)."""
     import hashlib
 
     more = [[repr(g.spec), int(g.world_count), g.variations, g.world_seeds] for g in also]
     text = json.dumps(
-        [repr(spec), str(device), int(world_count), variations, world_seeds] + more,
+        [repr(spec), device_kind(device), int(world_count), variations, world_seeds] + more,
         sort_keys=True,
         default=_json_default,
     )

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from warpdem.engine.types import device_names
+from warpdem.engine.types import device_kind, device_names
 from warpdem.scene.runner import _json_default
 
 from . import spec as sp
@@ -90,7 +90,7 @@ def merges_scenes(devices: list[str]) -> bool:
     """Whether launches on ``devices`` hold worlds of several scenes (:func:`_batches`): on GPUs, where a launch
     costs about its steps whatever its worlds; not on CPUs, where it costs its particle-steps and a scene of
     larger grains would step at the smaller grains' step."""
-    return all(d.startswith("cuda") for d in devices)
+    return all(device_kind(d) == "cuda" for d in devices)
 
 
 def _batches(study: sp.StudySpec, rows: list[dict], parts: int = 1, merge: bool = False) -> list[list[dict]]:
