@@ -460,6 +460,30 @@ def test_pile_spheres_drops_grains_off_the_pile():
     assert abs(angle_surface_fit(xa[on], ra[on])["mean_deg"] - 30.0) < 0.5
 
 
+def test_pile_spheres_drops_strays_lying_apart_on_the_plate():
+    """Grains that bounced off a pile and lie apart on the plate, out to three base radii, stand on the base
+    but are not the pile: kept, they set the flank's foot and the image method reads the 45 deg cone below
+    30 deg; left out (their own bodies, smaller than the pile), the cone reads 45 deg within the method's 1 deg."""
+    from warpdem.scene.measure import pile_spheres
+
+    x, r = _cone(45.0, 0.0, 0.0, (0.0, 0.0), 0)
+    rng = np.random.default_rng(5)
+    phi = rng.uniform(0.0, 2.0 * np.pi, 40)
+    rho = rng.uniform(1.3 * R_BASE, 3.0 * R_BASE, 40)
+    strays = np.c_[rho * np.cos(phi), rho * np.sin(phi), np.full(40, R_SPHERE)]
+    xa, ra = np.vstack([x, strays]), np.r_[r, np.full(40, R_SPHERE)]
+    assert angle_image(xa, ra)["mean_deg"] < 30.0
+    alone = pile_spheres(x, r, gap=0.3)  # the lattice lifts a few top spheres clear of their column
+    assert alone.mean() > 0.99
+    on = pile_spheres(xa, ra, gap=0.3)
+    assert np.array_equal(on[: len(r)], alone) and not on[len(r) :].any()
+    assert angle_image(xa[on], ra[on])["mean_deg"] == pytest.approx(45.0, abs=1.0)
+    # two piles on one plate: the larger is the pile
+    small = x[x[:, 2] < 2.5 * R_SPHERE][:30] + np.array([4.0 * R_BASE, 0.0, 0.0])
+    keep = pile_spheres(np.vstack([x, small]), np.r_[r, np.full(len(small), R_SPHERE)], gap=0.3)
+    assert np.array_equal(keep[: len(r)], alone) and not keep[len(r) :].any()
+
+
 # --------------------------------------------------------------------------------------------------
 # packing fraction and bulk density
 # --------------------------------------------------------------------------------------------------

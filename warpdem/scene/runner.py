@@ -137,9 +137,10 @@ PILE_METRICS = (
 
 def pile_select(x, r, m) -> tuple[np.ndarray, np.ndarray, int]:
     """The pile among one world's free particle spheres (centres ``x`` (n, 3) [m], radii ``r`` (n,) [m]) under the
-    angle-of-repose measure settings ``m``: spheres below the base (rolled off the plate) and those not connected
-    to it (stuck to a lifted wall, in the air) are not the pile. Returns its centres (k, 3) [m], radii (k,) [m] and
-    how many spheres above the base were left out (``detached``)."""
+    angle-of-repose measure settings ``m``: spheres below the base (rolled off the plate), those not connected
+    to it (stuck to a lifted wall, in the air) and those lying apart from the pile on the plate are not the pile
+    (:func:`measure.pile_spheres`). Returns its centres (k, 3) [m], radii (k,) [m] and how many spheres above the
+    base were left out (``detached``)."""
     x, r = np.asarray(x, dtype=np.float64).reshape(-1, 3), np.asarray(r, dtype=np.float64).reshape(-1)
     keep = x[:, 2] - r > m.base_height - 2 * r.max(initial=0.0)
     x, r = x[keep], r[keep]
