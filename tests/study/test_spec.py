@@ -27,6 +27,7 @@ COUNTS = {
     "phosphate_ffd": 16,
     "phosphate_bbd": 15,
     "main_funnel_pb": 12,
+    "wetfeed_gamma_scan": 5,
 }
 
 
