@@ -734,3 +734,22 @@ def test_suspect_runs_warn(name, argv, words, corpus, tmp_path, capsys):
     metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
     assert check in {w["check"] for w in metrics["metrics"][0]["warnings"]}
     assert any(needles[0] in line for line in metrics["info"]["warnings"])
+
+
+def test_a_missing_dependency_names_the_package(tmp_path, monkeypatch, capsys):
+    """An install without its dependencies (pip --no-deps, as on a machine with no index) fails at the first
+    import of one: the command line names the package and how to install it, exit code 8, no traceback; an
+    import of warpdem's own that fails stays a bug (70)."""
+    import sys
+
+    from warpdem.errors import ExitCode, classify
+
+    # a study on two CPU processes needs Dask's distributed only once its first launch goes out
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    out = tmp_path / "out"
+    rc = main(["study", "studies/main_funnel_pb.toml", "--device", "cpu,cpu", "--out", str(out), "--no-progress"])
+    text = "".join(capsys.readouterr())
+    assert rc == ExitCode.MISSING_PACKAGE == 8, text[-2000:]
+    assert "'distributed' is not installed" in text and "pip install" in text and "Traceback" not in text
+    code, _ = classify(ModuleNotFoundError("No module named 'warpdem.nothing'", name="warpdem.nothing"))
+    assert code == ExitCode.INTERNAL

@@ -28,6 +28,8 @@ class ExitCode(enum.IntEnum):
     """The device asked for is not there, or was lost during the run."""
     BUSY = 7
     """Another study or diagnosis holds the output folder's lock."""
+    MISSING_PACKAGE = 8
+    """A package warpdem needs is not installed (an install without its dependencies)."""
     INTERNAL = 70
     """A bug: an exception no check anticipated (``--debug`` shows its traceback)."""
     INTERRUPTED = 130
@@ -86,6 +88,12 @@ def classify(exc: BaseException) -> tuple[ExitCode, str]:
         where = f"{exc.filename}: " if exc.filename else ""
         reason = exc.strerror or str(exc)
         return ExitCode.FILE_SYSTEM, f"{where}{reason}"
+    if isinstance(exc, ModuleNotFoundError) and exc.name and not exc.name.startswith("warpdem"):
+        # an install without its dependencies (pip --no-deps, a copied tree) fails at the first import of one
+        return ExitCode.MISSING_PACKAGE, (
+            f"the package {exc.name.split('.')[0]!r} is not installed, and warpdem needs it: "
+            "pip install -e . (or pip install warpdem) installs every dependency"
+        )
     if isinstance(exc, MemoryError):
         return ExitCode.SIMULATION, "out of memory; run fewer worlds per launch or fewer particles"
     text = f"{type(exc).__name__}: {exc}"
