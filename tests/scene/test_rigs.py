@@ -10,6 +10,7 @@ import re
 import numpy as np
 import pytest
 
+from tests.conftest import RunKilled, kill_past
 from warpdem.engine import geometry
 from warpdem.scene import measure, rigs, runner
 from warpdem.scene.stage import StageError, apply_overrides, read_stage, write_stage
@@ -501,14 +502,8 @@ def test_rotating_drum_resumes_with_its_frames(tmp_path):
     spec = rigs.spec("rotating_drum", values, smoke=True)
     a = runner.run_scene(spec, out_dir=tmp_path / "a", frames=False, checkpoint_every=1e-9)
 
-    class Crash(Exception):
-        pass
-
-    def kill(frac, msg):
-        if frac * spec.run.duration > spec.measure.average_from + 0.05:
-            raise Crash
-
-    with pytest.raises(Crash):
+    kill = kill_past((spec.measure.average_from + 0.05) / spec.run.duration)
+    with pytest.raises(RunKilled):
         runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9, progress=kill)
     b = runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9)
     assert b.info["resumed_from_s"] > spec.measure.average_from
@@ -1205,15 +1200,8 @@ def test_run_resumes_from_checkpoint_bit_identical(tmp_path):
     spec = rigs.spec("funnel", {"count": 60, "duration": 0.2}, smoke=True)
     a = runner.run_scene(spec, out_dir=tmp_path / "a", frames=False, checkpoint_every=1e-9)
 
-    class Crash(Exception):
-        pass
-
-    def kill(frac, msg):
-        if frac > 0.5:
-            raise Crash
-
-    with pytest.raises(Crash):
-        runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9, progress=kill)
+    with pytest.raises(RunKilled):
+        runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9, progress=kill_past(0.5))
     assert (tmp_path / "b" / "checkpoint.npz").exists()
     b = runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9)
     assert 0.05 < b.info["resumed_from_s"] < 0.2 and b.info["steps"] == a.info["steps"]
@@ -1224,8 +1212,8 @@ def test_run_resumes_from_checkpoint_bit_identical(tmp_path):
     assert len(b.info["tick_wall_s"]) == len(b.info["tick_time_s"]) == len(a.info["tick_time_s"])
     assert b.info["tick_rebuilds"] == a.info["tick_rebuilds"] and a.info["rebuilds"] >= len(a.info["tick_time_s"])
     assert not (tmp_path / "b" / "checkpoint.npz").exists()
-    with pytest.raises(Crash):
-        runner.run_scene(spec, out_dir=tmp_path / "c", frames=False, checkpoint_every=1e-9, progress=kill)
+    with pytest.raises(RunKilled):
+        runner.run_scene(spec, out_dir=tmp_path / "c", frames=False, checkpoint_every=1e-9, progress=kill_past(0.5))
     other = rigs.spec("funnel", {"count": 60, "duration": 0.2, "seed": 2}, smoke=True)
     c = runner.run_scene(other, out_dir=tmp_path / "c", frames=False, checkpoint_every=1e-9)
     assert c.info["resumed_from_s"] is None
@@ -1257,15 +1245,14 @@ def test_press_resumed_while_unloading_ends_bit_identical(tmp_path):
     a = runner.run_scene(spec, out_dir=tmp_path / "a", frames=False, checkpoint_every=1e-9)
     t_kill = a.metrics[0]["unload_start_s"] + 2.5 * spec.run.output_interval
 
-    class Crash(Exception):
-        pass
-
-    def kill(frac, msg):
-        if frac * spec.run.duration > t_kill:
-            raise Crash
-
-    with pytest.raises(Crash):
-        runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9, progress=kill)
+    with pytest.raises(RunKilled):
+        runner.run_scene(
+            spec,
+            out_dir=tmp_path / "b",
+            frames=False,
+            checkpoint_every=1e-9,
+            progress=kill_past(t_kill / spec.run.duration),
+        )
     b = runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9)
     assert b.info["resumed_from_s"] > a.metrics[0]["unload_start_s"]
     assert b.metrics[0]["stop"] == "unloaded"

@@ -4,7 +4,7 @@ import dataclasses
 
 import pytest
 
-from tests.conftest import requires_cuda
+from tests.conftest import RunKilled, kill_past, requires_cuda
 from tests.verification.test_analytic import _assert_records
 from warpdem.verify import cases as verify
 
@@ -81,15 +81,10 @@ def test_checkpoint_resumes_on_another_cuda_device(tmp_path):
     spec = rigs.spec("funnel", {"count": 60, "duration": 0.2}, smoke=True)
     a = runner.run_scene(spec, "cuda:0", out_dir=tmp_path / "a", frames=False, checkpoint_every=1e-9)
 
-    class Crash(Exception):
-        pass
-
-    def kill(frac, msg):
-        if frac > 0.5:
-            raise Crash
-
-    with pytest.raises(Crash):
-        runner.run_scene(spec, "cuda:0", out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9, progress=kill)
+    with pytest.raises(RunKilled):
+        runner.run_scene(
+            spec, "cuda:0", out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9, progress=kill_past(0.5)
+        )
     other = f"cuda:{wp.get_cuda_device_count() - 1}" if wp.get_cuda_device_count() > 1 else "cuda"
     b = runner.run_scene(spec, other, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9)
     assert b.info["resumed_from_s"] is not None and 0.05 < b.info["resumed_from_s"] < 0.2
