@@ -4,7 +4,7 @@
 
 The steps: seed 001's wet-feed Plackett-Burman (wetfeed_pb), central composite with its verification replicates
 (wetfeed_ccd), then the die press at the central composite's chosen optimum, or its closest point when the target
-is out of reach (die_press); seed 002's 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run
+is out of reach (die_press), and its surface-energy scan beyond the paper's range (wetfeed_gamma_scan); seed 002's 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run
 (phosphate_bbd) and the truck tipper, first contacts split from the rest of the loading (truck_tipper; with the
 bucket turning over 6 s, truck_tipper_slow); the reach diagnoses of seeds 000 and 001's one angle each
 (seed000_reach, seed001_reach: ``warpdem diagnose studies/diagnose/seed00N_*.toml``). A lane
@@ -83,6 +83,8 @@ def rig(name: str, device: str, root: Path, sets=()) -> list:
 STEPS = {
     "wetfeed_pb": lambda dev, root: study("wetfeed_pb", dev, root),
     "wetfeed_ccd": lambda dev, root: study("wetfeed_ccd", dev, root),
+    # the wet feed's surface energy doubled from 0.5 to 8 J/m^2, beyond the paper's range (no verification)
+    "wetfeed_gamma_scan": lambda dev, root: study("wetfeed_gamma_scan", dev, root) + ["--no-verify"],
     # at the central composite's optimum: built when the step starts, after the composite has run
     "die_press": lambda dev, root: lambda: rig("die_press", dev.split(",")[-1], root, ccd_optimum(root).items()),
     "phosphate_ffd": lambda dev, root: study("phosphate_ffd", dev, root),
