@@ -461,9 +461,10 @@ def test_pile_spheres_drops_grains_off_the_pile():
 
 
 def test_pile_spheres_drops_strays_lying_apart_on_the_plate():
-    """Grains that bounced off a pile and lie apart on the plate, out to three base radii, stand on the base
-    but are not the pile: kept, they set the flank's foot and the image method reads the 45 deg cone below
-    30 deg; left out (their own bodies, smaller than the pile), the cone reads 45 deg within the method's 1 deg."""
+    """Grains that bounced off a pile and lie apart on the plate (more than a diameter from any other grain), out
+    to three base radii, stand on the base but are not the pile: kept (``apart`` = 0), they set the flank's foot
+    and the image method reads the 45 deg cone below 30 deg; left out, the cone reads 45 deg within the
+    method's 1 deg."""
     from warpdem.scene.measure import pile_spheres
 
     x, r = _cone(45.0, 0.0, 0.0, (0.0, 0.0), 0)
@@ -478,6 +479,8 @@ def test_pile_spheres_drops_strays_lying_apart_on_the_plate():
     on = pile_spheres(xa, ra, gap=0.3)
     assert np.array_equal(on[: len(r)], alone) and not on[len(r) :].any()
     assert angle_image(xa[on], ra[on])["mean_deg"] == pytest.approx(45.0, abs=1.0)
+    off = pile_spheres(xa, ra, gap=0.3, apart=0.0)  # every grain on the base, the strays too
+    assert np.array_equal(off[: len(r)], alone) and off[len(r) :].all()
     # two piles on one plate: the larger is the pile
     small = x[x[:, 2] < 2.5 * R_SPHERE][:30] + np.array([4.0 * R_BASE, 0.0, 0.0])
     keep = pile_spheres(np.vstack([x, small]), np.r_[r, np.full(len(small), R_SPHERE)], gap=0.3)

@@ -166,6 +166,16 @@ def test_stage_round_trip(rig):
     assert _close(gm.phase_ends, wm.phase_ends)
     for f in ("drum_center", "drum_axis", "drum_radius", "average_from"):
         assert _close(getattr(gm, f), getattr(wm, f), rtol=1e-12, atol=0), f
+    assert gm.pile_apart == wm.pile_apart
+
+
+def test_pile_apart_is_a_measure_setting():
+    """measure.pile_apart goes through a stage (a value other than the default survives the round trip) and an
+    override, and a value that would split touching grains (below the touching gap) is refused by name."""
+    spec = apply_overrides(rigs.spec("funnel", smoke=True), {"measure.pile_apart": 0.0})
+    assert spec.measure.pile_apart == 0.0 and read_stage(write_stage(spec)).measure.pile_apart == 0.0
+    with pytest.raises(StageError, match=r"measure\.pile_apart.*0\.05"):
+        apply_overrides(rigs.spec("funnel", smoke=True), {"measure.pile_apart": 0.05})
 
 
 # ----------------------------------------------------------------------------------------------------

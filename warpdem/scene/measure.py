@@ -171,30 +171,46 @@ def _base_layer(x: np.ndarray, r: np.ndarray, base_z: float) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------
 
 
-def pile_spheres(x, r, base_z: float = 0.0, gap: float = 0.1) -> np.ndarray:
-    """Mask of the spheres that belong to the pile: the largest body of touching spheres that stands on the base.
+PILE_GAP = 0.1
+"""How near two spheres' surfaces come [-, in units of r_i + r_j] to count as touching in a pile (``pile_spheres``):
+a settled pile's contacts overlap, and the margin keeps a contact that has just opened."""
 
-    Two spheres touch when their centres are closer than (1 + ``gap``) (r_i + r_j); a body stands on the base
-    when one of its spheres lies within ``gap`` r of the base plane ``base_z`` [m]. Grains stuck to a lifted
-    cylinder, carried by a wall or still in flight are not part of the pile and would read as a tall column.
-    Nor are grains that bounced or rolled off and lie apart on the plate: every angle method takes the pile's
-    foot from its outermost grains, and a few strays 0.2 m out turned a cohesive mound with near-vertical
-    flanks into a 14 deg "pile" (seed 001's wet feed).
+
+def pile_spheres(x, r, base_z: float = 0.0, gap: float = PILE_GAP, apart: float = 1.0) -> np.ndarray:
+    """Mask of the spheres that belong to the pile: connected to the base through a chain of touching spheres,
+    and not lying apart from the pile's main body.
+
+    Two spheres touch when their centres are closer than (1 + ``gap``) (r_i + r_j); the chain starts at the
+    spheres within ``gap`` r of the base plane ``base_z`` [m]. Grains stuck to a lifted cylinder, carried by
+    a wall or still in flight are not part of the pile and would read as a tall column. Of what stands on the
+    base, the pile is the largest cluster of spheres whose surfaces come within ``apart`` times (r_i + r_j)
+    of each other (one diameter, for ``apart`` = 1): grains that bounced or rolled off and lie apart on the
+    plate are left out (``apart`` = 0: none is). Every angle method takes the pile's foot from its outermost grains, and a few strays
+    0.2 m out turned a cohesive mound into an 8 deg "pile" (seed 001's wet feed); a sparse toe, or a small
+    pile whose grains do not all touch, stays whole.
 
     Args:
         x: sphere centres [m], shape (n, 3); r: radii [m], shape (n,).
+        base_z: base plane [m]; gap: touching tolerance [-], >= 0; apart: the largest surface gap within the
+            pile, in units of r_i + r_j [-], >= gap, or 0 for no limit.
     Returns:
         bool mask, shape (n,).
     """
     x, r = _spheres(x, r)
     gap = _finite_number("gap", gap, "[-]")
+    apart = _finite_number("apart", apart, "[-]")
+    if not (apart == 0 or apart >= gap):
+        _bad("apart", apart, f"0 (no limit) or a surface gap in units of r_i + r_j, >= gap = {gap}")
     label = _touching_groups(x, r, gap)
     grounded = x[:, 2] - r <= base_z + gap * r
-    if not grounded.any():
-        return np.zeros(len(r), dtype=bool)
-    bodies = np.unique(label[grounded])
-    size = np.bincount(label)[bodies]
-    return label == bodies[np.argmax(size)]
+    on = np.isin(label, np.unique(label[grounded]))
+    if apart == 0 or not on.any():
+        return on
+    idx = np.flatnonzero(on)
+    near = _touching_groups(x[idx], r[idx], apart)
+    out = np.zeros(len(r), dtype=bool)
+    out[idx[near == np.argmax(np.bincount(near))]] = True
+    return out
 
 
 def _touching_groups(x: np.ndarray, r: np.ndarray, gap: float) -> np.ndarray:

@@ -144,7 +144,7 @@ def pile_select(x, r, m) -> tuple[np.ndarray, np.ndarray, int]:
     x, r = np.asarray(x, dtype=np.float64).reshape(-1, 3), np.asarray(r, dtype=np.float64).reshape(-1)
     keep = x[:, 2] - r > m.base_height - 2 * r.max(initial=0.0)
     x, r = x[keep], r[keep]
-    on = ms.pile_spheres(x, r, base_z=m.base_height) if len(r) else np.zeros(0, bool)
+    on = ms.pile_spheres(x, r, base_z=m.base_height, apart=m.pile_apart) if len(r) else np.zeros(0, bool)
     return x[on], r[on], int(len(r) - on.sum())
 
 

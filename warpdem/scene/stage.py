@@ -151,6 +151,11 @@ class MeasureSpec:
     walls: list = field(default_factory=list)
     phase_names: list = field(default_factory=list)
     phase_ends: list = field(default_factory=list)
+    pile_apart: float = 1.0
+    """Angle of repose: the widest surface gap [-, in units of r_i + r_j] between grains of one pile
+    (``measure.pile_spheres``): grains further from the pile's main body lie apart on the plate and are not
+    measured. 0: every grain that stands on the base through touching grains is the pile (the rule before
+    issue 23's third stage)."""
     first_contact_window: float = 0.0
     """Impacts: how long [s] after the first impact on ``walls`` the impacts are also summed as the phase
     ``first_contacts`` (not reset, so the first phase still counts them): the first grains' fall, apart from
@@ -381,6 +386,8 @@ def write_stage(spec: SceneSpec, path=None):
     wp_.CreateAttribute(NS + "measure:backstopHeight", Sdf.ValueTypeNames.Double).Set(float(m.backstop_height))
     if m.outlet_height is not None:
         wp_.CreateAttribute(NS + "measure:outletHeight", Sdf.ValueTypeNames.Double).Set(float(m.outlet_height))
+    if m.kind == "angle_of_repose":
+        wp_.CreateAttribute(NS + "measure:pileApart", Sdf.ValueTypeNames.Double).Set(float(m.pile_apart))
     if m.unload_speed > 0:
         for name, value in (("unloadSpeed", m.unload_speed), ("holdTime", m.hold_time)):
             wp_.CreateAttribute(NS + "measure:" + name, Sdf.ValueTypeNames.Double).Set(float(value))
@@ -739,6 +746,7 @@ def read_stage(path_or_stage) -> SceneSpec:
         unload_speed=r.get(world, NS + "measure:unloadSpeed", required=False, default=0.0),
         hold_time=r.get(world, NS + "measure:holdTime", required=False, default=0.0),
         outlet_height=r.get(world, NS + "measure:outletHeight", required=False, default=None),
+        pile_apart=r.get(world, NS + "measure:pileApart", required=False, default=1.0),
     )
     if kind == "drum":
         measure.drum_center = r.get(world, NS + "measure:drumCenter", "vec3")
