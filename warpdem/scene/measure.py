@@ -185,9 +185,9 @@ def pile_spheres(x, r, base_z: float = 0.0, gap: float = PILE_GAP, apart: float 
     a wall or still in flight are not part of the pile and would read as a tall column. Of what stands on the
     base, the pile is the largest cluster of spheres whose surfaces come within ``apart`` times (r_i + r_j)
     of each other (one diameter, for ``apart`` = 1): grains that bounced or rolled off and lie apart on the
-    plate are left out (``apart`` = 0: none is). Every angle method takes the pile's foot from its outermost grains, and a few strays
-    0.2 m out turned a cohesive mound into an 8 deg "pile" (seed 001's wet feed); a sparse toe, or a small
-    pile whose grains do not all touch, stays whole.
+    plate are left out (``apart`` = 0: none is). Every angle method takes the pile's foot from its outermost
+    grains, and a few strays 0.2 m out turned a cohesive mound into an 8 deg "pile" (seed 001's wet feed); a
+    sparse toe, or a small pile whose grains do not all touch, stays whole.
 
     Args:
         x: sphere centres [m], shape (n, 3); r: radii [m], shape (n,).
