@@ -37,6 +37,12 @@ COUNT = 500
 """Grains per pile. At 300 the bulk density of the cylinder's core scattered 92 kg/m^3 over world seeds and the
 rods' rise of the angle vanished in the piles' scatter: the base model was ADEQUATE for both files."""
 
+PILE_RULE = {"measure.pile_apart": 0.0}
+"""The piles are read with every grounded grain, the rule this case was built and checked with. Its verdict from
+the angle alone sits on an edge (README, Diagnose, open problems): leaving out the grains that lie apart, the
+default since issue 23's third stage, moves a few piles' cone angles and tipped it from AMBIGUOUS to
+UNEXPLAINED."""
+
 NOISE = {"angle_cone_deg": 0.5, "bulk_density_kg_m3": 10.0}
 """Measurement noise SD: 0.5 deg on the angle (the cone formula's, what a ruler gives), 10 kg/m^3 on the bulk
 density."""
@@ -71,7 +77,7 @@ mcmc_steps = 400
 [candidates]
 use = ["shape", "rolling_friction"]
 ranges = {{ shape = [1.0, 2.0] }}
-""".replace("FIXED", syn.toml_lines({**syn.LIFT_RIG, **syn.LIFT_SOFT, "count": COUNT}))
+""".replace("FIXED", syn.toml_lines({**syn.LIFT_RIG, **syn.LIFT_SOFT, **PILE_RULE, "count": COUNT}))
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +88,7 @@ def confounded(tmp_path_factory):
 
     tmp = tmp_path_factory.mktemp("confounded")
     exps, jobs = [], []
-    hidden = {**syn.LIFT_SOFT, "interaction.ore.ore.static_friction": MU_S}
+    hidden = {**syn.LIFT_SOFT, **PILE_RULE, "interaction.ore.ore.static_friction": MU_S}
     for k, radius in enumerate(syn.LIFT_RADII):
         geo = syn.lift_geometry(radius)
         exps.append({"id": f"R{k}", **geo})
