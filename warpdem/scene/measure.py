@@ -201,35 +201,47 @@ def pile_spheres(x, r, base_z: float = 0.0, gap: float = PILE_GAP, apart: float 
     apart = _finite_number("apart", apart, "[-]")
     if not (apart == 0 or apart >= gap):
         _bad("apart", apart, f"0 (no limit) or a surface gap in units of r_i + r_j, >= gap = {gap}")
-    label = _touching_groups(x, r, gap)
+    # one neighbour query serves both tests: the pairs within the wider gap hold those within the narrower
+    i, j, ratio = _near_pairs(x, r, max(gap, apart))
+    touch = ratio < 1.0 + gap
+    label = _components(len(r), i[touch], j[touch])
     grounded = x[:, 2] - r <= base_z + gap * r
     on = np.isin(label, np.unique(label[grounded]))
     if apart == 0 or not on.any():
         return on
-    idx = np.flatnonzero(on)
-    near = _touching_groups(x[idx], r[idx], apart)
-    out = np.zeros(len(r), dtype=bool)
-    out[idx[near == np.argmax(np.bincount(near))]] = True
-    return out
+    near = (ratio < 1.0 + apart) & on[i] & on[j]
+    cluster = _components(len(r), i[near], j[near])
+    return on & (cluster == np.argmax(np.bincount(cluster[on], minlength=len(r))))
+
+
+def _near_pairs(x: np.ndarray, r: np.ndarray, gap: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The index pairs (i, j) of spheres whose centres are closer than (1 + ``gap``) (r_i + r_j), and each pair's
+    centre distance over r_i + r_j (all of shape (k,))."""
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(x).query_pairs(2.0 * (1.0 + gap) * float(r.max()), output_type="ndarray")
+    if not len(pairs):
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0)
+    i, j = pairs[:, 0], pairs[:, 1]
+    ratio = np.linalg.norm(x[i] - x[j], axis=1) / (r[i] + r[j])
+    keep = ratio < 1.0 + gap
+    return i[keep], j[keep], ratio[keep]
+
+
+def _components(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Label (n,) of each of n nodes' connected component over the edges (i, j)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
 
 
 def _touching_groups(x: np.ndarray, r: np.ndarray, gap: float) -> np.ndarray:
     """Label (n,) of each sphere's group of spheres connected by contacts: two spheres touch when their
     centres are closer than (1 + ``gap``) (r_i + r_j)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
-
-    n = len(r)
-    pairs = cKDTree(x).query_pairs(2.0 * (1.0 + gap) * float(r.max()), output_type="ndarray")
-    if len(pairs):
-        i, j = pairs[:, 0], pairs[:, 1]
-        near = np.linalg.norm(x[i] - x[j], axis=1) < (1.0 + gap) * (r[i] + r[j])
-        i, j = i[near], j[near]
-    else:
-        i = j = np.zeros(0, dtype=np.int64)
-    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
-    return connected_components(graph, directed=False)[1]
+    i, j, _ = _near_pairs(x, r, gap)
+    return _components(len(r), i, j)
 
 
 def angle_surface_fit(
