@@ -4,11 +4,11 @@
 
 The steps: seed 001's wet-feed Plackett-Burman (wetfeed_pb), central composite with its verification replicates
 (wetfeed_ccd), then the die press at the central composite's chosen optimum, or its closest point when the target
-is out of reach (die_press), and its surface-energy scan beyond the paper's range (wetfeed_gamma_scan); seed 002's 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run
-(phosphate_bbd) and the truck tipper, first contacts split from the rest of the loading (truck_tipper; with the
-bucket turning over 6 s, truck_tipper_slow); the reach diagnoses of seeds 000 and 001's one angle each
-(seed000_reach, seed001_reach: ``warpdem diagnose studies/diagnose/seed00N_*.toml``). A lane
-runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
+is out of reach (die_press), and its surface-energy scan beyond the paper's range (wetfeed_gamma_scan); seed
+002's 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run (phosphate_bbd) and the truck
+tipper, first contacts split from the rest of the loading (truck_tipper; with the bucket turning over 6 s,
+truck_tipper_slow); the reach diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach:
+``warpdem diagnose studies/diagnose/seed00N_*.toml``). A lane runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
 side by side and may share a device. The default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the other three.
 
 Every step is a ``warpdem`` command that resumes where it stopped: each gets ``--stop-after`` the time left of

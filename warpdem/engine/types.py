@@ -64,7 +64,7 @@ def device_names(device: str, where: str = "device") -> list[str]:
         else:
             raise InputError(f"{where} = {device!r}: {d!r} is not a device; expected {DEVICE_FORMS}")
     for d in out:
-        if d.startswith("cuda"):
+        if device_kind(d) == "cuda":
             n = _cuda_count(device, where, f"{d!r} is not there")
             if d != "cuda" and int(d[5:]) >= n:
                 raise DeviceError(

@@ -1161,9 +1161,8 @@ def run_verification(
     runs (world seeds 1..n, so they differ from each other) as one launch per device of ``executor`` (the
     study's; by default ``device`` in this process); writes ``out/verification/verification.json`` with each
     value, the mean, SD and relative error against the target, and appends them to the report. Resumes like the
-    design runs (one file per replicate); each launch checkpoints into ``out/verification/launches/<id>/`` and, with
-    ``stop_after``
-    (wall seconds), returns {"stopped": message} once it has saved its checkpoint."""
+    design runs (one file per replicate); each launch checkpoints into ``out/verification/launches/<id>/`` and,
+    with ``stop_after`` (wall seconds), returns {"stopped": message} once it has saved its checkpoint."""
     out = Path(out)
     resp = next((r for r in study.responses if r.target is not None), None)
     if resp is None:
