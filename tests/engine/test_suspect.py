@@ -47,6 +47,14 @@ def test_outlet_threshold():
     assert hit["check"] == "outlet" and "(99 mm)" in hit["detail"] and "(100 mm)" in hit["detail"]
 
 
+def test_off_axis_threshold():
+    """A pile whose centre of mass lies beyond the radius it was poured within is flagged, one within it is not;
+    the words give both distances in mm."""
+    assert suspect.off_axis_warning(0.0199, 0.02) is None
+    hit = suspect.off_axis_warning(0.0261, 0.02)
+    assert hit["check"] == "off_axis" and "26 mm off" in hit["detail"] and "20 mm" in hit["detail"]
+
+
 def test_coincident_spheres_warn_at_finalize():
     """Two spheres placed at one point: finalize warns (they would push in no direction and stay together);
     two spheres apart do not."""

@@ -24,6 +24,7 @@ from warpdem.scene.measure import (
     impact_summary,
     packing_core,
     packing_fraction,
+    pile_offset,
     plot_angles,
     plot_drum,
     plot_impacts,
@@ -233,6 +234,17 @@ def test_small_pile_is_rejected():
     x, r = synthetic_cone(30.0, 0.012, R_SPHERE)
     with pytest.raises(ValueError, match="too small"):
         angle_surface_fit(x, r)
+
+
+@pytest.mark.parametrize("pd", [0.0, 0.1])
+def test_pile_offset_is_the_distance_of_its_centre_of_mass_from_the_axis(pd):
+    """A cone built about (0.03, -0.04) m lies 50 mm off the axis at the origin and on its own axis. Its
+    lattice is symmetric about its central column, so only the jitter (0.1 of the largest radius at most) and,
+    for unequal radii, their scatter (a volume-weighted mean over about 2,000 spheres) move the centre of
+    mass: a tenth of a sphere radius bounds both."""
+    x, r = synthetic_cone(45.0, R_BASE, R_SPHERE, seed=2, polydispersity=pd, center=(0.03, -0.04))
+    assert pile_offset(x, r) == pytest.approx(0.05, abs=0.1 * R_SPHERE)
+    assert pile_offset(x, r, center=(0.03, -0.04)) < 0.1 * R_SPHERE
 
 
 # --------------------------------------------------------------------------------------------------

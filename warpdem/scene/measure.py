@@ -244,6 +244,17 @@ def _touching_groups(x: np.ndarray, r: np.ndarray, gap: float) -> np.ndarray:
     return _components(len(r), i, j)
 
 
+def pile_offset(x, r, center=(0.0, 0.0)) -> float:
+    """How far [m] the pile's centre of mass lies from its axis ``center`` (cx, cy) [m], horizontally: spheres
+    ``x`` (n, 3) [m], ``r`` (n,) [m] of one density, weighted by their volumes. A pile poured or lifted on its axis
+    grows around it; one that stands far off it moved as a body after it was built (a cohesive column that fell
+    over), and the angle methods, which read slopes about the axis, read its side."""
+    x, r = _spheres(x, r)
+    cx, cy = _axis(x, r, center)
+    w = r**3
+    return float(math.hypot(np.dot(w, x[:, 0]) / w.sum() - cx, np.dot(w, x[:, 1]) / w.sum() - cy))
+
+
 def angle_surface_fit(
     x,
     r,

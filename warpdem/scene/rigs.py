@@ -413,7 +413,13 @@ class Funnel:
         plate, plate_pairs = _plate_pairs(self, "grain", "steel", pw)
         walls = [WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "plate")]
         settle_after = self.count / self.rate
-        measure = MeasureSpec("angle_of_repose", base_height=0.0, center=(0.0, 0.0), outlet_height=self.outlet_height)
+        measure = MeasureSpec(
+            "angle_of_repose",
+            base_height=0.0,
+            center=(0.0, 0.0),
+            outlet_height=self.outlet_height,
+            pour_radius=self.outlet_diameter / 2,
+        )
         if self.gate_time > 0:
             gate, opened = self._gate(radius, bound)
             walls.append(gate)
@@ -602,6 +608,7 @@ class LiftingCylinder:
                 packing_time=t0,
                 packing_radius=R - (2 * coat_r if self.coated else 0.0),
                 packing_margin=self.packing_margin,
+                pour_radius=R,
             ),
             domain=_plate_domain(
                 self.base_size, self.base_size, (0.0, 0.0, 0.0), margin, H + lift + self.pour_height + 0.5

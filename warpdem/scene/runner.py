@@ -130,6 +130,7 @@ PILE_METRICS = (
     "angle_image_deg",
     "angle_image_sd_deg",
     "angle_cone_deg",
+    "pile_offset_m",
     "angle_error",
 )
 """The metrics :func:`measure_pile` writes: what a stored final state can be measured for again."""
@@ -169,6 +170,7 @@ def measure_pile(x, r, m) -> dict:
             angle_image_deg=img["mean_deg"],
             angle_image_sd_deg=img["sd_deg"],
             angle_cone_deg=float(ms.angle_cone(x, r, base_z=m.base_height, center=m.center)),
+            pile_offset_m=ms.pile_offset(x, r, center=m.center),
         )
     except ValueError as e:
         mw["angle_error"] = str(e)
@@ -298,9 +300,9 @@ LAUNCH_RUN_FIELDS = ("duration", "settle_energy", "settle_after")
 """RunSpec fields in which scenes that share a launch may differ: the launch runs to the longest duration and
 the latest settle_after, and each world settles by its own settle_energy (:func:`launch_run`)."""
 
-WORLD_MEASURE_FIELDS = ("packing_radius", "packing_margin", "packing_base")
-"""MeasureSpec fields read per world after the run (a fill's core, sized by its grains), in which scenes that
-share a launch may differ; every other field steers the run itself."""
+WORLD_MEASURE_FIELDS = ("packing_radius", "packing_margin", "packing_base", "pour_radius")
+"""MeasureSpec fields read per world after the run (a fill's core, sized by its grains; the radius a pile was
+poured within, a funnel's outlet), in which scenes that share a launch may differ; every other field steers the run itself."""
 
 
 def shares_launch(a: SceneSpec, b: SceneSpec) -> bool:
@@ -348,6 +350,7 @@ MEASURE_METRICS = {
         "angle_image_sd_deg",
         "angle_cone_deg",
         "pile_height_m",
+        "pile_offset_m",
         "particles",
         "packing_fraction",
         "bulk_density_kg_m3",
@@ -783,6 +786,10 @@ def run_scene_iter(
         }
         if m.kind == "angle_of_repose":
             mw.update(measure_pile(*_particles(model, state, h, w), m))
+            if measures[w].pour_radius > 0 and "pile_offset_m" in mw:
+                found = suspect.off_axis_warning(mw["pile_offset_m"], measures[w].pour_radius)
+                if found is not None:
+                    mw["warnings"].append(found)
             if m.outlet_height is not None:
                 mw.update(_discharge_metrics(series, w))
                 found = suspect.outlet_warning(m.base_height + mw["pile_height_m"], m.outlet_height, 2 * r_small)

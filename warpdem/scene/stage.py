@@ -156,6 +156,10 @@ class MeasureSpec:
     (``measure.pile_spheres``): grains further from the pile's main body lie apart on the plate and are not
     measured. 0: every grain that stands on the base through touching grains is the pile (the rule before
     issue 23's third stage)."""
+    pour_radius: float = 0.0
+    """Angle of repose: the radius [m] about ``center`` of what the pile was poured from or lifted out of (a
+    funnel's outlet, a lifting cylinder's bore). A pile whose centre of mass lies further off the axis moved as a
+    body after it was built, and the run warns (``suspect.off_axis_warning``); 0: not checked."""
     first_contact_window: float = 0.0
     """Impacts: how long [s] after the first impact on ``walls`` the impacts are also summed as the phase
     ``first_contacts`` (not reset, so the first phase still counts them): the first grains' fall, apart from
@@ -388,6 +392,8 @@ def write_stage(spec: SceneSpec, path=None):
         wp_.CreateAttribute(NS + "measure:outletHeight", Sdf.ValueTypeNames.Double).Set(float(m.outlet_height))
     if m.kind == "angle_of_repose":
         wp_.CreateAttribute(NS + "measure:pileApart", Sdf.ValueTypeNames.Double).Set(float(m.pile_apart))
+    if m.pour_radius > 0:
+        wp_.CreateAttribute(NS + "measure:pourRadius", Sdf.ValueTypeNames.Double).Set(float(m.pour_radius))
     if m.unload_speed > 0:
         for name, value in (("unloadSpeed", m.unload_speed), ("holdTime", m.hold_time)):
             wp_.CreateAttribute(NS + "measure:" + name, Sdf.ValueTypeNames.Double).Set(float(value))
@@ -747,6 +753,7 @@ def read_stage(path_or_stage) -> SceneSpec:
         hold_time=r.get(world, NS + "measure:holdTime", required=False, default=0.0),
         outlet_height=r.get(world, NS + "measure:outletHeight", required=False, default=None),
         pile_apart=r.get(world, NS + "measure:pileApart", required=False, default=1.0),
+        pour_radius=r.get(world, NS + "measure:pourRadius", required=False, default=0.0),
     )
     if kind == "drum":
         measure.drum_center = r.get(world, NS + "measure:drumCenter", "vec3")

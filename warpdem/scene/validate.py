@@ -146,6 +146,7 @@ def _check_measure(spec: SceneSpec, origin: Origin) -> None:
         ("packing_radius", lambda v: v > 0 if m.packing_time > 0 else v >= 0, "the container's inner radius > 0 m"),
         ("packing_margin", lambda v: v >= 0, "a margin >= 0 diameters (of a particle)"),
         ("pile_apart", lambda v: v == 0 or v >= PILE_GAP, f"0 (off) or a gap >= {PILE_GAP} (r_i + r_j)"),
+        ("pour_radius", lambda v: v >= 0, "a radius >= 0 m (0: not checked)"),
         ("unload_speed", lambda v: v >= 0, "a speed >= 0 m/s (0: no unloading)"),
         ("hold_time", lambda v: v >= 0, "a time >= 0 s"),
         ("first_contact_window", lambda v: v >= 0, "a time >= 0 s (0: not split)"),

@@ -690,7 +690,8 @@ def run_checks(out, study: sp.StudySpec | None = None) -> list[dict]:
     bodies left the domain), ``fast``, ``start_overlap``, ``soft`` and ``outlet`` (the run's own warnings, see
     :mod:`warpdem.engine.suspect`), ``inertial`` (a press faster than
     :data:`warpdem.scene.measure.QUASI_STATIC_INERTIAL_NUMBER`), ``step`` (the step exceeded the stable step
-    in some tick) and ``outlet`` (a pile that grew up to its funnel's outlet, the run's own warning)."""
+    in some tick), ``outlet`` (a pile that grew up to its funnel's outlet) and ``off_axis`` (a pile that moved off
+    the axis it was poured on), the last two the run's own warnings."""
     out = Path(out)
     study = study or sp.load_study(out / "study.toml", check_scene=False)
     flags, scene = [], _scene_cache(study)
@@ -746,6 +747,7 @@ CHECK_WORDS = {
     "inertial": "not quasi-static",
     "step": "step above the stable step",
     "outlet": "pile reached the funnel",
+    "off_axis": "pile off its axis",
 }
 """How the report and the console name each of :func:`run_checks`' checks."""
 
