@@ -5,7 +5,8 @@
 STUDY_DIR is a study's output folder with its runs' final states (``runs/<point_id>.npz``, kept on the machine
 that ran it); RECORD_DIR (default STUDY_DIR) holds its ``results.csv`` and ``runs/<point_id>.json``. Prints, per
 run, the image, fit and cone angles [deg] the run recorded, and of its pile (``measure.pile_spheres``, the
-default rule) the horizontal distance of the centre of mass from the axis at (0, 0), its radius about that
+default rule) the horizontal distance of its centre of mass from the axis at (0, 0) (``measure.pile_offset``,
+which every run now records as ``pile_offset_m``), its radius about that
 centre (98th percentile) and its height [mm]; then Spearman's rank correlation of the image angle with the offset
 and with the height. Seed 001's cohesive columns that toppled lie far off the axis (README, "Seed 001 read
 again"); ``ccd/pile_offsets.txt`` is this script's output for the fourth stage's central composite.
@@ -20,16 +21,18 @@ from pathlib import Path
 
 import numpy as np
 
-from warpdem.scene.measure import pile_spheres
+from warpdem.scene.measure import pile_offset, pile_spheres
 
 
 def pile_figures(npz: Path) -> tuple[float, float, float]:
     """The pile's centre of mass off the axis, its radius about that centre and its height [m]."""
     state = np.load(npz)
-    x = state["sphere_x"][pile_spheres(state["sphere_x"], state["sphere_r"], 0.0)]
-    centre = x[:, :2].mean(axis=0)
+    on = pile_spheres(state["sphere_x"], state["sphere_r"], 0.0)
+    x, r = state["sphere_x"][on], state["sphere_r"][on]
+    w = r**3
+    centre = (w @ x[:, :2]) / w.sum()
     radius = np.percentile(np.hypot(*(x[:, :2] - centre).T), 98)
-    return float(np.hypot(*centre)), float(radius), float(x[:, 2].max())
+    return pile_offset(x, r), float(radius), float(x[:, 2].max())
 
 
 def main(study: Path, record: Path) -> None:
