@@ -7,7 +7,7 @@ The steps: seed 001's wet-feed Plackett-Burman (wetfeed_pb), central composite w
 is out of reach (die_press), and its surface-energy scan beyond the paper's range (wetfeed_gamma_scan); seed
 002's 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run (phosphate_bbd) and the truck
 tipper, first contacts split from the rest of the loading (truck_tipper; with the bucket turning over 6 s,
-truck_tipper_slow); the reach diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach:
+truck_tipper_slow); seed 000's Box-Behnken, read with the current pile rule (pellets_bbd); the reach diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach:
 ``warpdem diagnose studies/diagnose/seed00N_*.toml``). A lane runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
 side by side and may share a device. The default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the other three.
 
@@ -89,6 +89,8 @@ STEPS = {
     "die_press": lambda dev, root: lambda: rig("die_press", dev.split(",")[-1], root, ccd_optimum(root).items()),
     "phosphate_ffd": lambda dev, root: study("phosphate_ffd", dev, root),
     "phosphate_bbd": lambda dev, root: study("phosphate_bbd", dev, root),
+    # seed 000's Box-Behnken again, its piles read without the grains lying apart (the first run read them all)
+    "pellets_bbd": lambda dev, root: study("pellets_bbd", dev, root),
     # seeds 000 and 001 give one angle each, out of their base models' reach: which candidates reach it
     "seed000_reach": lambda dev, root: diagnosis("seed000_pellets", dev, root),
     "seed001_reach": lambda dev, root: diagnosis("seed001_wetfeed", dev, root),
