@@ -52,7 +52,7 @@ def test_off_axis_threshold():
     the words give both distances in mm."""
     assert suspect.off_axis_warning(0.0199, 0.02) is None
     hit = suspect.off_axis_warning(0.0261, 0.02)
-    assert hit["check"] == "off_axis" and "26 mm off" in hit["detail"] and "20 mm" in hit["detail"]
+    assert hit["check"] == "off_axis" and "26.1 mm off" in hit["detail"] and "the 20 mm it" in hit["detail"]
 
 
 def test_coincident_spheres_warn_at_finalize():

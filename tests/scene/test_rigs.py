@@ -193,6 +193,18 @@ def test_pour_radius_is_the_outlet_or_the_bore_and_a_measure_setting():
         apply_overrides(rigs.spec("funnel", smoke=True), {"measure.pour_radius": -0.01})
 
 
+def test_a_run_warns_of_a_pile_beyond_its_pour_radius():
+    """A run reads its pile's offset and warns when it exceeds the pour radius: 40 grains poured for 0.3 s,
+    with the radius cut to 0.1 mm, lie further off the axis than that (their centre of mass wanders by
+    millimetres), so the run carries the off_axis warning with its offset in mm, as a study's checks list it."""
+    spec = apply_overrides(rigs.spec("funnel", {"count": 40, "duration": 0.3}, smoke=True), {"measure.pile_apart": 0.0})
+    spec = apply_overrides(spec, {"measure.pour_radius": 1e-4})
+    m = runner.run_scene(spec, frames=False).metrics[0]
+    assert m["pile_offset_m"] > 1e-4
+    found = [w for w in m["warnings"] if w["check"] == "off_axis"]
+    assert len(found) == 1 and f"{1000 * m['pile_offset_m']:.3g} mm off its axis" in found[0]["detail"]
+
+
 # ----------------------------------------------------------------------------------------------------
 # 2. run outputs
 # ----------------------------------------------------------------------------------------------------

@@ -169,7 +169,7 @@ def off_axis_warning(offset: float, pour_radius: float) -> dict | None:
         return None
     return {
         "check": "off_axis",
-        "detail": f"the pile's centre of mass lies {1000 * offset:.0f} mm off its axis, beyond the {1000 * pour_radius:.0f} "
-        "mm it was poured within: it moved as a body after it was built (a column that fell over, a pile that "
+        "detail": f"the pile's centre of mass lies {1000 * offset:.3g} mm off its axis, beyond the "
+        f"{1000 * pour_radius:.3g} mm it was poured within: it moved as a body after it was built (a column that fell over, a pile that "
         "slid), and its angle is that of its side",
     }
