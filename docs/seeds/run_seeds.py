@@ -1,15 +1,16 @@
-"""Seeds 001 and 002 end to end on several GPUs (issue 23), as two lanes run side by side; resumable.
+"""The seed calibrations end to end on several GPUs (issue 23), as two lanes run side by side; resumable.
 
     python docs/seeds/run_seeds.py --root DIR --budget SECONDS [--lane DEVICES=STEP,STEP,... ...] [--dry-run]
 
 The steps: seed 001's wet-feed Plackett-Burman (wetfeed_pb), central composite with its verification replicates
-(wetfeed_ccd), then the die press at the central composite's chosen optimum, or its closest point when the target
-is out of reach (die_press), and its surface-energy scan beyond the paper's range (wetfeed_gamma_scan); seed
-002's 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run (phosphate_bbd) and the truck
-tipper, first contacts split from the rest of the loading (truck_tipper; with the bucket turning over 6 s,
-truck_tipper_slow); seed 000's Box-Behnken, read with the current pile rule (pellets_bbd); the reach diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach:
-``warpdem diagnose studies/diagnose/seed00N_*.toml``). A lane runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
-side by side and may share a device. The default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the other three.
+(wetfeed_ccd), then the die press at the central composite's chosen optimum, or its closest point when the target is
+out of reach (die_press), and its surface-energy scan beyond the paper's range (wetfeed_gamma_scan); seed 002's
+2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run (phosphate_bbd) and the truck tipper, first
+contacts split from the rest of the loading (truck_tipper; with the bucket turning over 6 s, truck_tipper_slow);
+seed 000's Box-Behnken, read with the current pile rule (pellets_bbd); the reach diagnoses of seeds 000 and 001's
+one angle each (seed000_reach, seed001_reach: ``warpdem diagnose studies/diagnose/seed00N_*.toml``). A lane runs its
+steps in order on its devices (a study on several goes through the distributed executor); lanes run side by side and
+may share a device. The default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the other three.
 
 Every step is a ``warpdem`` command that resumes where it stopped: each gets ``--stop-after`` the time left of
 ``--budget`` less :data:`STOP_MARGIN` and exits 3 when it stops, which ends its lane for this call. Run the same
