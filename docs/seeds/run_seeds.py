@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import subprocess
 import sys
 import threading
@@ -48,6 +49,28 @@ PRESS_KEYS = {
 }
 """The central composite's factors (wetfeed_ccd.toml, the funnel's grain-grain pair) as the die press's feed-feed
 pair; the CCD's fixed values are the press's own (restitution 0.15, the steel pair's 0.1, 0.2 and 0.45)."""
+
+
+RUNNING: set = set()
+"""The steps' processes now running: ended, by their pids, when this script gets SIGTERM. ``timeout`` signals
+the whole process group, but ``kill PID`` of this script alone used to leave its running step behind, still
+writing into DIR while the next call started the same step again."""
+
+STOPPING = threading.Event()
+"""Set on SIGTERM, so that no lane starts its next step."""
+
+
+def end_steps(signum, frame) -> None:
+    """SIGTERM: end each running step (it keeps its last checkpoint, at most a minute old) and exit."""
+    STOPPING.set()
+    for proc in list(RUNNING):
+        proc.terminate()
+    for proc in list(RUNNING):
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    raise SystemExit(128 + signum)
 
 
 def ccd_optimum(root: Path) -> dict:
@@ -122,6 +145,8 @@ def run_lane(name: str, steps: list, root: Path, deadline: float, dry: bool, log
         if done.exists():
             log(f"[{name}] {step}: done before")
             continue
+        if STOPPING.is_set():
+            return
         left = int(deadline - time.time()) - STOP_MARGIN
         if left < 30:
             log(f"[{name}] {step}: {left} s left, not started")
@@ -136,7 +161,12 @@ def run_lane(name: str, steps: list, root: Path, deadline: float, dry: bool, log
             continue
         t0 = time.time()
         with open(root / f"{step}.log", "a") as fh:
-            rc = subprocess.call(cmd, stdout=fh, stderr=subprocess.STDOUT)
+            proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT)
+            RUNNING.add(proc)
+            if STOPPING.is_set():  # SIGTERM came between the check above and the start
+                proc.terminate()
+            rc = proc.wait()
+            RUNNING.discard(proc)
         log(f"[{name}] {step}: exit {rc} after {time.time() - t0:.1f} s")
         if rc != 0:
             return
@@ -159,6 +189,7 @@ def main(argv=None) -> int:
             print(time.strftime("%H:%M:%S"), msg, flush=True)
 
     lanes = [(chr(65 + k), parse_lane(t, a.root)) for k, t in enumerate(a.lane or LANES)]
+    signal.signal(signal.SIGTERM, end_steps)
     threads = [threading.Thread(target=run_lane, args=(n, s, a.root, deadline, a.dry_run, log)) for n, s in lanes]
     for t in threads:
         t.start()
