@@ -40,7 +40,9 @@ tick, saves its checkpoint and the cluster shuts down, and the pack that follows
 no margin (and a study's clock then started only once its Dask cluster was up, the workers' first kernel compile
 included), ``--budget 500`` (plus the wheels' install) took 543 s, and ``--budget 530`` overran a 600 s call, which
 lost the machine and its checkpoints. Wrapping the script in ``timeout`` keeps the pack that follows: a killed
-launch loses at most its last minute, since launches checkpoint every 60 s."""
+launch loses at most its last minute, since launches checkpoint every 60 s. A study's analysis after its last run
+is not bounded by ``--stop-after``: seed 000's Box-Behnken (211,500 spheres a world) was still drawing its pile
+pictures 146 s after its last run (11 of 17 done) when ``timeout`` ended it; give such a step that much more."""
 
 PRESS_KEYS = {
     "X1": "interaction.feed.feed.rolling_friction",
