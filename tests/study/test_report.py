@@ -380,3 +380,28 @@ def test_contour_plots_share_one_colour_scale():
 
     levels = _shared_levels([np.array([[1.0, 2.0]]), np.array([[0.5, 4.0]])])
     assert levels[0] == 0.5 and levels[-1] == 4.0 and len(levels) == 15
+
+
+@pytest.mark.parametrize("target, inside", [(10.0, True), (12.0, False)])
+def test_mean_model_target_against_its_interval(tmp_path, target, inside):
+    """With no factor significant, backward elimination leaves the mean model; the report then places the target
+    against the mean's confidence interval, which is scipy's one-sample t interval of the runs. Data: a 2^3
+    factorial with two centre points whose response is noise alone (SD 0.5 about 10), the hidden effect none."""
+    from scipy import stats
+
+    factors = [Factor(f, 0.0, 1.0) for f in "ABC"]
+    runs = full_factorial(3)
+    runs = pd.concat([runs, pd.DataFrame({f: [0.0, 0.0] for f in "ABC"})], ignore_index=True)
+    runs["run"] = np.arange(1, len(runs) + 1)
+    runs["aor_deg"] = np.random.default_rng(7).normal(10.0, 0.5, len(runs))
+    res = _aor_report(tmp_path, (runs, factors, {}), "noise", target, model="linear", eliminate=True)
+    r = res["aor_deg"]
+    assert r["terms"] == [] and r["chosen"] is None
+    y = runs["aor_deg"]
+    lo, hi = stats.t.interval(0.95, len(y) - 1, loc=y.mean(), scale=stats.sem(y))
+    assert r["mean_interval"] == pytest.approx([lo, hi], rel=1e-12)
+    assert r["predicted"] == pytest.approx(y.mean(), rel=1e-12)
+    assert r["reachable"] is inside
+    md = (tmp_path / "report.md").read_text()
+    assert f"The target lies **{'inside' if inside else 'outside'}** that interval" in md
+    assert ("outside the mean model's interval" in md) is (not inside)

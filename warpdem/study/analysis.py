@@ -947,6 +947,21 @@ def mean_prediction_interval(
     return predicted - half, predicted + half
 
 
+def mean_interval(fit: ModelFit, alpha: float = 0.05) -> tuple[float, float, float]:
+    """The mean response of a model with no terms left (the mean model, what backward elimination leaves when no
+    factor is significant) and its two-sided ``1 - alpha`` confidence interval: statsmodels' ``conf_int`` of the
+    intercept, brought back to the response's units through the fit's transform. It is what such a model
+    predicts at every setting of the design region. Returns (mean, low, high)."""
+    if fit.terms:
+        raise InputError(f"mean_interval: the model of {fit.response} has terms {fit.labels}; expected none")
+    low, high = (float(v) for v in np.asarray(fit.ols.conf_int(alpha))[0])
+    mean = float(np.asarray(fit.ols.params)[0])
+    if fit.transform != NONE:
+        mean = float(fit.to_response(mean))
+        low, high = fit.transform.interval(low, high)
+    return mean, float(low), float(high)
+
+
 def confirmation_interval(fit: ModelFit, x, runs: int = 1, alpha: float = 0.05) -> dict:
     """Design-Expert's confirmation check at the coded point ``x`` (mapping or (k,) array): the prediction,
     its leverage h0 = x0' (X'X)^-1 x0, the residual mean square and its df, and

@@ -1172,7 +1172,8 @@ def run_verification(
     s = summary.get(resp.name) or {}
     chosen = s.get("chosen")
     if not chosen:
-        log(f"{study.name}: no verification: target {resp.target} is not reachable in the design region")
+        why = "no factor moves the response" if s.get("mean_interval") else "it is not reachable in the design region"
+        log(f"{study.name}: no verification at target {resp.target}: {why}")
         return None
     n = study.verification.replicates
     vdir = out / "verification"

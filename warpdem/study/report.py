@@ -46,6 +46,7 @@ from .analysis import (
     half_normal,
     influence,
     interaction,
+    mean_interval,
     model_terms,
     optimize_desirability,
     outlier_limit,
@@ -1370,7 +1371,33 @@ def write_report(
             "reachable": None,
         }
         if target is not None and sol is None:
-            md += ["", "### Target", "", f"Target {target:g}: no model terms left, nothing to solve."]
+            # the mean model predicts one value everywhere: the target is either within its interval or out of reach
+            unit = f" {resp['unit']}" if resp.get("unit") else ""
+            mean, lo, hi = mean_interval(fit, alpha)
+            inside = bool(lo <= float(target) <= hi)
+            md += [
+                "",
+                "### Target",
+                "",
+                f"Target {target:g}{unit}: no model terms left, so the model predicts its mean, {mean:.4g}{unit}, at "
+                f"every setting of the design region ({100 * (1 - alpha):g} % confidence interval {lo:.4g} .. "
+                f"{hi:.4g}{unit}). No settings are chosen.",
+                "",
+                f"The target lies **{'inside' if inside else 'outside'}** that interval"
+                + (
+                    ": the region gives it within the runs' scatter, whatever the factors."
+                    if inside
+                    else f", {abs(float(target) - mean):.3g}{unit} {'above' if target > mean else 'below'} the mean: "
+                    "no setting in the design region is predicted to reach it."
+                ),
+            ]
+            if not inside:
+                auto_notes.append(
+                    f"{name}: target {target:g} is outside the mean model's interval {lo:.4g} .. {hi:.4g}: no factor "
+                    "moves the response out of its scatter in the design region; widen the factor ranges or add a "
+                    "factor that moves it."
+                )
+            entry.update(reachable=inside, predicted=mean, mean_interval=[lo, hi])
         if sol is not None:
             fam = sol.family
             opt = pd.DataFrame({f: fam[f"{f}_actual"] for f in fnames})
