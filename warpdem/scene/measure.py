@@ -244,15 +244,23 @@ def _touching_groups(x: np.ndarray, r: np.ndarray, gap: float) -> np.ndarray:
     return _components(len(r), i, j)
 
 
+def pile_centroid(x, r) -> np.ndarray:
+    """The pile's centre of mass (x, y) [m], shape (2,): spheres ``x`` (n, 3) [m], ``r`` (n,) [m] of one density,
+    weighted by their volumes."""
+    x, r = _spheres(x, r)
+    w = r**3
+    return (w @ x[:, :2]) / w.sum()
+
+
 def pile_offset(x, r, center=(0.0, 0.0)) -> float:
-    """How far [m] the pile's centre of mass lies from its axis ``center`` (cx, cy) [m], horizontally: spheres
-    ``x`` (n, 3) [m], ``r`` (n,) [m] of one density, weighted by their volumes. A pile poured or lifted on its axis
-    grows around it; one that stands far off it moved as a body after it was built (a cohesive column that fell
-    over), and the angle methods, which read slopes about the axis, read its side."""
+    """How far [m] the pile's centre of mass (:func:`pile_centroid`) lies from its axis ``center`` (cx, cy) [m],
+    horizontally: spheres ``x`` (n, 3) [m], ``r`` (n,) [m]. A pile poured or lifted on its axis grows around it;
+    one that stands far off it moved as a body after it was built (a cohesive column that fell over), and the
+    angle methods, which read slopes about the axis, read its side."""
     x, r = _spheres(x, r)
     cx, cy = _axis(x, r, center)
-    w = r**3
-    return float(math.hypot(np.dot(w, x[:, 0]) / w.sum() - cx, np.dot(w, x[:, 1]) / w.sum() - cy))
+    gx, gy = pile_centroid(x, r)
+    return float(math.hypot(gx - cx, gy - cy))
 
 
 def angle_surface_fit(

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from warpdem.scene.measure import pile_offset, pile_spheres
+from warpdem.scene.measure import pile_centroid, pile_offset, pile_spheres
 
 
 def pile_figures(npz: Path) -> tuple[float, float, float]:
@@ -29,9 +29,7 @@ def pile_figures(npz: Path) -> tuple[float, float, float]:
     state = np.load(npz)
     on = pile_spheres(state["sphere_x"], state["sphere_r"], 0.0)
     x, r = state["sphere_x"][on], state["sphere_r"][on]
-    w = r**3
-    centre = (w @ x[:, :2]) / w.sum()
-    radius = np.percentile(np.hypot(*(x[:, :2] - centre).T), 98)
+    radius = np.percentile(np.hypot(*(x[:, :2] - pile_centroid(x, r)).T), 98)
     return pile_offset(x, r), float(radius), float(x[:, 2].max())
 
 
