@@ -1370,9 +1370,9 @@ def write_report(
             "predicted": None,
             "reachable": None,
         }
+        unit = f" {resp['unit']}" if resp.get("unit") else ""
         if target is not None and sol is None:
             # the mean model predicts one value everywhere: the target is either within its interval or out of reach
-            unit = f" {resp['unit']}" if resp.get("unit") else ""
             mean, lo, hi = mean_interval(fit, alpha)
             inside = bool(lo <= float(target) <= hi)
             md += [
@@ -1415,7 +1415,6 @@ def write_report(
             settings = {f: float(sol.chosen_actual[f]) for f in fnames}
             pred = float(sol.chosen["predicted"])
             lo, hi = sol.predicted_range
-            unit = f" {resp['unit']}" if resp.get("unit") else ""
             md += [
                 "",
                 "### Target",
