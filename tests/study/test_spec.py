@@ -22,6 +22,7 @@ COUNTS = {
     "pellets_pb": 12,
     "pellets_steepest": 6,
     "pellets_bbd": 17,
+    "pellets_verify": 4,
     "wetfeed_pb": 12,
     "wetfeed_ccd": 23,
     "phosphate_ffd": 16,
@@ -80,6 +81,13 @@ def test_design_counts_match_the_seeds(tables):
     assert pt["phosphate_bbd"] == {"factorial": 12, "centre": 3}
     assert pt["pellets_steepest"] == {"path": 6}
     assert pt["phosphate_ffd"] == {"factorial": 16}
+    # seed 000's replicates sit on one Box-Behnken point, the region's high corner in D and E
+    assert pt["pellets_verify"] == {"point": 4}
+    acts = ["C_actual", "D_actual", "E_actual"]
+    points = {
+        name: {tuple(r) for r in tables[name][acts].to_numpy().round(9)} for name in ("pellets_verify", "pellets_bbd")
+    }
+    assert points["pellets_verify"] == {(0.45, 0.75, 0.07)} and (0.45, 0.75, 0.07) in points["pellets_bbd"]
 
 
 @pytest.mark.parametrize("name", ["pellets_pb", "wetfeed_pb", "pellets_bbd", "wetfeed_ccd", "phosphate_bbd"])
