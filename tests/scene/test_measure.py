@@ -499,6 +499,42 @@ def test_pile_spheres_drops_strays_lying_apart_on_the_plate():
     assert np.array_equal(keep[: len(r)], alone) and not keep[len(r) :].any()
 
 
+@pytest.mark.parametrize("apart", [0.0, 0.3, 1.0, 2.5])
+def test_pile_spheres_equals_its_definition_by_brute_force(apart):
+    """On scattered clusters of spheres of mixed sizes (touching groups, grains a little apart, grains far off,
+    some in the air), the mask equals the definition worked out over every pair: spheres connected to the base
+    by chains of centres closer than 1.1 (r_i + r_j), and of those the largest cluster whose pairs are closer
+    than (1 + apart) (r_i + r_j). The selection asks only the grains outside the largest touching group for
+    their wide neighbours; this checks that nothing is lost by it."""
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial.distance import cdist
+
+    from warpdem.scene.measure import PILE_GAP, pile_spheres
+
+    # a touching block of 1 mm spheres on the plate, grains at surface gaps of 0.2, 0.7 and 2 (r_i + r_j) from
+    # its edge, one touching the 0.7 grain (a chain), and scattered clusters of mixed sizes 0.3 m off
+    block = np.stack(np.meshgrid(np.arange(8), np.arange(8), np.arange(3), indexing="ij"), -1).reshape(-1, 3)
+    block = 2.0e-3 * block + 1.0e-3
+    edge = block[:, 0].max()
+    sat = np.array([[edge + 2e-3 * (1 + g), 2e-3 * k + 1e-3, 1e-3] for k, g in enumerate((0.2, 0.7, 2.0))])
+    chain = sat[1] + [0.0, 0.0, 2.0e-3]
+    rng = np.random.default_rng(11)
+    seeds = rng.uniform([0.25, -0.05, 0.0], [0.35, 0.05, 0.02], (25, 3))
+    scatter = np.concatenate([s + rng.normal(0.0, 0.004, (rng.integers(1, 40), 3)) for s in seeds])
+    x = np.vstack([block, sat, chain, scatter])
+    r = np.r_[np.full(len(block) + 4, 1.0e-3), rng.uniform(0.6e-3, 1.8e-3, len(scatter))]
+    x[:, 2] = np.maximum(np.abs(x[:, 2]), r)  # no sphere below the plate
+    d = cdist(x, x) / (r[:, None] + r[None, :])
+    touch = connected_components(d < 1.0 + PILE_GAP, directed=False)[1]
+    on = np.isin(touch, touch[x[:, 2] - r <= PILE_GAP * r])
+    assert 0 < on.sum() < len(r)
+    if apart > 0:
+        near = connected_components((d < 1.0 + apart) & on[:, None] & on[None, :], directed=False)[1]
+        on &= near == np.argmax(np.bincount(near[on]))
+    assert 0 < on.sum()
+    assert np.array_equal(pile_spheres(x, r, apart=apart), on)
+
+
 # --------------------------------------------------------------------------------------------------
 # packing fraction and bulk density
 # --------------------------------------------------------------------------------------------------
