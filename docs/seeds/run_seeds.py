@@ -7,11 +7,12 @@ The steps: seed 001's wet-feed Plackett-Burman (wetfeed_pb), central composite w
 out of reach (die_press), and its surface-energy scan beyond the paper's range (wetfeed_gamma_scan); seed 002's
 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run (phosphate_bbd) and the truck tipper, first
 contacts split from the rest of the loading (truck_tipper; with the bucket turning over 6 s, truck_tipper_slow);
-seed 000's Box-Behnken and steepest ascent, read with the current pile rule (pellets_bbd, pellets_steepest), and
-replicates at the Box-Behnken region's high corner (pellets_verify); the reach diagnoses of seeds 000 and 001's
-one angle each (seed000_reach, seed001_reach: ``warpdem diagnose studies/diagnose/seed00N_*.toml``). A lane runs its
-steps in order on its devices (a study on several goes through the distributed executor); lanes run side by side and
-may share a device. The default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the other three.
+seed 000's screening, steepest ascent and Box-Behnken, read with the current pile rule (pellets_pb,
+pellets_steepest, pellets_bbd), and replicates at the Box-Behnken region's high corner (pellets_verify); the reach
+diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach: ``warpdem diagnose
+studies/diagnose/seed00N_*.toml``). A lane runs its steps in order on its devices (a study on several goes through
+the distributed executor); lanes run side by side and may share a device. The default, for 4 GPUs: seed 001 on
+cuda:0, seed 002 on the other three.
 
 Every step is a ``warpdem`` command that resumes where it stopped: each gets ``--stop-after`` the time left of
 ``--budget`` less :data:`STOP_MARGIN` and exits 3 when it stops, which ends its lane for this call. Run the same
@@ -118,8 +119,9 @@ STEPS = {
     "phosphate_bbd": lambda dev, root: study("phosphate_bbd", dev, root),
     # seed 000's Box-Behnken again, its piles read without the grains lying apart (the first run read them all)
     "pellets_bbd": lambda dev, root: study("pellets_bbd", dev, root),
-    # its steepest ascent again (the current pile rule), and replicates at the Box-Behnken region's high corner,
-    # the one point that read above the target: its mean model names no optimum to verify
+    # its screening and steepest ascent again (the current pile rule), and replicates at the Box-Behnken region's
+    # high corner, the one point that read above the target: its mean model names no optimum to verify
+    "pellets_pb": lambda dev, root: study("pellets_pb", dev, root),
     "pellets_steepest": lambda dev, root: study("pellets_steepest", dev, root),
     "pellets_verify": lambda dev, root: study("pellets_verify", dev, root),
     # seeds 000 and 001 give one angle each, out of their base models' reach: which candidates reach it
