@@ -208,7 +208,7 @@ def pile_spheres(x, r, base_z: float = 0.0, gap: float = PILE_GAP, apart: float 
         return on
     # spheres that touch are near too, so only a pair with a sphere outside the largest touching group can join
     # groups. Asking every sphere for its neighbours within the wide gap found hundreds of sub-spheres of nearby
-    # pellets for each of a seed 000 pile's 211,500 and took 5 times as long (benchmarks/pile_select.py)
+    # pellets for each of a seed 000 pile's 211,500 and took 8 times as long (benchmarks/pile_select.py)
     idx = np.flatnonzero(on)
     rest = idx[label[idx] != np.argmax(np.bincount(label[idx]))]
     i, j, _ = _near_pairs_from(x, r, rest, idx, apart)
