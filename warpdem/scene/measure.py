@@ -222,13 +222,9 @@ def _near_pairs(x: np.ndarray, r: np.ndarray, gap: float) -> tuple[np.ndarray, n
     centre distance over r_i + r_j (all of shape (k,))."""
     from scipy.spatial import cKDTree
 
-    pairs = cKDTree(x).query_pairs(2.0 * (1.0 + gap) * float(r.max()), output_type="ndarray")
-    if not len(pairs):
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0)
+    pairs = cKDTree(x).query_pairs(_reach(r, gap), output_type="ndarray").reshape(-1, 2)
     i, j = pairs[:, 0], pairs[:, 1]
-    ratio = np.linalg.norm(x[i] - x[j], axis=1) / (r[i] + r[j])
-    keep = ratio < 1.0 + gap
-    return i[keep], j[keep], ratio[keep]
+    return _closer_than(r, i, j, np.linalg.norm(x[i] - x[j], axis=1), gap)
 
 
 def _near_pairs_from(
@@ -239,13 +235,23 @@ def _near_pairs_from(
     from scipy.spatial import cKDTree
 
     if not len(some) or not len(among):
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0)
-    reach = 2.0 * (1.0 + gap) * float(r.max())
-    d = cKDTree(x[some]).sparse_distance_matrix(cKDTree(x[among]), reach, output_type="ndarray")
-    i, j = some[d["i"]], among[d["j"]]
-    ratio = d["v"] / (r[i] + r[j])
+        return _closer_than(r, some[:0], among[:0], np.zeros(0), gap)
+    d = cKDTree(x[some]).sparse_distance_matrix(cKDTree(x[among]), _reach(r, gap), output_type="ndarray")
+    return _closer_than(r, some[d["i"]], among[d["j"]], d["v"], gap)
+
+
+def _reach(r: np.ndarray, gap: float) -> float:
+    """The centre distance [m] within which any two of the spheres of radii ``r`` may be closer than (1 + ``gap``)
+    (r_i + r_j): the search radius of the neighbour queries."""
+    return 2.0 * (1.0 + gap) * float(r.max())
+
+
+def _closer_than(r, i, j, dist, gap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Of the pairs (i, j) with centre distances ``dist`` [m], those closer than (1 + ``gap``) (r_i + r_j), and
+    their distance over r_i + r_j."""
+    ratio = dist / (r[i] + r[j])
     keep = ratio < 1.0 + gap
-    return i[keep], j[keep], ratio[keep]
+    return i[keep].astype(np.int64, copy=False), j[keep].astype(np.int64, copy=False), ratio[keep]
 
 
 def _components(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
