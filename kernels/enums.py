@@ -24,9 +24,15 @@ class RollingModel(enum.IntEnum):
 
     NONE = 0
     CONSTANT_TORQUE = 1
-    """Type A (EDEM "standard rolling friction"): torque -mu_r * R* * F_n along the relative rolling direction."""
+    """Type A (Ai et al. 2011; EDEM's "RVD rolling friction", LIGGGHTS ``cdt``): torque -mu_r * R* * F_n along the
+    relative rolling direction, R* the two spheres' reduced radius."""
     EPSD = 2
     """Type C (elastic-plastic spring-dashpot, Ai et al. 2011): rolling spring capped at mu_r * R* * F_n, plus a dashpot."""
+    STANDARD = 3
+    """EDEM's "standard rolling friction": on each body its own torque -mu_r * F_n * R_i * w_i/|w_i|, R_i the
+    contact point's distance from that body's centre of mass (a clump's, not its sphere's), w_i its own angular
+    velocity, twisting included. Between two equal spheres twice type A's torque; on a clump's sphere the lever
+    is the clump's."""
 
 
 class Overflow(enum.IntFlag):

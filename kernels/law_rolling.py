@@ -1,8 +1,10 @@
-"""Rolling resistance: type A (constant directional torque) and type C (EPSD, Ai et al. 2011).
+"""Rolling resistance: type A (constant directional torque), type C (EPSD, Ai et al. 2011) and EDEM's standard model.
 
-Both act on the relative rolling velocity w_r = (w_a - w_b) minus its component along the normal
+Types A and C act on the relative rolling velocity w_r = (w_a - w_b) minus its component along the normal
 (twisting is not resisted) and use the rolling radius R*, so that the torques on a and b are equal
-and opposite (EDEM's standard model uses R_i of each body; for a sphere on a wall R* = R_i).
+and opposite. EDEM's standard model (:func:`standard_rolling`) gives each body a torque of its own, from
+its own angular velocity and the lever R_i from its centre of mass to the contact point (for a sphere on a
+wall, its radius less half the overlap: type A's R* = R to first order).
 
 Type A:  M = -mu_r R* F_n w_r/|w_r|.  At rest it flips sign every step (a known property).
 Type C:  spring M_k += -k_r w_r dt, k_r = 2.25 k_n mu_r^2 R*^2 with k_n the secant normal stiffness,
@@ -13,6 +15,22 @@ Type C:  spring M_k += -k_r w_r dt, k_r = 2.25 k_n mu_r^2 R*^2 with k_n the seca
 import warp as wp
 
 from .enums import RollingModel
+
+
+@wp.func
+def standard_rolling(w: wp.vec3, f_n: float, lever: float, mu_r: float):
+    """EDEM's standard rolling friction: the torque on one body [N m], -mu_r F_n R_i w/|w|.
+
+    Args:
+        w: the body's own angular velocity [rad/s] (a clump's sphere: the clump's).
+        f_n: normal force [N] (only its positive part resists rolling).
+        lever: R_i, the contact point's distance from the body's centre of mass [m].
+        mu_r: rolling friction coefficient [-].
+    """
+    w_len = wp.length(w)
+    if w_len > 0.0:
+        return w * (-mu_r * lever * wp.max(f_n, 0.0) / w_len)
+    return wp.vec3(0.0)
 
 
 @wp.func
@@ -32,7 +50,7 @@ def rolling_resistance(
     """Rolling resistance torque on body a.
 
     Args:
-        model: a RollingModel (NONE, CONSTANT_TORQUE: type A, EPSD: type C).
+        model: a RollingModel (NONE, CONSTANT_TORQUE: type A, EPSD: type C; STANDARD: zero, see standard_rolling).
         w_rel: angular velocity of a minus that of b [rad/s].
         n: unit contact normal.
         f_n: normal force [N] (only its positive part resists rolling).

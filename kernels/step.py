@@ -27,7 +27,7 @@ from .enums import RollingModel, SphereActivity
 from .features import MODULE_OPTIONS, StepFeatures
 from .geometry import FEATURE_FACE, closest_point_triangle
 from .law_contact import contact_force_for
-from .law_rolling import rolling_resistance
+from .law_rolling import rolling_resistance, standard_rolling
 from .params import ContactHistory, PairParams, history_load, history_store, slot_bit, slot_live
 
 wp.set_module_options(MODULE_OPTIONS)
@@ -177,13 +177,15 @@ def wall_contact_for(cohesive_laws: bool, rolling: bool):
         v_wall: wp.vec3,
         r_i: float,
         m_i: float,
+        body_arm: wp.vec3,
         p: PairParams,
         history: ContactHistory,
         dt: float,
     ):
         """A sphere against a wall (infinite radius and mass) along unit normal n (sphere -> wall).
 
-        ``v_wall`` is the wall's velocity at the contact point [m/s].
+        ``v_wall`` is the wall's velocity at the contact point [m/s]; ``body_arm`` the sphere's centre less its
+        body's centre of mass [m] (zero for a free sphere; EDEM's standard rolling friction reads it).
 
         Returns:
             (active, force on the sphere [N], torque on the sphere [N m], updated history (zero once the contact
@@ -195,6 +197,9 @@ def wall_contact_for(cohesive_laws: bool, rolling: bool):
         if active == 0:
             return int(0), wp.vec3(0.0), wp.vec3(0.0), h, 0.0
         if wp.static(rolling):
+            if p.rolling_model == RollingModel.STANDARD:
+                m_std = standard_rolling(w_i, f_n, wp.length(body_arm + arm * n), p.mu_r)
+                return int(1), f_a, wp.cross(arm * n, f_t) + m_std, ContactHistory(h.spring, h.roll * 0.0, h.aux), k_s
             m_roll, roll = rolling_resistance(
                 p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i, p.rolling_damping, h.roll, dt
             )
@@ -341,6 +346,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
         v_in: wp.array[wp.vec3],
         w_in: wp.array[wp.vec3],
         active_in: wp.array[int],
+        clump_x: wp.array[wp.vec3],
         wall_pose: wp.array[wp.transform],
         wall_v: wp.array[wp.vec3],
         wall_w: wp.array[wp.vec3],
@@ -418,6 +424,13 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             tally = clump
         run_key = int(-1)
         run_n = int(0)
+
+        # the sphere's centre from its body's centre of mass: EDEM's standard rolling friction takes its lever
+        # from the body's centre, a clump's for its spheres
+        body_arm = wp.vec3(0.0)
+        if wp.static(clumps and rolling):
+            if clump >= 0:
+                body_arm = x_i - clump_x[clump]
 
         f = wp.vec3(0.0)
         t = wp.vec3(0.0)
@@ -515,12 +528,18 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             m_roll = wp.vec3(0.0)
             roll = h.roll * 0.0
             if wp.static(rolling):
-                i_roll = 0.0
-                if p.rolling_model == RollingModel.EPSD:
-                    i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
-                m_roll, roll = rolling_resistance(
-                    p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, h.roll, dt
-                )
+                if p.rolling_model == RollingModel.STANDARD:
+                    # this sphere's own torque, as the torque on a that the sign below turns into its own
+                    lever = wp.length(body_arm + wp.where(i_low, arm_a, -arm_b) * n)
+                    m_std = standard_rolling(w_i, f_n, lever, p.mu_r)
+                    m_roll = wp.where(i_low, m_std, -m_std)
+                else:
+                    i_roll = 0.0
+                    if p.rolling_model == RollingModel.EPSD:
+                        i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
+                    m_roll, roll = rolling_resistance(
+                        p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, h.roll, dt
+                    )
             history_store(neighbor_history_out, k, i, ContactHistory(h.spring, roll, h.aux))
             live = live | slot_bit(k)
             f_i = f_a
@@ -568,7 +587,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                 if was_live:
                     h_last = history_load(plane_history_out, p_id, i)
                 active, f_a, t_a, h, k_s = wp.static(wall_contact)(
-                    r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, p, h_last, dt
+                    r_i - gap, -n_p, v_i, w_i, wp.vec3(0.0), r_i, mc_i, body_arm, p, h_last, dt
                 )
                 stiff += k_s
                 if active != 0 or was_live:
@@ -622,7 +641,17 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
                 if wp.static(share_mass):
                     mc_i = contact_mass(m_i, clump, key_w, partner_key, partner_count)
                 active, f_a, t_a, h, k_s = wp.static(wall_contact)(
-                    r_i - gap, -dq / gap, v_i, w_i, v_wall, r_i, mc_i, p, history_load(mesh_history_out, k, i), dt
+                    r_i - gap,
+                    -dq / gap,
+                    v_i,
+                    w_i,
+                    v_wall,
+                    r_i,
+                    mc_i,
+                    body_arm,
+                    p,
+                    history_load(mesh_history_out, k, i),
+                    dt,
                 )
                 stiff += k_s
                 history_store(mesh_history_out, k, i, h)
@@ -725,6 +754,7 @@ def launch_step_spheres(
             state_in.sphere_v,
             state_in.sphere_w,
             state_in.sphere_active,
+            state_in.clump_x,
             state_in.wall_pose,
             state_in.wall_v,
             state_in.wall_w,

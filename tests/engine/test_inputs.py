@@ -56,9 +56,12 @@ def test_material_fields_checked(kw, field):
 
 
 def test_rolling_model_names():
-    """Rolling models are accepted by name or EDEM type letter; unknown names list the choices."""
+    """Rolling models are accepted by name, EDEM type letter or EDEM model name; unknown names list the choices.
+    EDEM's "standard rolling friction" is a model of its own (each body's lever), its "RVD" model type A."""
     assert wd.Interaction(rolling_model="type_c").rolling_model == wd.RollingModel.EPSD
     assert wd.Interaction(rolling_model="A").rolling_model == wd.RollingModel.CONSTANT_TORQUE
+    assert wd.Interaction(rolling_model="rvd").rolling_model == wd.RollingModel.CONSTANT_TORQUE
+    assert wd.Interaction(rolling_model="Standard").rolling_model == wd.RollingModel.STANDARD
     with pytest.raises(ValueError, match="rolling_model = 'spring'.*CONSTANT_TORQUE"):
         wd.Interaction(rolling_model="spring")
 

@@ -14,8 +14,8 @@ Each candidate adds ONE parameter to the base model and reduces to the base mode
   [off, max(0.25, off)] (a truncated normal at +-2 SD keeps radii positive up to 0.5).
 - ``rolling_friction``: the grain-grain rolling friction mu_r [-] (the base's rolling model). Off: the base value;
   range [0, max(0.5, 2 off)].
-- ``rolling_model``: not a one-parameter extension (type A and type C are two models, not one with an off
-  value), so it is named here but never applies; a diagnosis reports it as not tried.
+- ``rolling_model``: not a one-parameter extension (type A, type C and EDEM's standard model are three models,
+  not one with an off value), so it is named here but never applies; a diagnosis reports it as not tried.
 - ``wall_friction``: the static friction of the grain against the wall the measurement rests on (the funnel's
   and lifting cylinder's base plate, the press's die, the drum's shell), separate from grain-grain friction.
   Off: the base value; range [0.1, 1].
@@ -50,7 +50,7 @@ CAUSES = {
     "shape": "particle shape (elongation)",
     "size_distribution": "size distribution (PSD width)",
     "rolling_friction": "rolling resistance (rolling friction)",
-    "rolling_model": "rolling-resistance model (type A vs C)",
+    "rolling_model": "rolling-resistance model (type A, C or EDEM standard)",
     "wall_friction": "particle-wall friction",
 }
 """The cause each candidate stands for, in the report's words."""
@@ -172,7 +172,9 @@ def library(scene, rig_params: Mapping | None, taken: set[str]) -> tuple[list[Ca
         skipped["size_distribution"] = "the scene has no radius_spread rig parameter"
     mu_r = float(gg.rolling_friction)
     add("rolling_friction", f"{pp}.rolling_friction", mu_r, 0.0, max(0.5, 2.0 * mu_r))
-    skipped["rolling_model"] = "type A and type C are two models, not one parameter with an off value"
+    skipped["rolling_model"] = (
+        "type A, type C and EDEM's standard model are three models, not one parameter with an off value"
+    )
     rest = [w for w in scene.walls if w.name in _REST_WALL.get(scene.measure.kind, ())]
     if rest:
         mat = rest[0].material

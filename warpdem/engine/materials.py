@@ -116,7 +116,7 @@ class Material:
 _ENUM_ALIASES = {
     "A": "CONSTANT_TORQUE",
     "TYPE_A": "CONSTANT_TORQUE",
-    "STANDARD": "CONSTANT_TORQUE",
+    "RVD": "CONSTANT_TORQUE",
     "C": "EPSD",
     "TYPE_C": "EPSD",
     "HM": "HERTZ_MINDLIN",
@@ -149,8 +149,9 @@ class Interaction:
     Attributes:
         restitution: coefficient of restitution e [-], in (0, 1].
         static_friction: Coulomb friction coefficient mu_s [-], >= 0.
-        rolling_friction: rolling friction coefficient mu_r [-], >= 0 (torque = mu_r R* F_n).
-        rolling_model: RollingModel (or its name): NONE, CONSTANT_TORQUE (type A) or EPSD (type C).
+        rolling_friction: rolling friction coefficient mu_r [-], >= 0 (torque = mu_r R* F_n; STANDARD: mu_r R_i F_n).
+        rolling_model: RollingModel (or its name): NONE, CONSTANT_TORQUE (type A, EDEM's RVD), EPSD (type C)
+            or STANDARD (EDEM's standard rolling friction: each body's own lever from its centre of mass).
         rolling_damping: EPSD dashpot ratio eta_r [-], >= 0 (0.3 as Ai et al. 2011).
         law: ContactLaw of the pair: HERTZ_MINDLIN, JKR or EEPA.
         surface_energy: gamma [J/m^2], >= 0 (JKR; EEPA's f_min = -1.5 pi gamma R*). EDEM's "Surface Energy"

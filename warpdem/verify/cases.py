@@ -225,13 +225,18 @@ def _rolling_scene(device, model_name: str, mu_r: float, tilt_deg: float = 0.0, 
     return b.finalize(device)
 
 
+ROLLING_LABELS = {"constant_torque": "type A", "epsd": "type C (EPSD)", "standard": "EDEM standard"}
+"""The rolling models the cases run, by name, and how their records name them."""
+
+
 def case_rolling_plane(device: str = "cpu") -> list[Record]:
-    """A ball rolling on a plane decelerates at (5/7) mu_r g (both models); EPSD comes to rest."""
+    """A ball rolling on a plane decelerates at (5/7) mu_r g (every model: on a wall R* = R_i = R); EPSD comes to
+    rest."""
     out = []
     mu_r, v0, g = 0.1, 0.3, 9.81
     a_exp = 5.0 / 7.0 * mu_r * g
     t_stop = v0 / a_exp
-    for name in ("constant_torque", "epsd"):
+    for name, label in ROLLING_LABELS.items():
         model = _rolling_scene(device, name, mu_r, v0=v0)
         solver = Solver(model)
         state, contacts = model.state(), solver.contacts()
@@ -244,7 +249,6 @@ def case_rolling_plane(device: str = "cpu") -> list[Record]:
         ts, vs = np.array(ts), np.array(vs)
         keep = ts > 0.1 * t_stop
         slope = np.polyfit(ts[keep], vs[keep], 1)[0]
-        label = "type A" if name == "constant_torque" else "type C (EPSD)"
         out.append(Record(f"rolling on plane {label}", "deceleration", -slope, a_exp, "m/s^2", 0.02))
         if name == "epsd":
             state = solver.run(state, contacts, int((0.5 * t_stop) / solver.dt))
@@ -266,16 +270,15 @@ def case_rolling_plane(device: str = "cpu") -> list[Record]:
 
 
 def case_rolling_incline(device: str = "cpu") -> list[Record]:
-    """A ball on an incline stays iff tan(theta) <= mu_r (both models; mu_s = 1, no sliding)."""
+    """A ball on an incline stays iff tan(theta) <= mu_r (every model; mu_s = 1, no sliding)."""
     out = []
     mu_r = 0.2
     tilts = [math.degrees(math.atan(0.8 * mu_r)), math.degrees(math.atan(1.25 * mu_r))]
-    for name in ("constant_torque", "epsd"):
+    for name, label in ROLLING_LABELS.items():
         model = _rolling_scene(device, name, mu_r, worlds=tilts)
         solver = Solver(model)
         state = solver.run(model.state(), solver.contacts(), int(0.3 / solver.dt))
         x = state.sphere_x.numpy()[:, 0]
-        label = "type A" if name == "constant_torque" else "type C (EPSD)"
         # below the limit: creep under 1 % of the radius in 0.3 s; above: rolls (net torque >= 0.25 of
         # the driving torque gives a travel of > 2 mm in 0.3 s)
         out.append(
@@ -293,6 +296,114 @@ def case_rolling_incline(device: str = "cpu") -> list[Record]:
 
 # ------------------------------------------------------------------------------------------------
 # kinematics and energy
+
+
+def _spin_deceleration(device, build, probe, w0: float, t_end: float) -> float:
+    """Angular deceleration [rad/s^2] of the spin ``probe(state)`` [rad/s] of the scene ``build(device)`` while
+    it is between 90 % and 20 % of ``w0``, from a line fitted over 1 ms samples up to ``t_end`` [s]."""
+    model = build(device)
+    solver = Solver(model)
+    state, contacts = model.state(), solver.contacts()
+    chunk = max(1, int(0.001 / solver.dt))
+    ts, ws = [], []
+    while state.time < t_end:
+        state = solver.run(state, contacts, chunk)
+        ts.append(state.time)
+        ws.append(probe(state))
+    ts, ws = np.array(ts), np.array(ws)
+    keep = (ws < 0.9 * w0) & (ws > 0.2 * w0)
+    if keep.sum() < 5:
+        return float("nan")
+    return -float(np.polyfit(ts[keep], ws[keep], 1)[0])
+
+
+def case_rolling_lever(device: str = "cpu") -> list[Record]:
+    """EDEM's standard rolling friction takes each body's own lever R_i, the contact point's distance from its
+    centre of mass, and resists a spin about the normal too (mu_s = 0 here, so nothing else does).
+
+    - A sphere spinning about the vertical on top of an equal sphere that rests on a plane:
+      dw/dt = mu_r m g R_i / (2/5 m R^2), R_i = R less half the overlap; type A (R* = R/2, twisting not
+      resisted) leaves the spin alone.
+    - A dumbbell clump (two spheres R, centres +-L from its centre of mass) lying on a plane, spinning about the
+      vertical: dw/dt = mu_r g sqrt(L^2 + R^2) / (2/5 R^2 + L^2), each sphere's lever reaching from the clump's
+      centre of mass to its contact point (a sphere's own R would give 2.2 times less).
+    """
+    from warpdem.engine.clumps import ClumpTemplate
+
+    R, rho, E, nu, g, mu_r, L = 0.005, 2500.0, 1e8, 0.3, 9.81, 0.1, 0.010
+    m = rho * 4.0 / 3.0 * math.pi * R**3
+
+    def materials(b, model_name):
+        b.add_material(Material("ball", density=rho, youngs_modulus=E, poisson_ratio=nu))
+        b.add_material(Material("floor", density=rho, youngs_modulus=E * RIGID, poisson_ratio=nu))
+        b.set_interaction("ball", "floor", restitution=0.5, static_friction=0.0, rolling_friction=0.0)
+        b.set_interaction(
+            "ball", "ball", restitution=0.5, static_friction=0.0, rolling_friction=mu_r, rolling_model=model_name
+        )
+        b.add_plane((0, 0, 0), (0, 0, 1), "floor")
+
+    # static overlaps: the lower sphere carries 2 m g on the rigid floor, the pair m g at R* = R/2
+    e_floor = E / (1 - nu * nu)
+    d_floor = (3 * 2 * m * g / (4 * e_floor * math.sqrt(R))) ** (2 / 3)
+    d_pair = (3 * m * g / (4 * (0.5 * e_floor) * math.sqrt(0.5 * R))) ** (2 / 3)
+    w0_stack = 50.0
+
+    def stack(model_name):
+        def build(device):
+            b = ModelBuilder()
+            materials(b, model_name)
+            b.add_sphere((0, 0, R - d_floor), R, "ball")
+            b.add_sphere((0, 0, 3 * R - d_floor - d_pair), R, "ball", angular_velocity=(0, 0, w0_stack))
+            return b.finalize(device)
+
+        return build
+
+    top_spin = lambda state: float(state.sphere_w.numpy()[1, 2])  # noqa: E731
+    a_stack = 2.5 * mu_r * g * (R - 0.5 * d_pair) / R**2
+    out = [
+        Record(
+            "spin on a sphere, EDEM standard",
+            "spin deceleration",
+            _spin_deceleration(device, stack("standard"), top_spin, w0_stack, 1.2 * w0_stack / a_stack),
+            a_stack,
+            "rad/s^2",
+            0.02,
+        )
+    ]
+    # type A resists only the rolling part of the relative rotation: the top sphere keeps its spin
+    model = stack("constant_torque")(device)
+    solver = Solver(model)
+    state = solver.run(model.state(), solver.contacts(), int(0.5 * w0_stack / a_stack / solver.dt))
+    out.append(Record("spin on a sphere, type A", "spin kept", top_spin(state), w0_stack, "rad/s", 1e-3))
+
+    # the dumbbell: two spheres on the floor, each at m g / 2 on the rigid plane
+    tpl = ClumpTemplate.from_spheres("dumbbell", [(-L, 0, 0), (L, 0, 0)], [R, R])
+    d_each = (3 * m * g / (4 * e_floor * math.sqrt(R))) ** (2 / 3)
+    w0_bell = 20.0
+
+    def bell(device):
+        b = ModelBuilder()
+        materials(b, "standard")
+        b.set_interaction(
+            "ball", "floor", restitution=0.5, static_friction=0.0, rolling_friction=mu_r, rolling_model="standard"
+        )
+        b.add_clump(tpl, (0, 0, R - d_each), "ball", angular_velocity=(0, 0, w0_bell))
+        return b.finalize(device)
+
+    lever = math.sqrt(L**2 + (R - 0.5 * d_each) ** 2)
+    a_bell = mu_r * g * lever / (0.4 * R**2 + L**2)
+    bell_spin = lambda state: float(state.clump_w.numpy()[0, 2])  # noqa: E731
+    out.append(
+        Record(
+            "spinning dumbbell clump, EDEM standard",
+            "spin deceleration",
+            _spin_deceleration(device, bell, bell_spin, w0_bell, 1.2 * w0_bell / a_bell),
+            a_bell,
+            "rad/s^2",
+            0.02,
+        )
+    )
+    return out
 
 
 def case_free_fall(device: str = "cpu") -> list[Record]:
@@ -455,6 +566,7 @@ CASES = {
     "chung_ooi_4": case_chung_ooi_4,
     "rolling_plane": case_rolling_plane,
     "rolling_incline": case_rolling_incline,
+    "rolling_lever": case_rolling_lever,
     "free_fall": case_free_fall,
     "elastic_bounce": case_elastic_bounce,
     "mesh_vs_plane": case_mesh_vs_plane,
