@@ -943,6 +943,65 @@ def test_plate_friction_reaches_the_stage(tmp_path, rig, particle, wall):
     assert mine[(particle, "steel")] == plain[(particle, "steel")]
 
 
+@pytest.mark.parametrize("rig, particle", [("funnel", "grain"), ("lifting_cylinder", "ore")])
+def test_plate_follows_the_particle_wall_pair(tmp_path, rig, particle):
+    """An override of the particle-wall pair reaches the plate the pile rests on (seed 000 poured its pellets
+    onto a 304 steel plate and varied their contact with the steel), but not the friction the rig sets for the
+    plate itself, nor a field an override sets on the plate pair (in either order); a stage keeps the relation,
+    and a batched launch varies the plate with the walls."""
+    steel, plate = f"interaction.{particle}.steel", f"interaction.{particle}.plate"
+
+    def pairs(values, overrides):
+        spec = apply_overrides(rigs.spec(rig, values, smoke=True), overrides, "[fixed]")
+        return spec, {(a, b): i for a, b, i in spec.pairs}
+
+    _, p = pairs({}, {f"{steel}.restitution": 0.39, f"{steel}.static_friction": 0.65})
+    assert (p[(particle, "plate")].restitution, p[(particle, "plate")].static_friction) == (0.39, 0.65)
+    spec, p = pairs({"plate_static_friction": 0.2}, {f"{steel}.restitution": 0.39, f"{steel}.static_friction": 0.65})
+    assert (p[(particle, "plate")].restitution, p[(particle, "plate")].static_friction) == (0.39, 0.2)
+    for order in ((f"{plate}.restitution", f"{steel}.restitution"), (f"{steel}.restitution", f"{plate}.restitution")):
+        values = {order[0]: 0.3 if "plate" in order[0] else 0.39, order[1]: 0.3 if "plate" in order[1] else 0.39}
+        _, p = pairs({}, values)
+        assert (p[(particle, "plate")].restitution, p[(particle, "steel")].restitution) == (0.3, 0.39), order
+
+    path = tmp_path / f"{rig}.usda"
+    write_stage(spec, path)
+    back = read_stage(str(path))
+    assert back.pair_follows == {(particle, "plate"): (particle, "steel", ("static_friction",))}
+    p = {(a, b): i for a, b, i in apply_overrides(back, {f"{steel}.static_friction": 0.7}, "[fixed]").pairs}
+    assert p[(particle, "plate")].static_friction == 0.2 and p[(particle, "steel")].static_friction == 0.7
+
+    # per world: the plate takes the walls' restitution of each world (the pair table's damping factor)
+    from warpdem.engine.materials import damping_factor
+    from warpdem.scene.stage import build
+
+    model = build(rigs.spec(rig, {}, smoke=True), 2, {f"{steel}.restitution": [0.3, 0.6]}).finalize("cpu")
+    names = [m.name for m in model.materials]
+    beta = model.pair_params.numpy()["beta"]
+    k = {n: i for i, n in enumerate(names)}
+    assert beta[:, k[particle], k["plate"]] == pytest.approx([damping_factor(0.3), damping_factor(0.6)], rel=1e-6)
+    assert beta[:, k[particle], k["steel"]] == pytest.approx([damping_factor(0.3), damping_factor(0.6)], rel=1e-6)
+
+
+def test_a_pair_follows_only_a_pair(tmp_path):
+    """warpdem:pair:follows must target a pair prim, and warpdem:pair:own name pair fields: the error names the
+    prim, the attribute and the value."""
+    path = tmp_path / "funnel.usda"
+    rigs.new("funnel", path, smoke=True)
+    text = path.read_text()
+    bad = text.replace("follows = </World/Materials/Pairs/grain__steel>", "follows = </World/Materials/steel>")
+    (tmp_path / "bad.usda").write_text(bad)
+    with pytest.raises(StageError, match="grain__plate.*warpdem:pair:follows.*/World/Materials/steel.*not a pair"):
+        read_stage(str(tmp_path / "bad.usda"))
+    own = text.replace(
+        "custom rel warpdem:pair:follows",
+        'custom token[] warpdem:pair:own = ["stickiness"]\n                custom rel warpdem:pair:follows',
+    )
+    (tmp_path / "own.usda").write_text(own)
+    with pytest.raises(StageError, match="grain__plate.*warpdem:pair:own.*'stickiness'.*staticFriction"):
+        read_stage(str(tmp_path / "own.usda"))
+
+
 def test_load_regenerates_from_rig_parameter(tmp_path):
     """rigs.load with a rig parameter (as a string) regenerates the scene from the stage's recorded
     parameters: the funnel's outlet (its lowest vertex) moves to 0.03 m, the other smoke settings stay."""

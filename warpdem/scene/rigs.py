@@ -255,20 +255,23 @@ PLATE = dataclasses.replace(STEEL, name="plate")
 particles (``plate_static_friction``, ``plate_rolling_friction``) can differ from the other walls'."""
 
 
-def _plate_pairs(p, particle: str, wall: str, particle_wall: Interaction) -> tuple[list, list]:
-    """The plate material and its pairs with the particles (the walls' interaction with the rig's plate
-    friction and rolling friction where they are >= 0), the walls and itself."""
+def _plate_pairs(p, particle: str, wall: str, particle_wall: Interaction) -> tuple[list, list, dict]:
+    """The plate material; its pairs with the particles (the walls' interaction with the rig's plate friction
+    and rolling friction where they are >= 0), the walls and itself; and the particles' plate pair following
+    their wall pair (``SceneSpec.pair_follows``), so that an override or a factor of the particle-wall pair
+    reaches the plate the pile rests on, less the friction the rig sets for the plate itself."""
     changes = {}
     if p.plate_static_friction >= 0:
         changes["static_friction"] = p.plate_static_friction
     if p.plate_rolling_friction >= 0:
         changes["rolling_friction"] = p.plate_rolling_friction
     walls = Interaction(restitution=0.5, static_friction=0.3)
-    return [PLATE], [
+    pairs = [
         (particle, "plate", dataclasses.replace(particle_wall, **changes)),
         (wall, "plate", walls),
         ("plate", "plate", walls),
     ]
+    return [PLATE], pairs, {(particle, "plate"): (particle, wall, tuple(changes))}
 
 
 def _sphere_pair(restitution: float, static_friction: float, rolling_friction: float, surface_energy: float = 0.0):
@@ -410,7 +413,7 @@ class Funnel:
             rate=self.rate,
             seed=int(self.seed),
         )
-        plate, plate_pairs = _plate_pairs(self, "grain", "steel", pw)
+        plate, plate_pairs, follows = _plate_pairs(self, "grain", "steel", pw)
         walls = [WallSpec("Funnel", fv, ft, "steel"), WallSpec("Plate", pv, pt, "plate")]
         settle_after = self.count / self.rate
         measure = MeasureSpec(
@@ -436,6 +439,7 @@ class Funnel:
             rig="funnel",
             materials=[grain, STEEL, *plate],
             pairs=_pairs("grain", "steel", pp, pw) + plate_pairs,
+            pair_follows=follows,
             shapes=[shape],
             walls=walls,
             factories=[fac],
@@ -554,7 +558,7 @@ class LiftingCylinder:
         shape, _ = _shape(self.particle, "LiftingCylinder", self.aspect_ratio)
         r = self.particle_radius
         ore_steel = Interaction(restitution=0.15, static_friction=0.5, rolling_friction=0.1)
-        plate, plate_pairs = _plate_pairs(self, "ore", "steel", ore_steel)
+        plate, plate_pairs, follows = _plate_pairs(self, "ore", "steel", ore_steel)
         pairs = _pairs("ore", "steel", ORE_LAWS[self.law](self), ore_steel) + plate_pairs
         R, H = self.inner_diameter / 2, self.height
         lift = self.lift_height or H + 0.02
@@ -592,6 +596,7 @@ class LiftingCylinder:
             rig="lifting_cylinder",
             materials=[ORE, STEEL, *plate],
             pairs=pairs,
+            pair_follows=follows,
             shapes=[shape],
             walls=[cyl, base],
             factories=[fac],

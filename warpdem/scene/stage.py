@@ -13,7 +13,9 @@ wrong-typed one is an error that names the prim and the attribute):
 * ``/World/Materials/Pairs/<a>__<b>``: Scope with ``rel warpdem:pair:materials`` (two materials) and the
   contact law of that pair: ``warpdem:pair:law`` (hertz_mindlin | jkr | eepa), restitution, staticFriction,
   rollingFriction, rollingModel, rollingDamping, surfaceEnergy, pullOffForce, slopeExponent,
-  plasticityRatio, tensileExponent, tangentialStiffnessMultiplier (what UsdPhysics lacks).
+  plasticityRatio, tensileExponent, tangentialStiffnessMultiplier (what UsdPhysics lacks). A pair that
+  follows another (a rig's base plate follows its walls) has ``rel warpdem:pair:follows`` to that pair and
+  ``warpdem:pair:own`` (token[]: the fields it keeps, e.g. ``staticFriction``); see ``SceneSpec.pair_follows``.
 * ``/World/Shapes/<name>``: Xform, ``warpdem:shape:kind`` = sphere | clump; a clump's spheres are child
   ``UsdGeom.Sphere`` prims (``radius`` and ``xformOp:translate`` in the body frame [m]).
 * ``/World/Walls/<name>``: ``UsdGeom.Mesh`` in its own frame, its physics material bound with
@@ -239,6 +241,10 @@ class SceneSpec:
     domain: tuple | None = None
     """((x, y, z) low, (x, y, z) high) [m]: bodies whose centre leaves this box are removed (see
     ``Model.domain``); None removes nothing. In USD: ``warpdem:domainMin`` and ``warpdem:domainMax`` on /World."""
+    pair_follows: dict = field(default_factory=dict)
+    """{(a, b): (c, d, own)}: pair (a, b) takes each override and per-world variation of pair (c, d) (both
+    defined), but of the fields named in ``own`` (a tuple of Interaction fields it keeps): a rig's base plate
+    follows its walls, less the rig's own plate friction. An override of (a, b) itself stays on (a, b)."""
 
     def material(self, name: str) -> Material:
         for m in self.materials:
@@ -320,7 +326,8 @@ KNOWN = {
     | {NS + "run:" + _camel(f) for f in RUN_FIELDS}
     | {NS + "measure:" + _camel(f) for f in MEASURE_FIELDS},
     "material": {NS + "youngsModulus", NS + "shearModulus", NS + "poissonRatio"},
-    "pair": {NS + "pair:materials"} | {NS + "pair:" + _camel(f) for f in INTERACTION_FIELDS},
+    "pair": {NS + "pair:materials", NS + "pair:follows", NS + "pair:own"}
+    | {NS + "pair:" + _camel(f) for f in INTERACTION_FIELDS},
     "shape": {NS + "shape:kind"},
     "wall": {NS + "coat:" + _camel(f) for f in COAT_FIELDS},
     "factory": {NS + "factory:" + _camel(f) for f in FACTORY_FIELDS},
@@ -463,6 +470,13 @@ def write_stage(spec: SceneSpec, path=None):
                 prim.CreateAttribute(NS + "pair:" + _camel(f), Sdf.ValueTypeNames.Token).Set(v.name.lower())
             else:
                 prim.CreateAttribute(NS + "pair:" + _camel(f), Sdf.ValueTypeNames.Double).Set(float(v))
+        lead = spec.pair_follows.get((a, b))
+        if lead is not None:
+            prim.CreateRelationship(NS + "pair:follows").SetTargets(
+                [Sdf.Path(f"/World/Materials/Pairs/{_ident(lead[0])}__{_ident(lead[1])}")]
+            )
+            if lead[2]:
+                prim.CreateAttribute(NS + "pair:own", Sdf.ValueTypeNames.TokenArray).Set([_camel(f) for f in lead[2]])
 
     UsdGeom.Scope.Define(stage, "/World/Shapes")
     for sh in spec.shapes:
@@ -826,7 +840,7 @@ def read_stage(path_or_stage) -> SceneSpec:
             raise StageError(f"{where}: prim {prim.GetPath()}: {e}") from None
         names[prim.GetPath()] = prim.GetName()
 
-    pairs = []
+    pairs, pair_prims, follows = [], {}, {}
     proot = stage.GetPrimAtPath("/World/Materials/Pairs")
     for prim in proot.GetChildren() if proot else []:
         r.check_names(prim, "pair")
@@ -856,6 +870,22 @@ def read_stage(path_or_stage) -> SceneSpec:
         except ValueError as e:
             raise StageError(f"{where}: prim {prim.GetPath()}: {e}") from None
         pairs.append((mats[0].GetName(), mats[1].GetName(), ia))
+        pair_prims[prim.GetPath()] = pairs[-1][:2]
+        lead = r.target(prim, NS + "pair:follows", required=False)
+        if lead is not None:
+            own = r.get(prim, NS + "pair:own", "string[]", required=False, default=[])
+            fields = {_camel(f): f for f in INTERACTION_FIELDS}
+            bad = [o for o in own if o not in fields]
+            if bad:
+                r.fail(prim, NS + "pair:own", f"names {bad[0]!r}; expected pair fields: " + ", ".join(fields))
+            follows[pairs[-1][:2]] = (prim, lead, tuple(fields[o] for o in own))
+    pair_follows = {}
+    for key, (prim, lead, own) in follows.items():
+        if lead.GetPath() not in pair_prims:
+            r.fail(
+                prim, NS + "pair:follows", f"targets {lead.GetPath()}, which is not a pair under /World/Materials/Pairs"
+            )
+        pair_follows[key] = (*pair_prims[lead.GetPath()], own)
 
     shapes = []
     sroot = stage.GetPrimAtPath("/World/Shapes")
@@ -902,6 +932,7 @@ def read_stage(path_or_stage) -> SceneSpec:
         gravity=gravity,
         authoring=authoring,
         domain=domain,
+        pair_follows=pair_follows,
     )
     from .validate import check_scene, stage_origin
 
@@ -1100,10 +1131,17 @@ def apply_overrides(spec: SceneSpec, overrides: dict, where: str = "--set") -> S
     from .validate import check_scene
 
     defined = {"material": [m.name for m in spec.materials], "factory": [f.name for f in spec.factories]}
+    keys = {text: OVERRIDES.parse(text, where, defined=defined, error=StageError) for text in overrides}
+    # a pair that follows another keeps the fields these overrides set on it themselves
+    explicit = {(frozenset(k.names), k.field) for k in keys.values() if k.kind == "interaction"}
     for text, raw in overrides.items():
-        key = OVERRIDES.parse(text, where, defined=defined, error=StageError)
+        key = keys[text]
         try:
             _apply_override(spec, key, where, text, _parse(raw))
+            if key.kind == "interaction":
+                for a, b in pair_followers(spec, *key.names, key.field):
+                    if (frozenset((a, b)), key.field) not in explicit:
+                        _apply_override(spec, dataclasses.replace(key, names=(a, b)), where, text, _parse(raw))
         except StageError:
             raise
         except (TypeError, ValueError) as e:
@@ -1113,6 +1151,11 @@ def apply_overrides(spec: SceneSpec, overrides: dict, where: str = "--set") -> S
         keys = {str(k) for k in overrides}
         check_scene(spec, lambda k: where if k in keys else "scene")
     return spec
+
+
+def pair_followers(spec: SceneSpec, a: str, b: str, field: str) -> list[tuple[str, str]]:
+    """The pairs that take a change of pair (a, b)'s ``field`` too (:attr:`SceneSpec.pair_follows`)."""
+    return [k for k, (c, d, own) in spec.pair_follows.items() if {c, d} == {a, b} and field not in own]
 
 
 def _apply_override(spec: SceneSpec, key, where: str, text: str, value) -> None:
@@ -1193,6 +1236,21 @@ def _named(what: str):
         raise StageError(f"{what}: {e}") from None
 
 
+def _follow_variations(spec: SceneSpec, variations: dict) -> dict:
+    """``variations`` with each ``interaction.A.B.FIELD`` also given to the pairs that follow (A, B)
+    (:attr:`SceneSpec.pair_follows`), unless they are varied themselves."""
+    out = dict(variations)
+    for target, values in variations.items():
+        kind, *rest = target.split(".")
+        if kind != "interaction" or len(rest) != 3:
+            continue
+        for a, b in pair_followers(spec, rest[0], rest[1], rest[2]):
+            mine = [f"interaction.{a}.{b}.{rest[2]}", f"interaction.{b}.{a}.{rest[2]}"]
+            if not any(m in variations for m in mine):
+                out[mine[0]] = values
+    return out
+
+
 def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None, world_seeds=None):
     """A :class:`warpdem.ModelBuilder` holding the scene (call ``finalize(device)`` on it).
 
@@ -1266,7 +1324,7 @@ def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None,
                 b.add_factory(df, fac.material, template)
     if world_count > 1 or variations or world_seeds is not None:
         b.replicate(world_count)
-        for target, values in (variations or {}).items():
+        for target, values in _follow_variations(spec, variations or {}).items():
             b.vary(target, values)
         if world_seeds is not None:
             b.seed_worlds(world_seeds)
