@@ -8,7 +8,9 @@ out of reach (die_press), and its surface-energy scan beyond the paper's range (
 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run (phosphate_bbd) and the truck tipper, first
 contacts split from the rest of the loading (truck_tipper; with the bucket turning over 6 s, truck_tipper_slow);
 seed 000's screening, steepest ascent and Box-Behnken, read with the current pile rule (pellets_pb,
-pellets_steepest, pellets_bbd), and replicates at the Box-Behnken region's high corner (pellets_verify); the reach
+pellets_steepest, pellets_bbd), and replicates at the Box-Behnken region's high corner (pellets_verify); the
+screening and replicates at the paper's calibrated set with EDEM's standard rolling friction (pellets_pb_standard,
+pellets_calibrated_standard); the reach
 diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach: ``warpdem diagnose
 studies/diagnose/seed00N_*.toml``). A lane runs its steps in order on its devices (a study on several goes through
 the distributed executor); lanes run side by side and may share a device. The default, for 4 GPUs: seed 001 on
@@ -124,6 +126,10 @@ STEPS = {
     "pellets_pb": lambda dev, root: study("pellets_pb", dev, root),
     "pellets_steepest": lambda dev, root: study("pellets_steepest", dev, root),
     "pellets_verify": lambda dev, root: study("pellets_verify", dev, root),
+    # EDEM's standard rolling friction (each pellet's own lever) in place of type A: the screening again, and
+    # replicates at the paper's calibrated set
+    "pellets_pb_standard": lambda dev, root: study("pellets_pb_standard", dev, root),
+    "pellets_calibrated_standard": lambda dev, root: study("pellets_calibrated_standard", dev, root),
     # seeds 000 and 001 give one angle each, out of their base models' reach: which candidates reach it
     "seed000_reach": lambda dev, root: diagnosis("seed000_pellets", dev, root),
     "seed001_reach": lambda dev, root: diagnosis("seed001_wetfeed", dev, root),

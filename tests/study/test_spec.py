@@ -23,6 +23,8 @@ COUNTS = {
     "pellets_steepest": 6,
     "pellets_bbd": 17,
     "pellets_verify": 4,
+    "pellets_pb_standard": 12,
+    "pellets_calibrated_standard": 4,
     "wetfeed_pb": 12,
     "wetfeed_ccd": 23,
     "phosphate_ffd": 16,
@@ -88,6 +90,31 @@ def test_design_counts_match_the_seeds(tables):
         name: {tuple(r) for r in tables[name][acts].to_numpy().round(9)} for name in ("pellets_verify", "pellets_bbd")
     }
     assert points["pellets_verify"] == {(0.45, 0.75, 0.07)} and (0.45, 0.75, 0.07) in points["pellets_bbd"]
+
+
+def test_standard_rolling_studies_differ_from_their_twins_only_in_the_rolling_model(studies, tables):
+    """pellets_pb_standard runs pellets_pb's 12 points and pellets_calibrated_standard the paper's calibrated set
+    (A 0.52, B 0.03, C 0.45, D 0.55, E 0.05, F 0.37; seed 000's Table 12) four times; each fixes EDEM's standard
+    rolling friction on every pellet pair and differs from its type-A twin in nothing else."""
+    model = {f"interaction.grain.{b}.rolling_model": "standard" for b in ("grain", "steel", "plate")}
+    pb, pbs = studies["pellets_pb"], studies["pellets_pb_standard"]
+    assert dict(pbs.fixed) == dict(pb.fixed) | model
+    cols = [c for c in tables["pellets_pb"].columns if c != "point_id"]
+    assert tables["pellets_pb_standard"][cols].equals(tables["pellets_pb"][cols])
+    cal = studies["pellets_calibrated_standard"]
+    assert dict(cal.fixed) == dict(studies["pellets_verify"].fixed) | model
+    fixed = {
+        k: cal.fixed[k]
+        for k in (
+            "interaction.grain.steel.static_friction",
+            "interaction.grain.steel.rolling_friction",
+            "interaction.grain.grain.restitution",
+        )
+    }
+    assert list(fixed.values()) == [0.52, 0.03, 0.37]
+    t = tables["pellets_calibrated_standard"]
+    assert {tuple(r) for r in t[["C_actual", "D_actual", "E_actual"]].to_numpy().round(9)} == {(0.45, 0.55, 0.05)}
+    assert list(t["world_seed"]) == [0, 1, 2, 3]
 
 
 @pytest.mark.parametrize("name", ["pellets_pb", "wetfeed_pb", "pellets_bbd", "wetfeed_ccd", "phosphate_bbd"])
