@@ -48,6 +48,10 @@ class StepFeatures:
     """Some pair has EPSD rolling resistance (a rolling friction above zero), whose spring is history."""
     large_clumps: bool = True
     """Some clump has more than ``SMALL_CLUMP_SPHERES`` spheres: on CUDA, clumps integrate over blocks of lanes."""
+    rolling_standard: bool = True
+    """Some pair has EDEM's standard rolling friction (a rolling friction above zero): the step branches on the
+    pair's model per contact and reads each clump's centre of mass. Left out of the other models' kernel, whose
+    clump and rolling path it slowed by 13-30 % on the CPU."""
 
     @property
     def history_type(self):
@@ -67,6 +71,7 @@ class StepFeatures:
         pairs = model.pair_params.numpy()
         rolling = (pairs["rolling_model"] != int(RollingModel.NONE)) & (pairs["mu_r"] != 0.0)
         epsd = (pairs["rolling_model"] == int(RollingModel.EPSD)) & (pairs["mu_r"] != 0.0)
+        standard = (pairs["rolling_model"] == int(RollingModel.STANDARD)) & (pairs["mu_r"] != 0.0)
         clumps = model.clump_count > 0
         spheres = model.clump_sphere_end.numpy() - model.clump_sphere_start.numpy() if clumps else np.zeros(1)
         return StepFeatures(
@@ -78,4 +83,5 @@ class StepFeatures:
             rolling=bool(np.any(rolling)),
             rolling_spring=bool(np.any(epsd)),
             large_clumps=bool(spheres.max() > SMALL_CLUMP_SPHERES),
+            rolling_standard=bool(np.any(standard)),
         )

@@ -164,8 +164,9 @@ def mesh_contact_shadowed(
 
 
 @functools.cache
-def wall_contact_for(cohesive_laws: bool, rolling: bool):
-    """:func:`wall_contact` compiled for a model's laws and rolling models (see kernels/features.py)."""
+def wall_contact_for(cohesive_laws: bool, rolling: bool, standard: bool):
+    """:func:`wall_contact` compiled for a model's laws and rolling models (see kernels/features.py; ``standard``:
+    some pair has EDEM's standard rolling friction)."""
     force_law = contact_force_for(cohesive_laws)
 
     @wp.func(module="unique")
@@ -196,10 +197,11 @@ def wall_contact_for(cohesive_laws: bool, rolling: bool):
         active, f_a, f_n, f_t, h, k_n, k_s = wp.static(force_law)(overlap, n, v_rel, history, r_i, m_i, p, dt)
         if active == 0:
             return int(0), wp.vec3(0.0), wp.vec3(0.0), h, 0.0
-        if wp.static(rolling):
+        if wp.static(standard):
             if p.rolling_model == RollingModel.STANDARD:
                 m_std = standard_rolling(w_i, f_n, wp.length(body_arm + arm * n), p.mu_r)
                 return int(1), f_a, wp.cross(arm * n, f_t) + m_std, ContactHistory(h.spring, h.roll * 0.0, h.aux), k_s
+        if wp.static(rolling):
             m_roll, roll = rolling_resistance(
                 p.rolling_model, w_i, n, f_n, r_i, p.mu_r, k_n, 1.4 * m_i * r_i * r_i, p.rolling_damping, h.roll, dt
             )
@@ -317,8 +319,9 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
     coated_walls = features.coated_walls
     cohesive = features.cohesive_laws
     rolling = features.rolling
+    standard = features.rolling_standard
     force_law = contact_force_for(cohesive)
-    wall_contact = wall_contact_for(cohesive, rolling)
+    wall_contact = wall_contact_for(cohesive, rolling, standard)
     History = features.history_type
 
     @wp.kernel(module="unique", module_options=MODULE_OPTIONS, cuda_max_registers=max_registers)
@@ -428,7 +431,7 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
         # the sphere's centre from its body's centre of mass: EDEM's standard rolling friction takes its lever
         # from the body's centre, a clump's for its spheres
         body_arm = wp.vec3(0.0)
-        if wp.static(clumps and rolling):
+        if wp.static(clumps and standard):
             if clump >= 0:
                 body_arm = x_i - clump_x[clump]
 
@@ -528,18 +531,18 @@ def step_spheres_kernel(features: StepFeatures, max_registers: int | None = None
             m_roll = wp.vec3(0.0)
             roll = h.roll * 0.0
             if wp.static(rolling):
+                i_roll = 0.0
+                if p.rolling_model == RollingModel.EPSD:
+                    i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
+                m_roll, roll = rolling_resistance(
+                    p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, h.roll, dt
+                )
+            if wp.static(standard):
                 if p.rolling_model == RollingModel.STANDARD:
                     # this sphere's own torque, as the torque on a that the sign below turns into its own
                     lever = wp.length(body_arm + wp.where(i_low, arm_a, -arm_b) * n)
                     m_std = standard_rolling(w_i, f_n, lever, p.mu_r)
                     m_roll = wp.where(i_low, m_std, -m_std)
-                else:
-                    i_roll = 0.0
-                    if p.rolling_model == RollingModel.EPSD:
-                        i_roll = 1.0 / (1.0 / (1.4 * m_a * r_a * r_a) + 1.0 / (1.4 * m_b * r_b * r_b))
-                    m_roll, roll = rolling_resistance(
-                        p.rolling_model, w_a - w_b, n, f_n, r_star, p.mu_r, k_n, i_roll, p.rolling_damping, h.roll, dt
-                    )
             history_store(neighbor_history_out, k, i, ContactHistory(h.spring, roll, h.aux))
             live = live | slot_bit(k)
             f_i = f_a

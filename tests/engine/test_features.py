@@ -39,9 +39,9 @@ def _bed(kind: str, device: str = "cpu"):
 @pytest.mark.parametrize(
     "kind, expected",
     [
-        ("hm", StepFeatures(False, False, False, False, False, False, False, False)),
-        ("jkr", StepFeatures(False, False, False, False, True, True, True, False)),
-        ("clumps", StepFeatures(True, True, True, True, False, False, False, False)),
+        ("hm", StepFeatures(False, False, False, False, False, False, False, False, False)),
+        ("jkr", StepFeatures(False, False, False, False, True, True, True, False, False)),
+        ("clumps", StepFeatures(True, True, True, True, False, False, False, False, False)),
     ],
 )
 def test_features_follow_the_model(kind, expected):
