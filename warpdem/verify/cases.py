@@ -70,6 +70,11 @@ def _run_contact(solver: Solver, state, contacts, gap_fn, max_steps: int):
     return f_max, d_max, t_end - t_start, a
 
 
+def hertz_static_overlap(force: float, e_star: float, r_star: float) -> float:
+    """Hertz overlap [m] under a static normal ``force`` [N]: (3 F / (4 E* sqrt(R*)))^(2/3)."""
+    return (3 * force / (4 * e_star * math.sqrt(r_star))) ** (2 / 3)
+
+
 def hertz_expected(e_star: float, r_star: float, m_star: float, v: float):
     """Hertz impact: (F_max [N], delta_max [m], t_c [s]) for approach speed v [m/s]."""
     d_max = (15.0 * m_star * v * v / (16.0 * e_star * math.sqrt(r_star))) ** 0.4
@@ -218,7 +223,7 @@ def _rolling_scene(device, model_name: str, mu_r: float, tilt_deg: float = 0.0, 
     b.add_plane((0, 0, 0), (0, 0, 1), "floor")
     m = rho * 4 / 3 * math.pi * R**3
     e_star = E / (1 - nu * nu)
-    d0 = (3 * m * g / (4 * e_star * math.sqrt(R))) ** (2 / 3)
+    d0 = hertz_static_overlap(m * g, e_star, R)
     b.add_sphere((0, 0, R - d0), R, "ball", velocity=(v0, 0, 0), angular_velocity=(0, v0 / R, 0))
     b.replicate(len(tilts))
     b.vary("gravity", [(g * math.sin(math.radians(t)), 0.0, -g * math.cos(math.radians(t))) for t in tilts])
@@ -344,8 +349,8 @@ def case_rolling_lever(device: str = "cpu") -> list[Record]:
 
     # static overlaps: the lower sphere carries 2 m g on the rigid floor, the pair m g at R* = R/2
     e_floor = E / (1 - nu * nu)
-    d_floor = (3 * 2 * m * g / (4 * e_floor * math.sqrt(R))) ** (2 / 3)
-    d_pair = (3 * m * g / (4 * (0.5 * e_floor) * math.sqrt(0.5 * R))) ** (2 / 3)
+    d_floor = hertz_static_overlap(2 * m * g, e_floor, R)
+    d_pair = hertz_static_overlap(m * g, 0.5 * e_floor, 0.5 * R)
     w0_stack = 50.0
 
     def stack(model_name):
@@ -378,7 +383,7 @@ def case_rolling_lever(device: str = "cpu") -> list[Record]:
 
     # the dumbbell: two spheres on the floor, each at m g / 2 on the rigid plane
     tpl = ClumpTemplate.from_spheres("dumbbell", [(-L, 0, 0), (L, 0, 0)], [R, R])
-    d_each = (3 * m * g / (4 * e_floor * math.sqrt(R))) ** (2 / 3)
+    d_each = hertz_static_overlap(m * g, e_floor, R)
     w0_bell = 20.0
 
     def bell(device):
