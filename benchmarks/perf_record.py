@@ -47,6 +47,10 @@ from perf_table import RATE, sci, summarize
 CASES = {
     "hm": [],
     "clumps8": ["--clumps", "8", "--count", "200000"],
+    # the clump bed with rolling friction: type A (the seeds' default) and EDEM's standard model, whose lever is
+    # the clump's centre of mass (state.clump_x read in the step)
+    "clumps8_roll": ["--clumps", "8", "--count", "200000", "--rolling", "constant_torque"],
+    "clumps8_std": ["--clumps", "8", "--count", "200000", "--rolling", "standard"],
     "jkr": ["--law", "JKR"],
     "eepa": ["--law", "EEPA"],
     "batched17": ["--worlds", "17", "--count", "20000"],

@@ -90,6 +90,7 @@ def cmd_bench(args) -> int:
         law=args.law,
         worlds=args.worlds,
         shuffle=args.shuffle,
+        rolling=args.rolling,
     )
     rows = [(k, f"{v:.4g}" if isinstance(v, float) else str(v)) for k, v in res.items()]
     _table("warpdem bench: settled bed, Hertz-Mindlin with history", ["figure", "value"], rows)
@@ -437,6 +438,7 @@ def main(argv=None) -> int:
     from .engine.keys import KeyGrammar
     from .scene import rigs
     from .scene.stage import OVERRIDES
+    from .verify.bench import ROLLING_CHOICES
 
     p = argparse.ArgumentParser(prog="warpdem", description="DEM on NVIDIA Warp")
     sub = p.add_subparsers(dest="command", required=True)
@@ -456,6 +458,12 @@ def main(argv=None) -> int:
     b.add_argument("--law", default="HM", choices=["HM", "JKR", "EEPA"], help="contact law of every pair")
     b.add_argument("--worlds", type=_count, default=1, help="identical copies of the bed, batched in one model")
     b.add_argument("--shuffle", action="store_true", help="number the bodies in a random order (not row by row)")
+    b.add_argument(
+        "--rolling",
+        default="none",
+        choices=ROLLING_CHOICES,
+        help="rolling model of every pair, mu_r = 0.1 (default: none)",
+    )
     b.set_defaults(fn=cmd_bench)
     au = sub.add_parser("audit", help="recompute the seed papers' published statistics from their own data")
     au.add_argument("--json", help="write the records to this file ('-': JSON to stdout instead of the table)")

@@ -3,8 +3,10 @@
 import warnings
 
 import numpy as np
+import pytest
 
-from warpdem.verify.bench import DT, build_bed, run_bench
+from warpdem import RollingModel
+from warpdem.verify.bench import DT, ROLLING_FRICTION, build_bed, run_bench
 
 TINY = {"device": "cpu", "count": 100, "steps": 10, "settle_steps": 10}
 
@@ -35,3 +37,15 @@ def test_shuffled_bed_is_the_same_bed_in_another_order():
     y = build_bed(200, "cpu", shuffle=True)[0].initial["sphere_x"]
     assert not np.array_equal(x, y)
     assert np.array_equal(x[np.lexsort(x.T)], y[np.lexsort(y.T)])
+
+
+def test_rolling_bed_gives_every_pair_the_model():
+    """--rolling sets the named model with mu_r = ROLLING_FRICTION on every pair (the default bed has mu_r = 0); an
+    unknown model is refused with the allowed ones."""
+    plain = build_bed(100, "cpu")[0].pair_params.numpy()
+    std = build_bed(100, "cpu", clumps=8, rolling="standard")[0].pair_params.numpy()
+    assert np.all(plain["mu_r"] == 0.0)
+    assert np.all(std["rolling_model"] == RollingModel.STANDARD)
+    assert np.allclose(std["mu_r"], ROLLING_FRICTION)
+    with pytest.raises(ValueError, match="rolling = 'type_b'.*none, constant_torque, epsd, standard"):
+        build_bed(100, "cpu", rolling="type_b")

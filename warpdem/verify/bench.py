@@ -17,10 +17,15 @@ import warp as wp
 from warpdem.engine.builder import ModelBuilder
 from warpdem.engine.materials import Material
 from warpdem.engine.solver import Solver, SolverOptions
+from warpdem.engine.types import RollingModel
 
 DIAMETER = 0.005
 DT = 1e-5
 """The bench's time step [s]: the plain-sphere bed keeps it, so its figures compare with older records."""
+ROLLING_FRICTION = 0.1
+"""Rolling friction coefficient of every pair when the bench runs a rolling model (``rolling``)."""
+ROLLING_CHOICES = tuple(m.name.lower() for m in RollingModel)
+"""The bench's ``rolling`` values: a :class:`RollingModel` name in lower case ("none": no rolling friction)."""
 SETTLE_TIME = 0.2
 """Simulated time [s] the bed settles for before it is timed (unless ``settle_steps`` is given)."""
 UNITS = {
@@ -84,6 +89,7 @@ def build_bed(
     mesh_cells: int = 40,
     worlds: int = 1,
     shuffle: bool = False,
+    rolling: str = "none",
 ):
     """Model of ``count`` bodies per world (rounded to full 5-layer lattices) in a square box, replicated into
     ``worlds`` identical worlds; returns (model, side [m]).
@@ -92,7 +98,8 @@ def build_bed(
     "mesh" replaces the five planes by one triangle mesh of 10 mesh_cells^2 triangles (a funnel-sized mesh);
     ``law`` (HM, JKR, EEPA) sets the contact law of every pair, with moderate cohesion. ``shuffle`` numbers the
     same bodies in a random order (a lattice is numbered row by row, so neighbours are near in memory; a poured
-    or flowing bed's numbering is not).
+    or flowing bed's numbering is not). ``rolling`` (one of ``ROLLING_CHOICES``) gives every pair that rolling
+    model with mu_r = ``ROLLING_FRICTION``, so the rolling branches of the step are timed too.
     """
     layers = 5
     per_side = max(2, int(round(math.sqrt(count / layers))))
@@ -114,7 +121,16 @@ def build_bed(
     }
     if law not in cohesion:
         raise ValueError(f"bench: law = {law!r} is not allowed; expected HM, JKR or EEPA")
-    b.set_default_interaction(restitution=0.5, static_friction=0.5, rolling_friction=0.0, **cohesion[law])
+    if rolling not in ROLLING_CHOICES:
+        raise ValueError(f"bench: rolling = {rolling!r} is not allowed; expected one of {', '.join(ROLLING_CHOICES)}")
+    roll = (
+        {}
+        if rolling == "none"
+        else {"rolling_friction": ROLLING_FRICTION, "rolling_model": RollingModel[rolling.upper()]}
+    )
+    b.set_default_interaction(
+        restitution=0.5, static_friction=0.5, **({"rolling_friction": 0.0} | roll), **cohesion[law]
+    )
     if walls == "planes":
         b.add_plane((0, 0, 0), (0, 0, 1), "bed")
         b.add_plane((0, 0, 0), (1, 0, 0), "bed")
@@ -194,6 +210,7 @@ def run_bench(
     law: str = "HM",
     worlds: int = 1,
     shuffle: bool = False,
+    rolling: str = "none",
 ) -> dict:
     """Settle the bed, then time ``steps`` steps; returns the figures.
 
@@ -203,7 +220,9 @@ def run_bench(
     is_cuda = wp.get_device(device).is_cuda
     count = count or (1_000_000 if is_cuda else 2000)
     steps = steps or (2000 if is_cuda else 5000)
-    model, side = build_bed(count, device, clumps=clumps, walls=walls, law=law, worlds=worlds, shuffle=shuffle)
+    model, side = build_bed(
+        count, device, clumps=clumps, walls=walls, law=law, worlds=worlds, shuffle=shuffle, rolling=rolling
+    )
     mesh_capacity = 32 if walls == "mesh" else 16
     solver = Solver(model, SolverOptions(dt=None, mesh_capacity=mesh_capacity))
     if solver.dt > DT:
@@ -232,6 +251,7 @@ def run_bench(
     return {
         "device": str(wp.get_device(device).name if is_cuda else "cpu"),
         "law": law,
+        "rolling": rolling,
         "worlds": model.world_count,
         "shuffled": shuffle,
         "dt": solver.dt,
