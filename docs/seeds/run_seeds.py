@@ -130,6 +130,8 @@ STEPS = {
     # replicates at the paper's calibrated set
     "pellets_pb_standard": lambda dev, root: study("pellets_pb_standard", dev, root),
     "pellets_calibrated_standard": lambda dev, root: study("pellets_calibrated_standard", dev, root),
+    # eight replicates at the point that screening chose (its linear model on the 28.27 deg contour)
+    "pellets_verify_standard": lambda dev, root: study("pellets_verify_standard", dev, root),
     # seeds 000 and 001 give one angle each, out of their base models' reach: which candidates reach it
     "seed000_reach": lambda dev, root: diagnosis("seed000_pellets", dev, root),
     "seed001_reach": lambda dev, root: diagnosis("seed001_wetfeed", dev, root),

@@ -25,6 +25,7 @@ COUNTS = {
     "pellets_verify": 4,
     "pellets_pb_standard": 12,
     "pellets_calibrated_standard": 4,
+    "pellets_verify_standard": 8,
     "wetfeed_pb": 12,
     "wetfeed_ccd": 23,
     "phosphate_ffd": 16,
