@@ -134,6 +134,8 @@ STEPS = {
     "pellets_verify_standard": lambda dev, root: study("pellets_verify_standard", dev, root),
     # and again one steepest-descent step on (the screening model's A, D, E), the first read 1.96 deg high
     "pellets_verify_standard_step": lambda dev, root: study("pellets_verify_standard_step", dev, root),
+    # and on the secant between those two, where the target lies by linear interpolation
+    "pellets_verify_standard_secant": lambda dev, root: study("pellets_verify_standard_secant", dev, root),
     # seeds 000 and 001 give one angle each, out of their base models' reach: which candidates reach it
     "seed000_reach": lambda dev, root: diagnosis("seed000_pellets", dev, root),
     "seed001_reach": lambda dev, root: diagnosis("seed001_wetfeed", dev, root),

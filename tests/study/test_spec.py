@@ -27,6 +27,7 @@ COUNTS = {
     "pellets_calibrated_standard": 4,
     "pellets_verify_standard": 8,
     "pellets_verify_standard_step": 8,
+    "pellets_verify_standard_secant": 8,
     "wetfeed_pb": 12,
     "wetfeed_ccd": 23,
     "phosphate_ffd": 16,
