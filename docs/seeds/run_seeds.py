@@ -131,6 +131,9 @@ STEPS = {
     # replicates at the paper's calibrated set
     "pellets_pb_standard": lambda dev, root: study("pellets_pb_standard", dev, root),
     "pellets_calibrated_standard": lambda dev, root: study("pellets_calibrated_standard", dev, root),
+    # the standard screening with the plate's friction held at the paper's calibrated wall values: A, B on the
+    # funnel's walls alone
+    "pellets_pb_standard_plate_held": lambda dev, root: study("pellets_pb_standard_plate_held", dev, root),
     # eight replicates at the point that screening chose (its linear model on the 28.27 deg contour)
     "pellets_verify_standard": lambda dev, root: study("pellets_verify_standard", dev, root),
     # and again one steepest-descent step on (the screening model's A, D, E), the first read 1.96 deg high

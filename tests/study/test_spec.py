@@ -25,6 +25,7 @@ COUNTS = {
     "pellets_verify": 4,
     "pellets_pb_standard": 12,
     "pellets_calibrated_standard": 4,
+    "pellets_pb_standard_plate_held": 12,
     "pellets_verify_standard": 8,
     "pellets_verify_standard_step": 8,
     "pellets_verify_standard_secant": 8,
@@ -118,6 +119,15 @@ def test_standard_rolling_studies_differ_from_their_twins_only_in_the_rolling_mo
     t = tables["pellets_calibrated_standard"]
     assert {tuple(r) for r in t[["C_actual", "D_actual", "E_actual"]].to_numpy().round(9)} == {(0.45, 0.55, 0.05)}
     assert list(t["world_seed"]) == [0, 1, 2, 3]
+
+
+def test_plate_held_screening_differs_only_in_the_plate(studies, tables):
+    """pellets_pb_standard_plate_held runs pellets_pb_standard's 12 points with the plate's friction held at the
+    paper's calibrated particle-wall values (Table 12: A 0.52, B 0.03), nothing else changed."""
+    held, pbs = studies["pellets_pb_standard_plate_held"], studies["pellets_pb_standard"]
+    assert dict(held.fixed) == dict(pbs.fixed) | {"plate_static_friction": 0.52, "plate_rolling_friction": 0.03}
+    cols = [c for c in tables["pellets_pb_standard"].columns if c != "point_id"]
+    assert tables["pellets_pb_standard_plate_held"][cols].equals(tables["pellets_pb_standard"][cols])
 
 
 @pytest.mark.parametrize("name", ["pellets_pb", "wetfeed_pb", "pellets_bbd", "wetfeed_ccd", "phosphate_bbd"])
