@@ -10,7 +10,8 @@ contacts split from the rest of the loading (truck_tipper; with the bucket turni
 seed 000's screening, steepest ascent and Box-Behnken, read with the current pile rule (pellets_pb,
 pellets_steepest, pellets_bbd), and replicates at the Box-Behnken region's high corner (pellets_verify); the
 screening and replicates at the paper's calibrated set with EDEM's standard rolling friction (pellets_pb_standard,
-pellets_calibrated_standard), and three verifications of our own with it: at that screening's chosen point, one
+pellets_calibrated_standard), its steepest ascent and Box-Behnken (pellets_steepest_standard, pellets_bbd_standard),
+and three verifications of our own with it: at that screening's chosen point, one
 steepest-descent step on, and on the secant between them (pellets_verify_standard, pellets_verify_standard_step,
 pellets_verify_standard_secant); the reach diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach: ``warpdem diagnose
 studies/diagnose/seed00N_*.toml``). A lane runs its steps in order on its devices (a study on several goes through
@@ -131,6 +132,9 @@ STEPS = {
     # replicates at the paper's calibrated set
     "pellets_pb_standard": lambda dev, root: study("pellets_pb_standard", dev, root),
     "pellets_calibrated_standard": lambda dev, root: study("pellets_calibrated_standard", dev, root),
+    # the paper's later stages with it: steepest ascent, then the Box-Behnken with its optimum and verification
+    "pellets_steepest_standard": lambda dev, root: study("pellets_steepest_standard", dev, root),
+    "pellets_bbd_standard": lambda dev, root: study("pellets_bbd_standard", dev, root),
     # the standard screening with the plate's friction held at the paper's calibrated wall values: A, B on the
     # funnel's walls alone
     "pellets_pb_standard_plate_held": lambda dev, root: study("pellets_pb_standard_plate_held", dev, root),

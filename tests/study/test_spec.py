@@ -26,6 +26,8 @@ COUNTS = {
     "pellets_pb_standard": 12,
     "pellets_calibrated_standard": 4,
     "pellets_pb_standard_plate_held": 12,
+    "pellets_steepest_standard": 6,
+    "pellets_bbd_standard": 17,
     "pellets_verify_standard": 8,
     "pellets_verify_standard_step": 8,
     "pellets_verify_standard_secant": 8,
@@ -119,6 +121,19 @@ def test_standard_rolling_studies_differ_from_their_twins_only_in_the_rolling_mo
     t = tables["pellets_calibrated_standard"]
     assert {tuple(r) for r in t[["C_actual", "D_actual", "E_actual"]].to_numpy().round(9)} == {(0.45, 0.55, 0.05)}
     assert list(t["world_seed"]) == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize("name", ["pellets_steepest", "pellets_bbd"])
+def test_later_standard_stages_differ_from_their_twins_only_in_the_rolling_model(studies, tables, name):
+    """The steepest ascent and the Box-Behnken with EDEM's standard rolling friction run their type-A twins' points
+    with the same analysis and verification; only the three pellet pairs' rolling model is fixed on top."""
+    model = {f"interaction.grain.{b}.rolling_model": "standard" for b in ("grain", "steel", "plate")}
+    twin, std = studies[name], studies[f"{name}_standard"]
+    assert dict(std.fixed) == dict(twin.fixed) | model
+    assert std.analysis == twin.analysis and std.verification == twin.verification
+    assert std.responses == twin.responses
+    cols = [c for c in tables[name].columns if c != "point_id"]
+    assert tables[f"{name}_standard"][cols].equals(tables[name][cols])
 
 
 def test_plate_held_screening_differs_only_in_the_plate(studies, tables):
