@@ -53,6 +53,7 @@ def test_press_null_is_adequate(tmp_path, press_runs):
     assert not any(t["significant"] for t in res["adequacy_tests"])
 
 
+@pytest.mark.slow  # 603 s of two cores beside the suite's other tests on 2026-11-28: CI runs it in its slow step
 def test_press_plasticity_is_named(tmp_path, press_runs):
     """EEPA plasticity (lambda_p = 0.7) hidden in the press data: the diagnosis names plasticity (not cohesion,
     the other candidate tried), its interval covers 0.7, and the held-out error of the residual set falls by at
