@@ -124,13 +124,11 @@ def build_bed(
     if rolling not in ROLLING_CHOICES:
         raise ValueError(f"bench: rolling = {rolling!r} is not allowed; expected one of {', '.join(ROLLING_CHOICES)}")
     roll = (
-        {}
+        {"rolling_friction": 0.0}
         if rolling == "none"
         else {"rolling_friction": ROLLING_FRICTION, "rolling_model": RollingModel[rolling.upper()]}
     )
-    b.set_default_interaction(
-        restitution=0.5, static_friction=0.5, **({"rolling_friction": 0.0} | roll), **cohesion[law]
-    )
+    b.set_default_interaction(restitution=0.5, static_friction=0.5, **roll, **cohesion[law])
     if walls == "planes":
         b.add_plane((0, 0, 0), (0, 0, 1), "bed")
         b.add_plane((0, 0, 0), (1, 0, 0), "bed")
