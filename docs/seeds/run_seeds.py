@@ -11,9 +11,9 @@ seed 000's screening, steepest ascent and Box-Behnken, read with the current pil
 pellets_steepest, pellets_bbd), and replicates at the Box-Behnken region's high corner (pellets_verify); the
 screening and replicates at the paper's calibrated set with EDEM's standard rolling friction (pellets_pb_standard,
 pellets_calibrated_standard), its steepest ascent and Box-Behnken (pellets_steepest_standard, pellets_bbd_standard),
-and three verifications of our own with it: at that screening's chosen point, one
-steepest-descent step on, and on the secant between them (pellets_verify_standard, pellets_verify_standard_step,
-pellets_verify_standard_secant); the reach diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach: ``warpdem diagnose
+and three verifications of our own with it: at that screening's chosen point, one steepest-descent step on, and on
+the secant between them (pellets_verify_standard, pellets_verify_standard_step, pellets_verify_standard_secant); the
+reach diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach: ``warpdem diagnose
 studies/diagnose/seed00N_*.toml``). A lane runs its steps in order on its devices (a study on several goes through
 the distributed executor); lanes run side by side and may share a device. The default, for 4 GPUs: seed 001 on
 cuda:0, seed 002 on the other three.
