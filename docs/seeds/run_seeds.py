@@ -121,6 +121,8 @@ STEPS = {
     "die_press": lambda dev, root: lambda: rig("die_press", dev.split(",")[-1], root, ccd_optimum(root).items()),
     "phosphate_ffd": lambda dev, root: study("phosphate_ffd", dev, root),
     "phosphate_bbd": lambda dev, root: study("phosphate_bbd", dev, root),
+    # the screening's two surface energies as printed and times the coarse-graining factor squared (655)
+    "phosphate_gamma_scaled": lambda dev, root: study("phosphate_gamma_scaled", dev, root),
     # seed 000's Box-Behnken again, its piles read without the grains lying apart (the first run read them all)
     "pellets_bbd": lambda dev, root: study("pellets_bbd", dev, root),
     # its screening and steepest ascent again (the current pile rule), and replicates at the Box-Behnken region's

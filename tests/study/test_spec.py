@@ -35,6 +35,7 @@ COUNTS = {
     "wetfeed_ccd": 23,
     "phosphate_ffd": 16,
     "phosphate_bbd": 15,
+    "phosphate_gamma_scaled": 4,
     "main_funnel_pb": 12,
     "wetfeed_gamma_scan": 5,
 }
