@@ -123,6 +123,8 @@ STEPS = {
     "phosphate_bbd": lambda dev, root: study("phosphate_bbd", dev, root),
     # the screening's two surface energies as printed and times the coarse-graining factor squared (655)
     "phosphate_gamma_scaled": lambda dev, root: study("phosphate_gamma_scaled", dev, root),
+    # and four more between them, a scan in steps of about 2.2 from 0.3 to 982 J/m^2
+    "phosphate_gamma_scan": lambda dev, root: study("phosphate_gamma_scan", dev, root),
     # seed 000's Box-Behnken again, its piles read without the grains lying apart (the first run read them all)
     "pellets_bbd": lambda dev, root: study("pellets_bbd", dev, root),
     # its screening and steepest ascent again (the current pile rule), and replicates at the Box-Behnken region's

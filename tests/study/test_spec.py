@@ -36,6 +36,7 @@ COUNTS = {
     "phosphate_ffd": 16,
     "phosphate_bbd": 15,
     "phosphate_gamma_scaled": 4,
+    "phosphate_gamma_scan": 4,
     "main_funnel_pb": 12,
     "wetfeed_gamma_scan": 5,
 }
