@@ -28,6 +28,7 @@ COUNTS = {
     "pellets_pb_standard_plate_held": 12,
     "pellets_steepest_standard": 6,
     "pellets_bbd_standard": 17,
+    "pellets_bbd_standard_own": 17,
     "pellets_verify_standard": 8,
     "pellets_verify_standard_step": 8,
     "pellets_verify_standard_secant": 8,
