@@ -6,15 +6,15 @@ The steps: seed 001's wet-feed Plackett-Burman (wetfeed_pb), central composite w
 (wetfeed_ccd), then the die press at the central composite's chosen optimum, or its closest point when the target is
 out of reach (die_press), and its surface-energy scan beyond the paper's range (wetfeed_gamma_scan); seed 002's
 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run (phosphate_bbd), its surface energy as
-printed and scaled by the coarse-graining factor squared, and between (phosphate_gamma_scaled,
-phosphate_gamma_scan), and the truck tipper, first contacts split from the rest of the loading (truck_tipper; with
-the bucket turning over 6 s, truck_tipper_slow); seed 000's screening, steepest ascent and Box-Behnken, read with
-the current pile rule (pellets_pb, pellets_steepest, pellets_bbd), and replicates at the Box-Behnken region's high
-corner (pellets_verify); the screening and replicates at the paper's calibrated set with EDEM's standard rolling
-friction (pellets_pb_standard, pellets_calibrated_standard), its steepest ascent and Box-Behnken
-(pellets_steepest_standard, pellets_bbd_standard; the Box-Behnken again where our own path came nearest the target,
-pellets_bbd_standard_own), and three verifications of our own with it: at that screening's chosen point, one
-steepest-descent step on, and on the secant between them (pellets_verify_standard, pellets_verify_standard_step,
+printed and scaled by the coarse-graining factor squared, and between (phosphate_gamma_scaled, phosphate_gamma_scan;
+the screening with it scaled by s, phosphate_ffd_gamma_s), and the truck tipper, first contacts split from the rest
+of the loading (truck_tipper; with the bucket turning over 6 s, truck_tipper_slow); seed 000's screening, steepest
+ascent and Box-Behnken, read with the current pile rule (pellets_pb, pellets_steepest, pellets_bbd), and replicates
+at the Box-Behnken region's high corner (pellets_verify); the screening and replicates at the paper's calibrated set
+with EDEM's standard rolling friction (pellets_pb_standard, pellets_calibrated_standard), its steepest ascent and
+Box-Behnken (pellets_steepest_standard, pellets_bbd_standard; the Box-Behnken again where our own path came nearest
+the target, pellets_bbd_standard_own), and three verifications of our own with it: at that screening's chosen point,
+one steepest-descent step on, and on the secant between them (pellets_verify_standard, pellets_verify_standard_step,
 pellets_verify_standard_secant); the reach diagnoses of seeds 000 and 001's one angle each (seed000_reach,
 seed001_reach: ``warpdem diagnose studies/diagnose/seed00N_*.toml``). A lane runs its steps in order on its devices
 (a study on several goes through the distributed executor); lanes run side by side and may share a device. The
@@ -127,6 +127,8 @@ STEPS = {
     "phosphate_gamma_scaled": lambda dev, root: study("phosphate_gamma_scaled", dev, root),
     # and four more between them, a scan in steps of about 2.2 from 0.3 to 982 J/m^2
     "phosphate_gamma_scan": lambda dev, root: study("phosphate_gamma_scan", dev, root),
+    # the screening again with the surface energy's levels times s (7.68 and 38.4 J/m^2)
+    "phosphate_ffd_gamma_s": lambda dev, root: study("phosphate_ffd_gamma_s", dev, root),
     # seed 000's Box-Behnken again, its piles read without the grains lying apart (the first run read them all)
     "pellets_bbd": lambda dev, root: study("pellets_bbd", dev, root),
     # its screening and steepest ascent again (the current pile rule), and replicates at the Box-Behnken region's

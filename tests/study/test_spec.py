@@ -35,6 +35,7 @@ COUNTS = {
     "wetfeed_pb": 12,
     "wetfeed_ccd": 23,
     "phosphate_ffd": 16,
+    "phosphate_ffd_gamma_s": 16,
     "phosphate_bbd": 15,
     "phosphate_gamma_scaled": 4,
     "phosphate_gamma_scan": 4,
