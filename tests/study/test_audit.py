@@ -36,6 +36,7 @@ EXPECTED_FAILURES_OUTSIDE_PELLETS_BBD_ANOVA = {
     "pellets.pb.equation_actual.const",
     "pellets.steepest.step.C",
     "pellets.bbd.coding_direction",
+    "pellets.bbd.coding_agrees_with_screening",
     "pellets.bbd.significant_terms",
     "pellets.bbd.reduced_model_terms",
     "pellets.bbd.equation_actual.C",
@@ -193,6 +194,19 @@ def test_informational_records(by_name):
         assert by_name[name]["pass"] is None
         assert "predicted" in by_name[name]["note"]
     assert by_name["phosphate.bbd.optimum_ours.static_friction"]["value"] == pytest.approx(0.5757, abs=2e-3)
+
+
+def test_bbd_coding_read_against_the_screening(by_name):
+    """Seed 000's Table 10 read with Table 9's printed coding falls with static and rolling friction, which its
+    screening (Table 7's runs) says raise the angle; the text's coding agrees. The effects by hand from the printed
+    rows: at D's high value (coded -1 as printed) runs 1, 2, 9, 11 average 25.4975 deg, at its low value runs 3, 4,
+    10, 12 average 28.995 deg."""
+    r = by_name["pellets.bbd.coding_agrees_with_screening"]
+    assert r["value"] == "text"
+    assert r["pass"] is False
+    assert "Table 9 as printed: C -2.59 deg, D -3.50 deg, E -1.99 deg" in r["note"]
+    assert "text: C +2.59 deg, D +3.50 deg, E +1.99 deg" in r["note"]
+    assert "D +6.63 deg" in r["note"] and "E +3.58 deg" in r["note"]
 
 
 def test_format_and_main(records, monkeypatch, tmp_path, capsys):

@@ -613,6 +613,27 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
     )
     bbd = _csv(ref, "pellets_bbd_runs.csv")
     fac3 = list("CDE")
+    # Which coding makes Table 10 move the way the screening says each factor does (high value less low value)?
+    y10 = bbd["aor_deg"].map(_num)
+    rise = {f: float(y10[bbd[f].astype(float) > 0].mean() - y10[bbd[f].astype(float) < 0].mean()) for f in fac3}
+    pb_sign = {f: np.sign(fit.coef(f)) for f in fac3}
+    codings = {"Table 9 as printed": {f: -rise[f] for f in fac3}, "text": rise}
+    agree = [k for k, eff in codings.items() if all(np.sign(eff[f]) == pb_sign[f] for f in fac3)]
+    a.add(
+        "pellets.bbd.coding_agrees_with_screening",
+        " and ".join(agree) or "neither",
+        "Table 9 as printed",
+        "",
+        agree == ["Table 9 as printed"],
+        "the coding under which every one of Table 10's main effects (mean at the high value less mean at the low "
+        "value) has the sign of the screening's: "
+        + "; ".join(f"{k}: " + ", ".join(f"{f} {eff[f]:+.2f} deg" for f in fac3) for k, eff in codings.items())
+        + "; screening (Table 7's runs): "
+        + ", ".join(f"{f} {2 * fit.coef(f):+.2f} deg" for f in fac3)
+        + ". Read as printed, the angle falls with both frictions, against the screening and the steepest ascent",
+        "seed 000 Tables 7, 9, 10 and text",
+        "consistency",
+    )
     same = bool(np.array_equal(box_behnken(fac3, 5)[fac3].to_numpy(), bbd[fac3].astype(float).to_numpy()))
     a.check(
         "pellets.bbd.design_is_standard_bbd",
