@@ -613,12 +613,12 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
     )
     bbd = _csv(ref, "pellets_bbd_runs.csv")
     fac3 = list("CDE")
+    coded = bbd[fac3].astype(float)
     # Which coding makes Table 10 move the way the screening says each factor does (high value less low value)?
     y10 = bbd["aor_deg"].map(_num)
-    rise = {f: float(y10[bbd[f].astype(float) > 0].mean() - y10[bbd[f].astype(float) < 0].mean()) for f in fac3}
-    pb_sign = {f: np.sign(fit.coef(f)) for f in fac3}
+    rise = {f: float(y10[coded[f] > 0].mean() - y10[coded[f] < 0].mean()) for f in fac3}
     codings = {"Table 9 as printed": {f: -rise[f] for f in fac3}, "text": rise}
-    agree = [k for k, eff in codings.items() if all(np.sign(eff[f]) == pb_sign[f] for f in fac3)]
+    agree = [k for k, eff in codings.items() if all(np.sign(eff[f]) == np.sign(fit.coef(f)) for f in fac3)]
     a.add(
         "pellets.bbd.coding_agrees_with_screening",
         " and ".join(agree) or "neither",
@@ -634,7 +634,7 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
         "seed 000 Tables 7, 9, 10 and text",
         "consistency",
     )
-    same = bool(np.array_equal(box_behnken(fac3, 5)[fac3].to_numpy(), bbd[fac3].astype(float).to_numpy()))
+    same = bool(np.array_equal(box_behnken(fac3, 5)[fac3].to_numpy(), coded.to_numpy()))
     a.check(
         "pellets.bbd.design_is_standard_bbd",
         same,
@@ -642,9 +642,9 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
         "seed 000 Table 10",
         "consistency",
     )
-    bfit, bsl = _fit_and_slack(bbd[fac3].astype(float), bbd["aor_deg"], fac3, "quadratic", blv)
+    bfit, bsl = _fit_and_slack(coded, bbd["aor_deg"], fac3, "quadratic", blv)
     src11 = "seed 000 Table 11 / pellets_bbd_anova_published.csv"
-    pe = bbd[bbd[fac3].astype(float).eq(0).all(axis=1)]["aor_deg"].tolist()
+    pe = bbd[coded.eq(0).all(axis=1)]["aor_deg"].tolist()
     notes = {
         "pellets.bbd.anova.Pure Error.sum_sq": f"pure error of the five printed centre runs ({', '.join(pe)}) is "
         f"{bfit.anova.loc['Pure Error', 'sum_sq']:.3f}; the published table was not computed "
@@ -659,7 +659,7 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
     rfit, _ = _audit_reduced_equation(
         a,
         "pellets.bbd",
-        bbd[fac3].astype(float),
+        coded,
         bbd["aor_deg"],
         blv,
         eq6,
