@@ -115,45 +115,10 @@ def rig(name: str, device: str, root: Path, sets=()) -> list:
 
 
 STEPS = {
-    "wetfeed_pb": lambda dev, root: study("wetfeed_pb", dev, root),
-    "wetfeed_ccd": lambda dev, root: study("wetfeed_ccd", dev, root),
     # the wet feed's surface energy doubled from 0.5 to 8 J/m^2, beyond the paper's range (no verification)
     "wetfeed_gamma_scan": lambda dev, root: study("wetfeed_gamma_scan", dev, root) + ["--no-verify"],
     # at the central composite's optimum: built when the step starts, after the composite has run
     "die_press": lambda dev, root: lambda: rig("die_press", dev.split(",")[-1], root, ccd_optimum(root).items()),
-    "phosphate_ffd": lambda dev, root: study("phosphate_ffd", dev, root),
-    "phosphate_bbd": lambda dev, root: study("phosphate_bbd", dev, root),
-    # the screening's two surface energies as printed and times the coarse-graining factor squared (655)
-    "phosphate_gamma_scaled": lambda dev, root: study("phosphate_gamma_scaled", dev, root),
-    # and four more between them, a scan in steps of about 2.2 from 0.3 to 982 J/m^2
-    "phosphate_gamma_scan": lambda dev, root: study("phosphate_gamma_scan", dev, root),
-    # the screening again with the surface energy's levels times s (7.68 and 38.4 J/m^2)
-    "phosphate_ffd_gamma_s": lambda dev, root: study("phosphate_ffd_gamma_s", dev, root),
-    # seed 000's Box-Behnken again, its piles read without the grains lying apart (the first run read them all)
-    "pellets_bbd": lambda dev, root: study("pellets_bbd", dev, root),
-    # its screening and steepest ascent again (the current pile rule), and replicates at the Box-Behnken region's
-    # high corner, the one point that read above the target: its mean model names no optimum to verify
-    "pellets_pb": lambda dev, root: study("pellets_pb", dev, root),
-    "pellets_steepest": lambda dev, root: study("pellets_steepest", dev, root),
-    "pellets_verify": lambda dev, root: study("pellets_verify", dev, root),
-    # EDEM's standard rolling friction (each pellet's own lever) in place of type A: the screening again, and
-    # replicates at the paper's calibrated set
-    "pellets_pb_standard": lambda dev, root: study("pellets_pb_standard", dev, root),
-    "pellets_calibrated_standard": lambda dev, root: study("pellets_calibrated_standard", dev, root),
-    # the paper's later stages with it: steepest ascent, then the Box-Behnken with its optimum and verification
-    "pellets_steepest_standard": lambda dev, root: study("pellets_steepest_standard", dev, root),
-    "pellets_bbd_standard": lambda dev, root: study("pellets_bbd_standard", dev, root),
-    # the same Box-Behnken centred where our own steepest ascent came nearest the target (its run 3)
-    "pellets_bbd_standard_own": lambda dev, root: study("pellets_bbd_standard_own", dev, root),
-    # the standard screening with the plate's friction held at the paper's calibrated wall values: A, B on the
-    # funnel's walls alone
-    "pellets_pb_standard_plate_held": lambda dev, root: study("pellets_pb_standard_plate_held", dev, root),
-    # eight replicates at the point that screening chose (its linear model on the 28.27 deg contour)
-    "pellets_verify_standard": lambda dev, root: study("pellets_verify_standard", dev, root),
-    # and again one steepest-descent step on (the screening model's A, D, E), the first read 1.96 deg high
-    "pellets_verify_standard_step": lambda dev, root: study("pellets_verify_standard_step", dev, root),
-    # and on the secant between those two, where the target lies by linear interpolation
-    "pellets_verify_standard_secant": lambda dev, root: study("pellets_verify_standard_secant", dev, root),
     # seeds 000 and 001 give one angle each, out of their base models' reach: which candidates reach it
     "seed000_reach": lambda dev, root: diagnosis("seed000_pellets", dev, root),
     "seed001_reach": lambda dev, root: diagnosis("seed001_wetfeed", dev, root),
@@ -164,7 +129,23 @@ STEPS = {
         "truck_tipper", dev.split(",")[-1], root / "truck_tipper_slow", [("dump_duration", 6.0)]
     ),
 }
-"""Each step's command line on a lane's devices (a rig run takes the lane's last device)."""
+"""The steps that are not a plain study: each one's command line on a lane's devices (a rig run takes the lane's
+last device). Any other step name is the study ``studies/NAME.toml``, run as it is (:func:`step`); its header says
+which stage of which seed it encodes."""
+
+STUDIES = Path(__file__).resolve().parents[2] / "studies"
+"""Where a plain study step's file lives."""
+
+
+def step(name: str, devices: str, root: Path):
+    """Step ``name``'s command line (or, for the die press, a function that builds it once the composite has
+    run): from :data:`STEPS`, else the study ``studies/NAME.toml``; None when it is neither."""
+    if name in STEPS:
+        return STEPS[name](devices, root)
+    if (STUDIES / f"{name}.toml").is_file():
+        return study(name, devices, root)
+    return None
+
 
 LANES = ["cuda:0=wetfeed_pb,wetfeed_ccd,die_press", "cuda:1,cuda:2,cuda:3=phosphate_ffd,phosphate_bbd,truck_tipper"]
 """The default lanes, for a 4-GPU machine: DEVICES=STEP,STEP,... each."""
@@ -172,10 +153,14 @@ LANES = ["cuda:0=wetfeed_pb,wetfeed_ccd,die_press", "cuda:1,cuda:2,cuda:3=phosph
 
 def parse_lane(text: str, root: Path) -> list:
     devices, _, names = text.partition("=")
-    unknown = [n for n in names.split(",") if n not in STEPS]
-    if not devices or not names or unknown:
-        raise SystemExit(f"--lane {text!r}: expected DEVICES=STEP,STEP,... with steps from {', '.join(STEPS)}")
-    return [(n, STEPS[n](devices, root)) for n in names.split(",")]
+    steps = [(n, step(n, devices, root)) for n in names.split(",")] if devices and names else []
+    unknown = [n for n, args in steps if args is None]
+    if not steps or unknown:
+        raise SystemExit(
+            f"--lane {text!r}: expected DEVICES=STEP,STEP,... with each step one of {', '.join(STEPS)} or a study "
+            f"studies/NAME.toml" + (f"; not found: {', '.join(unknown)}" if unknown else "")
+        )
+    return steps
 
 
 def run_lane(name: str, steps: list, root: Path, deadline: float, dry: bool, log) -> None:
