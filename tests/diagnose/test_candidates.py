@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from warpdem.diagnose import candidates as cands
@@ -38,7 +39,8 @@ def test_sphere_funnel_library():
     lib, skipped = cands.library(scene, params, set())
     by = {c.name: c for c in lib}
     assert list(by) == ["cohesion", "plasticity", "shape", "size_distribution", "rolling_friction", "wall_friction"]
-    assert set(skipped) == {"rolling_model"}
+    assert set(skipped) == {"rolling_model", "coarse_graining"}
+    assert "HERTZ_MINDLIN, neither JKR nor EEPA" in skipped["coarse_graining"]
     assert by["cohesion"].off == 0.0 and by["cohesion"].high == pytest.approx(_bond_range(scene), rel=1e-12)
     assert by["cohesion"].shared == {"interaction.grain.grain.law": "JKR"}
     assert (by["shape"].key, by["shape"].off, by["shape"].high) == ("aspect_ratio", 1.0, 2.5)
@@ -106,3 +108,113 @@ def test_library_reads_the_data_files_values(tmp_path):
     lib2, _ = _diagnosis_library(tmp_path / "b", f'"material.grain.density" = {2 * rho}')
     assert next(c for c in lib2 if c.name == "cohesion").high == pytest.approx(2 * gamma_max, rel=1e-12)
     assert math.isfinite(gamma_max) and gamma_max > 0
+
+
+# --------------------------------------------------------------------------------------------------
+# coarse-graining: the surface energy scaled with the grain size
+# --------------------------------------------------------------------------------------------------
+
+GAMMA = "interaction.grain.grain.surface_energy"
+
+
+def _cohesive_funnel(gamma: float = 0.05, **values):
+    from warpdem.scene.stage import apply_overrides
+
+    scene, params = _funnel(particle="sphere", **values)
+    return apply_overrides(scene, {"interaction.grain.grain.law": "JKR", GAMMA: gamma}), params
+
+
+def test_coarse_graining_applies_to_a_cohesive_coarse_grained_scene():
+    """JKR grains 5 times the measured ones: the exponent k of gamma s^k, off 0 at the end of [0, 2], carrying
+    s = 5, the scene's surface energy and the key it scales; cohesion (the law is JKR already) does not apply."""
+    scene, params = _cohesive_funnel()
+    radius = cands._grain(scene)[1]
+    lib, skipped = cands.library(scene, params, set(), grain_radius=radius / 5.0)
+    c = next(c for c in lib if c.name == "coarse_graining")
+    assert (c.key, c.off, c.low, c.high, c.off_at_edge) == (cands.COARSE_EXPONENT, 0.0, 0.0, 2.0, True)
+    assert c.shared["coarse_graining.size_ratio"] == pytest.approx(5.0, rel=1e-12)
+    assert c.shared["coarse_graining.surface_energy"] == pytest.approx(0.05)
+    assert c.shared["coarse_graining.target"] == GAMMA
+    assert "cohesion" in skipped and "coarse_graining" not in skipped
+    # the surface energy is a free parameter: the scene's value is never used, so none is carried
+    lib, _ = cands.library(scene, params, {GAMMA}, grain_radius=radius / 5.0)
+    assert next(c for c in lib if c.name == "coarse_graining").shared["coarse_graining.surface_energy"] == 0.0
+
+
+@pytest.mark.parametrize(
+    "gamma, ratio, why",
+    [
+        (0.05, None, "no [candidates] grain_radius"),
+        (0.05, 1.0, "the measured size"),
+        (0.0, 5.0, "is 0: no cohesion to scale"),
+    ],
+)
+def test_coarse_graining_is_skipped_with_the_reason(gamma, ratio, why):
+    scene, params = _cohesive_funnel(gamma)
+    radius = cands._grain(scene)[1]
+    lib, skipped = cands.library(scene, params, set(), grain_radius=None if ratio is None else radius / ratio)
+    assert "coarse_graining" not in {c.name for c in lib}
+    assert why in skipped["coarse_graining"]
+
+
+def test_resolve_scales_the_surface_energy_by_hand():
+    """gamma s^k from the overrides' surface energy, else the scene's; the candidate's own keys are gone and the
+    others kept; overrides without the exponent come back unchanged."""
+    shared = {"coarse_graining.size_ratio": 4.0, "coarse_graining.surface_energy": 0.3, "coarse_graining.target": GAMMA}
+    other = {"interaction.grain.grain.rolling_friction": 0.2}
+    for k, factor in ((0.0, 1.0), (1.0, 4.0), (2.0, 16.0), (0.5, 2.0)):
+        out = cands.resolve({**other, **shared, cands.COARSE_EXPONENT: k})
+        assert out == {**other, GAMMA: pytest.approx(0.3 * factor, rel=1e-12)}
+        out = cands.resolve({**other, **shared, GAMMA: 1.5, cands.COARSE_EXPONENT: k})
+        assert out == {**other, GAMMA: pytest.approx(1.5 * factor, rel=1e-12)}
+    assert cands.resolve(other) == other
+
+
+def test_a_request_of_the_extended_model_carries_the_scaled_surface_energy(tmp_path):
+    """Through the pipeline: the data file's grain_radius gives s, the extended model's design keeps the exponent
+    continuous (it is a surface energy, which varies per world), and each request's surface energy is the free
+    parameter's value times s^k."""
+    from warpdem.diagnose.pipeline import Dim, Evaluator, Model, design_points
+
+    fixed = '"interaction.grain.grain.law" = "JKR"\nparticle_radius = 0.002'
+    csv = "id,replicate,angle_fit_deg\na,1,24.0\na,2,25.0\n"
+    tmp_path.mkdir(exist_ok=True)
+    (tmp_path / "experiments.csv").write_text(csv)
+    toml = TOML.replace("{fixed}", fixed).replace("interaction.grain.grain.static_friction", GAMMA)
+    path = tmp_path / "data.toml"
+    path.write_text(toml + "\n[candidates]\ngrain_radius = 0.0004\n")
+    spec, ex = load_diagnosis(path)
+    assert spec.grain_radius == 0.0004
+    prob = _problem(spec, ex)
+    lib, skipped = _library(spec, ex, prob.conditions)
+    cand = next(c for c in lib if c.name == "coarse_graining")
+    assert cand.shared["coarse_graining.size_ratio"] == pytest.approx(5.0, rel=1e-12)
+    base = Model("base", [Dim(p.name, p.parameter, p.low, p.high) for p in spec.parameters])
+    ext = Model.extended(base, cand)
+    U = design_points(ext.dims, 12, 1)
+    assert len(set(np.round(U[:, -1], 9))) == 12  # not rounded to a few launch levels
+    ov, seed = Evaluator(prob, None, None)._request(ext, [0.5, 0.25], 0, 7)
+    gamma = 0.2 + 0.5 * (1.0 - 0.2)  # the free parameter at u = 0.5 of [0.2, 1.0]
+    assert ov[GAMMA] == pytest.approx(gamma * 5.0**0.5, rel=1e-12) and seed == 7
+    assert not any(k.startswith("coarse_graining.") for k in ov)
+
+
+def test_coarse_graining_needs_one_size_ratio(tmp_path):
+    """Experiments at two grain sizes against one measured radius: s differs between them, so the candidate is
+    skipped with the reason rather than read as one rule."""
+    fixed = f'"interaction.grain.grain.law" = "JKR"\n"{GAMMA}" = 0.05'
+    (tmp_path / "experiments.csv").write_text(CSV)
+    (tmp_path / "data.toml").write_text(TOML.replace("{fixed}", fixed) + "\n[candidates]\ngrain_radius = 0.0004\n")
+    spec, ex = load_diagnosis(tmp_path / "data.toml")
+    lib, skipped = _library(spec, ex, _problem(spec, ex).conditions)
+    assert "coarse_graining" not in {c.name for c in lib}
+    assert "coarse_graining.size_ratio differs between the experiments" in skipped["coarse_graining"]
+
+
+@pytest.mark.parametrize("value", [0, -1e-4, "1 mm", True])
+def test_a_bad_grain_radius_is_refused(tmp_path, value):
+    (tmp_path / "experiments.csv").write_text(CSV)
+    lit = f'"{value}"' if isinstance(value, str) else str(value).lower()
+    (tmp_path / "data.toml").write_text(TOML.replace("{fixed}", "") + f"\n[candidates]\ngrain_radius = {lit}\n")
+    with pytest.raises(ValueError, match=r"\[candidates\]: grain_radius = .* is not allowed; expected the measured"):
+        load_diagnosis(tmp_path / "data.toml")

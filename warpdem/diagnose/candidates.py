@@ -19,6 +19,15 @@ Each candidate adds ONE parameter to the base model and reduces to the base mode
 - ``wall_friction``: the static friction of the grain against the wall the measurement rests on (the funnel's
   and lifting cylinder's base plate, the press's die, the drum's shell), separate from grain-grain friction.
   Off: the base value; range [0.1, 1].
+- ``coarse_graining``: the exponent k of the rule that scales the grain-grain JKR surface energy with the grain
+  size, gamma -> gamma s^k, where s is the scene's grain radius over the measured grains' (the data file's
+  ``[candidates] grain_radius``): the scene's grains are coarse-grained stand-ins, and a surface energy measured or
+  calibrated for the real grains is too weak for them (the pull-off force 1.5 pi gamma R* grows as R, the weight
+  as R^3). k = 1 keeps the bulk cohesive stress (pull-off force over a grain's cross-section), k = 2 the granular
+  Bond number (pull-off force over weight). Off 0 (the surface energy as given); range [0, 2]. Only for a JKR or
+  EEPA grain-grain pair whose surface energy is not 0, with the same s for every experiment. Its parameter is not an
+  override key: :func:`resolve` turns it into the surface energy it implies, whatever gives the base value (a free
+  parameter, a condition, ``[fixed]`` or the scene).
 
 A candidate does not apply when its parameter is already a free parameter of the base model, a condition of
 the experiments or a ``[fixed]`` key (the user has decided it), or when the scene cannot carry it.
@@ -41,6 +50,7 @@ CANDIDATE_NAMES = (
     "rolling_friction",
     "rolling_model",
     "wall_friction",
+    "coarse_graining",
 )
 """Names of the candidate extensions, in the order they are tried and reported."""
 
@@ -52,11 +62,43 @@ CAUSES = {
     "rolling_friction": "rolling resistance (rolling friction)",
     "rolling_model": "rolling-resistance model (type A, C or EDEM standard)",
     "wall_friction": "particle-wall friction",
+    "coarse_graining": "coarse-graining (the surface energy not scaled with the grain size)",
 }
 """The cause each candidate stands for, in the report's words."""
 
 BOND_MAX = 5.0
 """Largest granular Bond number (JKR pull-off force / a mean grain's weight) of the cohesion candidate's range."""
+
+COARSE_EXPONENT = "coarse_graining.exponent"
+"""The coarse_graining candidate's parameter: the exponent k of gamma s^k (not an override key)."""
+
+_COARSE_SHARED = ("coarse_graining.size_ratio", "coarse_graining.surface_energy", "coarse_graining.target")
+"""What :func:`resolve` needs beside the exponent, carried in the candidate's ``shared`` overrides: s (the scene's
+grain radius over the measured grains'), the scene's own surface energy [J/m^2] (used when no override sets one;
+0 when the data file sets it, as a free parameter, condition or [fixed] key) and the surface energy's override
+key."""
+
+
+def resolve(overrides: Mapping) -> dict:
+    """``overrides`` with the coarse_graining candidate's keys (when present) replaced by the surface energy they
+    imply: gamma s^k, gamma the overrides' own value of the target key, else the scene's. Every other key is
+    returned as it is."""
+    out = dict(overrides)
+    if COARSE_EXPONENT not in out:
+        return out
+    k = float(out.pop(COARSE_EXPONENT))
+    s, gamma, target = (out.pop(key) for key in _COARSE_SHARED)
+    out[target] = float(out.get(target, gamma)) * float(s) ** k
+    return out
+
+
+def varies_per_world(key: str) -> bool:
+    """True when a model parameter ``key`` can differ between the batched worlds of one launch: an override key
+    that can (:func:`warpdem.study.spec.varies_per_world`) or the coarse-graining exponent (a surface energy)."""
+    from warpdem.study.spec import varies_per_world as per_world
+
+    return key == COARSE_EXPONENT or per_world(key)
+
 
 _REST_WALL = {"angle_of_repose": ("Plate", "Base"), "press": ("Die",), "drum": ("Drum",)}
 """The wall each measure kind's grains rest on or slide along (wall_friction)."""
@@ -119,10 +161,13 @@ def _pair(scene, a: str, b: str):
     return Interaction()
 
 
-def library(scene, rig_params: Mapping | None, taken: set[str]) -> tuple[list[Candidate], dict[str, str]]:
+def library(
+    scene, rig_params: Mapping | None, taken: set[str], grain_radius: float | None = None
+) -> tuple[list[Candidate], dict[str, str]]:
     """The candidates that apply to ``scene`` (a SceneSpec built with the base model's overrides) and why the
     others do not. ``rig_params``: the rig's parameter values (None for a stage without a rig), ``taken``: the
-    override keys the user has decided (free parameters, conditions, ``[fixed]`` keys).
+    override keys the user has decided (free parameters, conditions, ``[fixed]`` keys), ``grain_radius``: the
+    measured grains' mean radius [m] when the scene's grains stand in for them (None: they are the real grains).
 
     Returns (candidates in :data:`CANDIDATE_NAMES` order, {name: reason it does not apply})."""
     from warpdem.engine.types import ContactLaw
@@ -182,6 +227,24 @@ def library(scene, rig_params: Mapping | None, taken: set[str]) -> tuple[list[Ca
         add("wall_friction", f"interaction.{grain}.{mat}.static_friction", mu_w, min(0.1, mu_w), max(1.0, mu_w))
     else:
         skipped["wall_friction"] = f"no wall the {scene.measure.kind} measurement rests on"
+    gamma_key = f"{pp}.surface_energy"
+    if gg.law not in (ContactLaw.JKR, ContactLaw.EEPA):
+        skipped["coarse_graining"] = (
+            f"the grain-grain law is {gg.law.name}, neither JKR nor EEPA: no surface energy to scale"
+        )
+    elif grain_radius is None:
+        skipped["coarse_graining"] = (
+            "the data file gives no [candidates] grain_radius (the measured grains' mean radius) to scale from"
+        )
+    elif radius <= 0 or math.isclose(radius, grain_radius, rel_tol=1e-9):
+        skipped["coarse_graining"] = f"the scene's grains are the measured size ({grain_radius:g} m): nothing to scale"
+    elif float(gg.surface_energy) == 0.0 and gamma_key not in taken:
+        skipped["coarse_graining"] = f"{gamma_key} is 0: no cohesion to scale"
+    else:
+        # a surface energy the data file sets reaches every request (and may differ between experiments)
+        gamma = 0.0 if gamma_key in taken else float(gg.surface_energy)
+        shared = dict(zip(_COARSE_SHARED, (radius / float(grain_radius), gamma, gamma_key)))
+        add("coarse_graining", COARSE_EXPONENT, 0.0, 0.0, 2.0, "", shared)
     return out, skipped
 
 

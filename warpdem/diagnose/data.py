@@ -55,6 +55,9 @@ Schema (``DATA.toml``)::
     use = ["cohesion", "plasticity"]    # a subset of diagnose.candidates.CANDIDATE_NAMES (default: every
                                         # candidate that applies; [] tries none)
     ranges = { cohesion = [0.0, 0.2] }  # per candidate [low, high], low < high, replacing its default range
+    grain_radius = 1.95e-4              # the measured grains' mean radius [m], > 0, when the scene's grains are
+                                        # coarse-grained stand-ins for them (optional; the coarse_graining
+                                        # candidate needs it)
 
 ``[diagnose]``, ``[[parameters]]`` and ``[experiments]`` are required; the other tables are optional. Free
 parameters are read by the factor grammar of :mod:`warpdem.study.spec` (``material.NAME.FIELD``, numeric
@@ -170,7 +173,7 @@ _TABLES = {
     "experiments": ("file", "curves"),
     "noise": ("sim_seeds",),
     "calibration": ("points", "confirm_seeds", "mcmc_steps", "alpha"),
-    "candidates": ("use", "ranges"),
+    "candidates": ("use", "ranges", "grain_radius"),
 }
 _REQUIRED = {
     "diagnose": ("name",),
@@ -221,7 +224,8 @@ class DiagnosisSpec:
     """A whole diagnosis file (schema in the module docstring). ``path`` is the TOML file (the scene, the
     experiments table and the curves are relative to it); ``experiments_file`` and ``curves`` are as written.
     ``candidates`` is None for every candidate that applies; ``candidate_ranges`` maps a candidate name to its
-    (low, high). Validated at construction; the experiments table is read by :func:`load_diagnosis`."""
+    (low, high); ``grain_radius`` [m] is the measured grains' mean radius (None: the scene's grains are the real
+    ones). Validated at construction; the experiments table is read by :func:`load_diagnosis`."""
 
     name: str
     title: str = ""
@@ -241,6 +245,7 @@ class DiagnosisSpec:
     alpha: float = 0.05
     candidates: tuple[str, ...] | None = None
     candidate_ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    grain_radius: float | None = None
     path: Path | None = None
 
     def __post_init__(self):
@@ -308,6 +313,13 @@ class DiagnosisSpec:
                 raise DiagnoseError(not_allowed(w, f"ranges.{c}", list(r), "[low, high] with low < high"))
             out[c] = (lo, hi)
         object.__setattr__(self, "candidate_ranges", FrozenMap(out))
+        if self.grain_radius is not None:
+            r = _as_number(self.grain_radius)
+            if r is None or r <= 0:
+                raise DiagnoseError(
+                    not_allowed(w, "grain_radius", self.grain_radius, "the measured grains' mean radius in m, > 0")
+                )
+            object.__setattr__(self, "grain_radius", r)
 
     # -- properties ----------------------------------------------------------------------------------
     @property
@@ -424,6 +436,7 @@ def _from_dict(data: Mapping, path) -> DiagnosisSpec:
         **_table(data, "calibration", "[calibration]"),
         candidates=candidates.get("use"),
         candidate_ranges=candidates.get("ranges", {}),
+        grain_radius=candidates.get("grain_radius"),
         path=Path(path) if path is not None else None,
     )
 

@@ -251,7 +251,7 @@ def design_points(dims: list[Dim], n: int, seed: int) -> np.ndarray:
     U = inf.space_filling(n, len(dims), seed)
     step = 1.0 / (LAUNCH_LEVELS - 1)
     for j, dim in enumerate(dims):
-        if not sp.varies_per_world(dim.key):
+        if not cands.varies_per_world(dim.key):
             U[:, j] = np.round(U[:, j] / step) * step
     return U
 
@@ -370,7 +370,7 @@ class Evaluator:
 
     def _request(self, model: Model, u, cond: int, seed: int) -> tuple[dict, int]:
         ov = {**self.spec.fixed, **self.prob.conditions[cond], **model.overrides(u)}
-        return ov, seed
+        return cands.resolve(ov), seed
 
     def _values(self, metrics: list[dict]) -> np.ndarray:
         """(len(metrics), responses) response values."""
@@ -1065,6 +1065,7 @@ def _library(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tu
     taken = {p.parameter for p in spec.parameters} | set(ex.conditions) | set(spec.fixed)
     merged: dict[str, cands.Candidate] = {}
     skipped: dict[str, str] = {}
+    differs: dict[str, str] = {}
     for cond in conditions:
         ov = {**spec.fixed, **cond}
         # every value the condition's runs have, per-world keys included (a launch's shared scene lacks those)
@@ -1076,10 +1077,16 @@ def _library(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tu
             base.update({k: v for k, v in ov.items() if sp.is_rig_key(k)})
             p = rigs.params(spec.rig, base)
             rig_params = {f: getattr(p, f) for f in p.__dataclass_fields__}
-        lib, skipped = cands.library(scene, rig_params, taken)
+        lib, skipped = cands.library(scene, rig_params, taken, spec.grain_radius)
         for c in lib:
             m = merged.get(c.name)
+            if m is not None and m.shared != c.shared:
+                # coarse-graining's size ratio (or the scene's surface energy) differs between experiments
+                differs[c.name] = f"{', '.join(k for k in c.shared if m.shared.get(k) != c.shared[k])} differs"
             merged[c.name] = c if m is None else cands.with_range(m, max(m.low, c.low), min(m.high, c.high))
+    for name, why in differs.items():
+        del merged[name]
+        skipped[name] = f"{why} between the experiments: one scaling rule cannot be read from them"
     lib = [merged[n] for n in cands.CANDIDATE_NAMES if n in merged]
     if spec.candidates is not None:
         for c in lib:
