@@ -19,8 +19,8 @@ Each candidate adds ONE parameter to the base model and reduces to the base mode
 - ``wall_friction``: the static friction of the grain against the wall the measurement rests on (the funnel's
   and lifting cylinder's base plate, the press's die, the drum's shell), separate from grain-grain friction.
   Off: the base value; range [0.1, 1].
-- ``coarse_graining``: the exponent k of the rule that scales the grain-grain JKR surface energy with the grain
-  size, gamma -> gamma s^k, where s is the scene's grain radius over the measured grains' (the data file's
+- ``coarse_graining``: the exponent k of the rule that scales the grain-grain surface energy (JKR's or EEPA's)
+  with the grain size, gamma -> gamma s^k, where s is the scene's grain radius over the measured grains' (the data file's
   ``[candidates] grain_radius``): the scene's grains are coarse-grained stand-ins, and a surface energy measured or
   calibrated for the real grains is too weak for them (the pull-off force 1.5 pi gamma R* grows as R, the weight
   as R^3). k = 1 keeps the bulk cohesive stress (pull-off force over a grain's cross-section), k = 2 the granular
@@ -236,7 +236,9 @@ def library(
         skipped["coarse_graining"] = (
             "the data file gives no [candidates] grain_radius (the measured grains' mean radius) to scale from"
         )
-    elif radius <= 0 or math.isclose(radius, grain_radius, rel_tol=1e-9):
+    elif radius <= 0:
+        skipped["coarse_graining"] = "the scene's grains have no mean radius to compare with grain_radius"
+    elif math.isclose(radius, grain_radius, rel_tol=1e-9):
         skipped["coarse_graining"] = f"the scene's grains are the measured size ({grain_radius:g} m): nothing to scale"
     elif float(gg.surface_energy) == 0.0 and gamma_key not in taken:
         skipped["coarse_graining"] = f"{gamma_key} is 0: no cohesion to scale"
