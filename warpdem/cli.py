@@ -209,6 +209,12 @@ def _print_analysis(out, summary: dict) -> None:
     import pandas as pd
 
     for name, s in summary.items():
+        if isinstance(s, dict) and "ci" in s:  # replicates, no model (execute.replicate_summary)
+            line = f"{name}: {s['n']} runs, mean {s['mean']:.4g}, SD {s['sd']:.3g}, "
+            line += f"{100 * (1 - s['alpha']):.0f} % interval of the mean [{s['ci'][0]:.4g}, {s['ci'][1]:.4g}]"
+            if s["target"] is not None:
+                line += f"; target {s['target']:g}: t {s['t']:.3g}, p {s['p']:.3g}"
+            print(line)
         if not isinstance(s, dict) or "r2" not in s:
             continue
         path = Path(out) / "analysis" / f"anova_{name}.csv"

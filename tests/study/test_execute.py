@@ -730,3 +730,48 @@ def test_json_records_of_an_analysis(finished, tmp_path):
     assert main(argv + ["--json", str(tmp_path / "s.json")]) == 0
     again = {r["name"]: r for r in json.loads((tmp_path / "s.json").read_text())}
     assert again["height.r2"]["value"] == pytest.approx(by["height.r2"]["value"], rel=1e-12)
+
+
+def test_replicates_without_a_model_are_summarised_against_their_target(finished, tmp_path, capsys):
+    """``[analysis] model = "none"`` (replicate runs, as a verification study has): ``warpdem analyze`` no longer
+    refuses the folder but reports each response's mean, SD, the mean's t interval and a one-sample t test against
+    its target, each equal to statsmodels' on the same values, with the runs' gallery; summary.json holds the
+    same numbers."""
+    from statsmodels.stats.weightstats import DescrStatsW
+
+    from warpdem.cli import main
+
+    study, out1, _ = finished
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    shutil.rmtree(out / "analysis", ignore_errors=True)
+    text = (out / "study.toml").read_text()
+    (out / "study.toml").write_text(text.replace('model = "linear"', 'model = "none"'))
+    assert main(["analyze", str(out)]) == 0
+    printed = capsys.readouterr().out
+    table = execute.load_results(out1, study)
+    ref = DescrStatsW(table["height"].to_numpy())
+    t, p, _ = ref.ttest_mean(0.0)
+    lo, hi = ref.tconfint_mean(0.05)
+    got = json.loads((out / "analysis" / "summary.json").read_text())["height"]
+    assert got["n"] == 6 and got["mean"] == pytest.approx(ref.mean, rel=1e-12)
+    assert got["sd"] == pytest.approx(ref.std_mean * math.sqrt(6), rel=1e-12)
+    assert got["ci"] == pytest.approx([lo, hi], rel=1e-10)
+    assert got["t"] == pytest.approx(t, rel=1e-10) and got["p"] == pytest.approx(p, rel=1e-8, abs=1e-300)
+    assert f"height: 6 runs, mean {ref.mean:.4g}" in printed and f"t {t:.3g}, p {p:.3g}" in printed
+    md = (out / "analysis" / "report.md").read_text()
+    assert "no model fitted" in md and "## Gallery" in md and "one-sample t test" in md
+    assert (out / "analysis" / "gallery" / "run_06.png").exists()
+
+
+def test_a_replicate_summary_with_too_few_values_says_so_by_nan():
+    """One finite value has no SD, interval or test (NaN, not an error); NaN runs are left out; without a target
+    there is no test. Checked against statsmodels on the values left."""
+    from statsmodels.stats.weightstats import DescrStatsW
+
+    one = execute.replicate_summary([1.0, math.nan], 2.0)
+    assert one["n"] == 1 and one["mean"] == 1.0 and math.isnan(one["sd"]) and math.isnan(one["p"])
+    three = execute.replicate_summary([56.21, 41.67, math.nan, 59.10], None, alpha=0.1)
+    ref = DescrStatsW(np.array([56.21, 41.67, 59.10]))
+    assert three["ci"] == pytest.approx(list(ref.tconfint_mean(0.1)), rel=1e-10) and math.isnan(three["t"])
+    assert (three["min"], three["max"]) == (41.67, 59.10)

@@ -819,6 +819,8 @@ def analyze(out, study: sp.StudySpec | None = None, runs=None, measure: Mapping 
     else:
         notes.append(f"Runs read from {runs} (made elsewhere): {len(data)} rows.")
     model = study.analysis.model
+    if model == "none":
+        return _replicate_report(out, study, data[finished].reset_index(drop=True), notes, runs is None, measure)
     summary = write_report(
         out / "analysis",
         data[finished].reset_index(drop=True),
@@ -852,6 +854,73 @@ def analyze(out, study: sp.StudySpec | None = None, runs=None, measure: Mapping 
     if vfile.exists():
         with open(vfile) as fh:
             _append_verification(out, json.load(fh))
+    return summary
+
+
+def replicate_summary(values, target: float | None, alpha: float = 0.05) -> dict:
+    """Replicate runs of one setting against a measured ``target``: n, mean, SD (n - 1), standard error, range,
+    the mean's two-sided (1 - ``alpha``) t interval and a one-sample t test of mean = target (scipy). NaN values
+    are left out; the interval and test need two values, the test a target. Units are the values'."""
+    from scipy import stats
+
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    n = len(v)
+    out = {"n": n, "mean": float(v.mean()) if n else math.nan, "min": float(v.min()) if n else math.nan}
+    out["max"] = float(v.max()) if n else math.nan
+    out |= {"sd": math.nan, "se": math.nan, "ci": [math.nan, math.nan], "alpha": alpha, "target": target}
+    out |= {"t": math.nan, "p": math.nan}
+    if n > 1:
+        out["sd"] = float(v.std(ddof=1))
+        out["se"] = out["sd"] / math.sqrt(n)
+        out["ci"] = [float(x) for x in stats.t.interval(1.0 - alpha, n - 1, loc=out["mean"], scale=out["se"])]
+        if target is not None and out["se"] > 0:
+            test = stats.ttest_1samp(v, target)
+            out["t"], out["p"] = float(test.statistic), float(test.pvalue)
+    return out
+
+
+def _replicate_report(
+    out: Path, study: sp.StudySpec, data: pd.DataFrame, notes: list[str], stored: bool, measure
+) -> dict:
+    """``[analysis] model = "none"`` (replicates, or points without a model): report.md with the runs and, per
+    response, :func:`replicate_summary` against its target, then (for a study folder) settling and the gallery.
+    Returns {response: summary}."""
+    folder = out / "analysis"
+    folder.mkdir(parents=True, exist_ok=True)
+    alpha = study.analysis.alpha
+    summary = {r.name: replicate_summary(data[r.name], r.target, alpha) for r in study.responses}
+    cols = [c for c in ("run", "world_seed") if c in data] + [f"{f.name}_actual" for f in study.levels]
+    cols += [r.name for r in study.responses]
+    lines = [
+        f"# {study.title or study.name}",
+        "",
+        f"{len(data)} runs, no model fitted (`[analysis] model = none`).",
+        "",
+    ]
+    lines += [f"- {n}" for n in notes] + ([""] if notes else [])
+    lines += ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    lines += ["| " + " | ".join(f"{row[c]:.6g}" for c in cols) + " |" for _, row in data[cols].iterrows()]
+    level = 100.0 * (1.0 - alpha)
+    for r in study.responses:
+        s = summary[r.name]
+        unit = f" {r.unit}" if r.unit else ""
+        lines += ["", f"## {r.name}", "", f"{s['n']} runs: mean {s['mean']:.4g}{unit}, SD {s['sd']:.3g}, "]
+        lines[-1] += f"range {s['min']:.4g}–{s['max']:.4g}; {level:.0f} % interval of the mean "
+        lines[-1] += f"[{s['ci'][0]:.4g}, {s['ci'][1]:.4g}]."
+        if r.target is not None:
+            lines += [
+                "",
+                f"Target {r.target:g}{unit}: the mean is {s['mean'] - r.target:+.3g}{unit} from it; one-sample t test "
+                f"t = {s['t']:.3g}, p = {s['p']:.3g}.",
+            ]
+    (folder / "report.md").write_text("\n".join(lines) + "\n")
+    with open(folder / "summary.json", "w") as fh:
+        json.dump(summary, fh, indent=1, default=_json_default)
+    data.to_csv(folder / "runs.csv", index=False)
+    if stored:
+        _append_settling(out, study)
+        _append_gallery(out, study, measure)
     return summary
 
 
