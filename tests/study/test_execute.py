@@ -734,9 +734,9 @@ def test_json_records_of_an_analysis(finished, tmp_path):
 
 def test_replicates_without_a_model_are_summarised_against_their_target(finished, tmp_path, capsys):
     """``[analysis] model = "none"`` (replicate runs, as a verification study has): ``warpdem analyze`` no longer
-    refuses the folder but reports each response's mean, SD, the mean's t interval and a one-sample t test against
-    its target, each equal to statsmodels' on the same values, with the runs' gallery; summary.json holds the
-    same numbers."""
+    refuses the folder. Runs at one setting get each response's mean, SD, the mean's t interval and a one-sample t
+    test against its target, each equal to statsmodels' on the same values, with the runs' gallery (summary.json
+    holds the same numbers); runs at several settings (a steepest-ascent path) are listed without a summary."""
     from statsmodels.stats.weightstats import DescrStatsW
 
     from warpdem.cli import main
@@ -747,6 +747,15 @@ def test_replicates_without_a_model_are_summarised_against_their_target(finished
     shutil.rmtree(out / "analysis", ignore_errors=True)
     text = (out / "study.toml").read_text()
     (out / "study.toml").write_text(text.replace('model = "linear"', 'model = "none"'))
+    # the fixture's six runs lie at five settings: listed, with no mean over them (a path's mean means nothing)
+    assert main(["analyze", str(out)]) == 0
+    assert "6 runs at 5 setting(s)" in (out / "analysis" / "report.md").read_text()
+    assert json.loads((out / "analysis" / "summary.json").read_text()) == {}
+    assert "t test" not in capsys.readouterr().out
+    # the same runs read as replicates of one setting (the design table edited to one A and one B)
+    design = pd.read_csv(out / "design.csv")
+    design["A_actual"], design["B_actual"] = 0.5, 0.175
+    design.to_csv(out / "design.csv", index=False)
     assert main(["analyze", str(out)]) == 0
     printed = capsys.readouterr().out
     table = execute.load_results(out1, study)
@@ -760,7 +769,7 @@ def test_replicates_without_a_model_are_summarised_against_their_target(finished
     assert got["t"] == pytest.approx(t, rel=1e-10) and got["p"] == pytest.approx(p, rel=1e-8, abs=1e-300)
     assert f"height: 6 runs, mean {ref.mean:.4g}" in printed and f"t {t:.3g}, p {p:.3g}" in printed
     md = (out / "analysis" / "report.md").read_text()
-    assert "no model fitted" in md and "## Gallery" in md and "one-sample t test" in md
+    assert "6 runs at 1 setting(s)" in md and "## Gallery" in md and "one-sample t test" in md
     assert (out / "analysis" / "gallery" / "run_06.png").exists()
 
 

@@ -601,9 +601,9 @@ def _finish_study(
     if stopped:
         log(f"{study.name}: stopped, {finished} of {len(rows)} runs finished; {stopped}")
         return result
-    if analyze_after and study.analysis.model != "none":
+    if analyze_after:
         result["analysis"] = analyze(out, study)
-        if verify and study.verification.replicates > 0:
+        if verify and study.verification.replicates > 0 and study.analysis.model != "none":
             try:
                 result["verification"] = run_verification(
                     study,
@@ -883,26 +883,30 @@ def replicate_summary(values, target: float | None, alpha: float = 0.05) -> dict
 def _replicate_report(
     out: Path, study: sp.StudySpec, data: pd.DataFrame, notes: list[str], stored: bool, measure
 ) -> dict:
-    """``[analysis] model = "none"`` (replicates, or points without a model): report.md with the runs and, per
-    response, :func:`replicate_summary` against its target, then (for a study folder) settling and the gallery.
-    Returns {response: summary}."""
+    """``[analysis] model = "none"`` (replicates, a steepest-ascent path, points without a model): report.md with
+    the runs and, where every run shares one setting (replicates), per response :func:`replicate_summary` against
+    its target; then (for a study folder) settling and the gallery. Returns {response: summary}, empty where the
+    runs lie at several settings (a mean over a path would mean nothing)."""
     folder = out / "analysis"
     folder.mkdir(parents=True, exist_ok=True)
     alpha = study.analysis.alpha
-    summary = {r.name: replicate_summary(data[r.name], r.target, alpha) for r in study.responses}
-    cols = [c for c in ("run", "world_seed") if c in data] + [f"{f.name}_actual" for f in study.levels]
-    cols += [r.name for r in study.responses]
+    settings = [f"{f.name}_actual" for f in study.levels]
+    count = len(data[settings].drop_duplicates()) if len(data) else 0
+    one = count == 1
+    summary = {r.name: replicate_summary(data[r.name], r.target, alpha) for r in study.responses} if one else {}
+    cols = [c for c in ("run", "world_seed") if c in data] + settings + [r.name for r in study.responses]
     lines = [
         f"# {study.title or study.name}",
         "",
-        f"{len(data)} runs, no model fitted (`[analysis] model = none`).",
+        f"{len(data)} runs at {count} setting(s), no model fitted (`[analysis] model = none`)"
+        + ("." if one else ": each run is listed, without a summary over settings."),
         "",
     ]
     lines += [f"- {n}" for n in notes] + ([""] if notes else [])
     lines += ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(f"{row[c]:.6g}" for c in cols) + " |" for _, row in data[cols].iterrows()]
     level = 100.0 * (1.0 - alpha)
-    for r in study.responses:
+    for r in study.responses if one else ():
         s = summary[r.name]
         unit = f" {r.unit}" if r.unit else ""
         lines += ["", f"## {r.name}", "", f"{s['n']} runs: mean {s['mean']:.4g}{unit}, SD {s['sd']:.3g}, "]
