@@ -3,22 +3,23 @@
     python docs/seeds/run_seeds.py --root DIR --budget SECONDS [--lane DEVICES=STEP,STEP,... ...] [--dry-run]
 
 The steps: seed 001's wet-feed Plackett-Burman (wetfeed_pb), central composite with its verification replicates
-(wetfeed_ccd) and that verification again with the seed's 25,000 grains (wetfeed_verify_large), then the die press
-at the central composite's chosen optimum, or its closest point when the target is out of reach (die_press), and
-its surface-energy scan beyond the paper's range (wetfeed_gamma_scan); seed 002's 2^(5-1) screening (phosphate_ffd), Box-Behnken with its verification run (phosphate_bbd), its surface energy as
-printed and scaled by the coarse-graining factor squared, and between (phosphate_gamma_scaled, phosphate_gamma_scan;
-the screening with it scaled by s, phosphate_ffd_gamma_s), and the truck tipper, first contacts split from the rest
-of the loading (truck_tipper; with the bucket turning over 6 s, truck_tipper_slow); seed 000's screening, steepest
-ascent and Box-Behnken, read with the current pile rule (pellets_pb, pellets_steepest, pellets_bbd), and replicates
-at the Box-Behnken region's high corner (pellets_verify); the screening and replicates at the paper's calibrated set
-with EDEM's standard rolling friction (pellets_pb_standard, pellets_calibrated_standard), its steepest ascent and
-Box-Behnken (pellets_steepest_standard, pellets_bbd_standard; the Box-Behnken again where our own path came nearest
-the target, pellets_bbd_standard_own), and three verifications of our own with it: at that screening's chosen point,
-one steepest-descent step on, and on the secant between them (pellets_verify_standard, pellets_verify_standard_step,
-pellets_verify_standard_secant); the reach diagnoses of seeds 000 and 001's one angle each (seed000_reach,
-seed001_reach: ``warpdem diagnose studies/diagnose/seed00N_*.toml``). A lane runs its steps in order on its devices
-(a study on several goes through the distributed executor); lanes run side by side and may share a device. The
-default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the other three.
+(wetfeed_ccd) and that verification again with the seed's 25,000 grains (wetfeed_verify_large), then the die press at
+the central composite's chosen optimum, or its closest point when the target is out of reach (die_press), and its
+surface-energy scan beyond the paper's range (wetfeed_gamma_scan); seed 002's 2^(5-1) screening (phosphate_ffd),
+Box-Behnken with its verification run (phosphate_bbd), its surface energy as printed and scaled by the coarse-graining
+factor squared, and between (phosphate_gamma_scaled, phosphate_gamma_scan; the screening with it scaled by s,
+phosphate_ffd_gamma_s), and the truck tipper, first contacts split from the rest of the loading (truck_tipper; with
+the bucket turning over 6 s, truck_tipper_slow); seed 000's screening, steepest ascent and Box-Behnken, read with the
+current pile rule (pellets_pb, pellets_steepest, pellets_bbd), and replicates at the Box-Behnken region's high corner
+(pellets_verify); the screening and replicates at the paper's calibrated set with EDEM's standard rolling friction
+(pellets_pb_standard, pellets_calibrated_standard), its steepest ascent and Box-Behnken (pellets_steepest_standard,
+pellets_bbd_standard; the Box-Behnken again where our own path came nearest the target, pellets_bbd_standard_own), and
+three verifications of our own with it: at that screening's chosen point, one steepest-descent step on, and on the
+secant between them (pellets_verify_standard, pellets_verify_standard_step, pellets_verify_standard_secant); the reach
+diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach: ``warpdem diagnose
+studies/diagnose/seed00N_*.toml``). A lane runs its steps in order on its devices (a study on several goes through the
+distributed executor); lanes run side by side and may share a device. The default, for 4 GPUs: seed 001 on cuda:0,
+seed 002 on the other three.
 
 Every step is a ``warpdem`` command that resumes where it stopped: each gets ``--stop-after`` the time left of
 ``--budget`` less :data:`STOP_MARGIN` and exits 3 when it stops, which ends its lane for this call. Run the same
