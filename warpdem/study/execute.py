@@ -797,9 +797,8 @@ def analyze(out, study: sp.StudySpec | None = None, runs=None, measure: Mapping 
     tables, Pareto and contour plots, target solutions, the gallery of the runs). With ``runs`` (a CSV run table,
     :func:`external_runs`) analyse those instead, into ``out``. With ``measure`` ({``measure.FIELD``: value},
     possibly empty) every run is measured again from its stored final state under those settings
-    (:func:`remeasure`) and analysed so. Returns :func:`report.write_report`'s summary."""
-    from .report import write_report
-
+    (:func:`remeasure`) and analysed so. Returns :func:`report.write_report`'s summary (with ``[analysis] model =
+    "none"``, :func:`_replicate_report`'s)."""
     out = Path(out)
     study = study or sp.load_study(out / "study.toml", check_scene=False)
     notes = []
@@ -819,11 +818,33 @@ def analyze(out, study: sp.StudySpec | None = None, runs=None, measure: Mapping 
     else:
         notes.append(f"Runs read from {runs} (made elsewhere): {len(data)} rows.")
     model = study.analysis.model
+    used = data[finished].reset_index(drop=True)
     if model == "none":
-        return _replicate_report(out, study, data[finished].reset_index(drop=True), notes, runs is None, measure)
-    summary = write_report(
-        out / "analysis",
-        data[finished].reset_index(drop=True),
+        summary = _replicate_report(out / "analysis", study, used, notes)
+    else:
+        summary = _model_report(out / "analysis", study, used, notes)
+    with open(out / "analysis" / "summary.json", "w") as fh:
+        json.dump(summary, fh, indent=1, default=_json_default)
+    used.to_csv(out / "analysis" / "runs.csv", index=False)  # the table the model was fitted to
+    if runs is not None:
+        return summary
+    _append_settling(out, study)
+    _append_gallery(out, study, measure)
+    vfile = out / "verification" / "verification.json"
+    if vfile.exists():
+        with open(vfile) as fh:
+            _append_verification(out, json.load(fh))
+    return summary
+
+
+def _model_report(folder: Path, study: sp.StudySpec, data: pd.DataFrame, notes: list[str]) -> dict:
+    """The fitted model's report.md, tables and plots in ``folder`` (:func:`report.write_report`); its summary."""
+    from .report import write_report
+
+    model = study.analysis.model
+    return write_report(
+        folder,
+        data,
         title=study.title or study.name,
         factors=study.levels,
         labels={f.name: f.label for f in study.factors},
@@ -843,18 +864,6 @@ def analyze(out, study: sp.StudySpec | None = None, runs=None, measure: Mapping 
         design_kind=study.design.kind,
         notes=notes,
     )
-    with open(out / "analysis" / "summary.json", "w") as fh:
-        json.dump(summary, fh, indent=1, default=_json_default)
-    data[finished].to_csv(out / "analysis" / "runs.csv", index=False)  # the table the model was fitted to
-    if runs is not None:
-        return summary
-    _append_settling(out, study)
-    _append_gallery(out, study, measure)
-    vfile = out / "verification" / "verification.json"
-    if vfile.exists():
-        with open(vfile) as fh:
-            _append_verification(out, json.load(fh))
-    return summary
 
 
 def replicate_summary(values, target: float | None, alpha: float = 0.05) -> dict:
@@ -880,14 +889,11 @@ def replicate_summary(values, target: float | None, alpha: float = 0.05) -> dict
     return out
 
 
-def _replicate_report(
-    out: Path, study: sp.StudySpec, data: pd.DataFrame, notes: list[str], stored: bool, measure
-) -> dict:
-    """``[analysis] model = "none"`` (replicates, a steepest-ascent path, points without a model): report.md with
-    the runs and, where every run shares one setting (replicates), per response :func:`replicate_summary` against
-    its target; then (for a study folder) settling and the gallery. Returns {response: summary}, empty where the
-    runs lie at several settings (a mean over a path would mean nothing)."""
-    folder = out / "analysis"
+def _replicate_report(folder: Path, study: sp.StudySpec, data: pd.DataFrame, notes: list[str]) -> dict:
+    """``[analysis] model = "none"`` (replicates, a steepest-ascent path, points without a model): report.md in
+    ``folder`` with the runs and, where every run shares one setting (replicates), per response
+    :func:`replicate_summary` against its target. Returns {response: summary}, empty where the runs lie at several
+    settings (a mean over a path would mean nothing)."""
     folder.mkdir(parents=True, exist_ok=True)
     alpha = study.analysis.alpha
     settings = [f"{f.name}_actual" for f in study.levels]
@@ -919,12 +925,6 @@ def _replicate_report(
                 f"t = {s['t']:.3g}, p = {s['p']:.3g}.",
             ]
     (folder / "report.md").write_text("\n".join(lines) + "\n")
-    with open(folder / "summary.json", "w") as fh:
-        json.dump(summary, fh, indent=1, default=_json_default)
-    data.to_csv(folder / "runs.csv", index=False)
-    if stored:
-        _append_settling(out, study)
-        _append_gallery(out, study, measure)
     return summary
 
 
@@ -1302,10 +1302,10 @@ def run_verification(
     for r in rows:
         with open(r["file"]) as fh:
             values.append(json.load(fh)["responses"][resp.name])
-    v = np.asarray(values, dtype=float)
-    mean = float(np.nanmean(v)) if np.isfinite(v).any() else math.nan
+    rep = replicate_summary(values, resp.target)
+    mean = rep["mean"]
     # Design-Expert's confirmation: the mean of the k runs against the prediction interval for a mean of k runs
-    conf, k = s.get("confirmation"), int(np.isfinite(v).sum())
+    conf, k = s.get("confirmation"), rep["n"]
     pi = confirmation_runs_interval(conf, k) if conf and k else (math.nan, math.nan)
     result = {
         "response": resp.name,
@@ -1314,7 +1314,7 @@ def run_verification(
         "predicted": s.get("predicted"),
         "values": values,
         "mean": mean,
-        "sd": float(np.nanstd(v, ddof=1)) if np.isfinite(v).sum() > 1 else math.nan,
+        "sd": rep["sd"],
         "relative_error_pct": 100.0 * abs(mean - resp.target) / abs(resp.target) if resp.target else math.nan,
         "prediction_interval": list(pi),
         "within_prediction_interval": bool(pi[0] <= mean <= pi[1]) if math.isfinite(pi[0]) else None,
