@@ -215,6 +215,10 @@ def _print_analysis(out, summary: dict) -> None:
             if s["target"] is not None:
                 line += f"; target {s['target']:g}: t {s['t']:.3g}, p {s['p']:.3g}"
             print(line)
+            if "unflagged" in s:
+                from .study.execute import replicate_line
+
+                print(f"  {replicate_line(s['unflagged'])}")
         if not isinstance(s, dict) or "r2" not in s:
             continue
         path = Path(out) / "analysis" / f"anova_{name}.csv"

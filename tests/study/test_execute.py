@@ -770,9 +770,45 @@ def test_replicates_without_a_model_are_summarised_against_their_target(finished
     assert got["ci"] == pytest.approx([lo, hi], rel=1e-10)
     assert got["t"] == pytest.approx(t, rel=1e-10) and got["p"] == pytest.approx(p, rel=1e-8, abs=1e-300)
     assert f"height: 6 runs, mean {ref.mean:.4g}" in printed and f"t {t:.3g}, p {p:.3g}" in printed
+    assert "unflagged" not in got and "Without run" not in printed  # the checks flag all six: none would be left
     md = (out / "analysis" / "report.md").read_text()
     assert "6 runs at 1 setting(s)" in md and "## Gallery" in md and "one-sample t test" in md
     assert (out / "analysis" / "gallery" / "run_06.png").exists()
+
+
+def test_replicates_flagged_by_the_checks_are_also_summarised_without_them(finished, tmp_path, capsys, monkeypatch):
+    """A replicate the run checks flag (a pile that slid off its axis) is kept in the summary, and the summary is
+    given again without it: n, mean, SD, interval and t test equal to statsmodels' on the other five values; the
+    report and the console name the run left out."""
+    from statsmodels.stats.weightstats import DescrStatsW
+
+    from warpdem.cli import main
+
+    study, out1, _ = finished
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    shutil.rmtree(out / "analysis", ignore_errors=True)
+    text = (out / "study.toml").read_text()
+    (out / "study.toml").write_text(text.replace('model = "linear"', 'model = "none"'))
+    design = pd.read_csv(out / "design.csv")
+    design["A_actual"], design["B_actual"] = 0.5, 0.175
+    design.to_csv(out / "design.csv", index=False)
+    slid = {"run": 2, "point_id": "x", "check": "off_axis", "detail": "the pile's centre of mass lies 21 mm off"}
+    monkeypatch.setattr(execute, "run_checks", lambda out, study=None: [slid])
+    assert main(["analyze", str(out)]) == 0
+    printed = capsys.readouterr().out
+    table = execute.load_results(out1, study)
+    target = load_study(out / "study.toml", check_scene=False).responses[0].target
+    got = json.loads((out / "analysis" / "summary.json").read_text())["height"]
+    assert got["n"] == 6
+    rest = DescrStatsW(table.loc[table["run"] != 2, "height"].to_numpy())
+    t, p, _ = rest.ttest_mean(target)
+    u = got["unflagged"]
+    assert u["left_out"] == [2] and u["n"] == 5 and u["mean"] == pytest.approx(rest.mean, rel=1e-12)
+    assert u["ci"] == pytest.approx(list(rest.tconfint_mean(0.05)), rel=1e-10)
+    assert u["t"] == pytest.approx(t, rel=1e-10) and u["p"] == pytest.approx(p, rel=1e-8, abs=1e-300)
+    line = f"Without run 2 (flagged by the checks): 5 runs, mean {rest.mean:.4g}"
+    assert line in printed and line in (out / "analysis" / "report.md").read_text()
 
 
 def test_a_replicate_summary_with_too_few_values_says_so_by_nan():

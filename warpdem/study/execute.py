@@ -36,7 +36,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -813,14 +813,16 @@ def analyze(out, study: sp.StudySpec | None = None, runs=None, measure: Mapping 
     finished = data[[r.name for r in study.responses]].notna().any(axis=1)
     if not finished.all():
         notes.append(f"{int((~finished).sum())} of {len(data)} runs have not finished; they are left out.")
+    flags = run_checks(out, study) if runs is None else []
     if runs is None:
-        notes += [f"Check: {line}." for line in check_lines(run_checks(out, study))]
+        notes += [f"Check: {line}." for line in check_lines(flags)]
     else:
         notes.append(f"Runs read from {runs} (made elsewhere): {len(data)} rows.")
     model = study.analysis.model
     used = data[finished].reset_index(drop=True)
     if model == "none":
-        summary = _replicate_report(out / "analysis", study, used, notes)
+        flagged = sorted({int(f["run"]) for f in flags})
+        summary = _replicate_report(out / "analysis", study, used, notes, flagged)
     else:
         summary = _model_report(out / "analysis", study, used, notes)
     with open(out / "analysis" / "summary.json", "w") as fh:
@@ -889,17 +891,26 @@ def replicate_summary(values, target: float | None, alpha: float = 0.05) -> dict
     return out
 
 
-def _replicate_report(folder: Path, study: sp.StudySpec, data: pd.DataFrame, notes: list[str]) -> dict:
+def _replicate_report(
+    folder: Path, study: sp.StudySpec, data: pd.DataFrame, notes: list[str], flagged: Sequence[int] = ()
+) -> dict:
     """``[analysis] model = "none"`` (replicates, a steepest-ascent path, points without a model): report.md in
     ``folder`` with the runs and, where every run shares one setting (replicates), per response
-    :func:`replicate_summary` against its target. Returns {response: summary}, empty where the runs lie at several
-    settings (a mean over a path would mean nothing)."""
+    :func:`replicate_summary` against its target. Where :func:`run_checks` flags some of the runs (``flagged``,
+    run numbers) and at least two are left, each summary also holds ``unflagged``: the same without them, with
+    ``left_out`` naming them; a pile that slid as a body is not a replicate of the angle. Returns {response:
+    summary}, empty where the runs lie at several settings (a mean over a path would mean nothing)."""
     folder.mkdir(parents=True, exist_ok=True)
     alpha = study.analysis.alpha
     settings = [f"{f.name}_actual" for f in study.levels]
     count = len(data[settings].drop_duplicates()) if len(data) else 0
     one = count == 1
     summary = {r.name: replicate_summary(data[r.name], r.target, alpha) for r in study.responses} if one else {}
+    left_out = sorted(set(flagged) & {int(k) for k in data["run"]}) if one and "run" in data else []
+    kept = data[~data["run"].isin(left_out)] if left_out else data
+    if left_out and len(kept) >= 2:
+        for r in study.responses:
+            summary[r.name]["unflagged"] = replicate_summary(kept[r.name], r.target, alpha) | {"left_out": left_out}
     cols = [c for c in ("run", "world_seed") if c in data] + settings + [r.name for r in study.responses]
     lines = [
         f"# {study.title or study.name}",
@@ -924,8 +935,22 @@ def _replicate_report(folder: Path, study: sp.StudySpec, data: pd.DataFrame, not
                 f"Target {r.target:g}{unit}: the mean is {s['mean'] - r.target:+.3g}{unit} from it; one-sample t test "
                 f"t = {s['t']:.3g}, p = {s['p']:.3g}.",
             ]
+        if "unflagged" in s:
+            lines += ["", replicate_line(s["unflagged"], unit) + "."]
     (folder / "report.md").write_text("\n".join(lines) + "\n")
     return summary
+
+
+def replicate_line(s: dict, unit: str = "") -> str:
+    """One line for :func:`_replicate_report`'s summary without the flagged runs (its ``unflagged``): the runs
+    left out, then n, mean, SD, the mean's interval and the t test against the target."""
+    runs = ", ".join(str(k) for k in s["left_out"])
+    line = f"Without run{'s' if len(s['left_out']) > 1 else ''} {runs} (flagged by the checks): {s['n']} runs, "
+    line += f"mean {s['mean']:.4g}{unit}, SD {s['sd']:.3g}, {100 * (1 - s['alpha']):.0f} % interval of the mean "
+    line += f"[{s['ci'][0]:.4g}, {s['ci'][1]:.4g}]"
+    if s["target"] is not None:
+        line += f"; target {s['target']:g}: t {s['t']:.3g}, p {s['p']:.3g}"
+    return line
 
 
 EXCEL_FIT_KEYS = ("model", "n_used", "model_p", "r2", "adj_r2", "pred_r2", "adeq_precision", "suggested_model")
