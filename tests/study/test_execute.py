@@ -811,6 +811,25 @@ def test_replicates_flagged_by_the_checks_are_also_summarised_without_them(finis
     assert line in printed and line in (out / "analysis" / "report.md").read_text()
 
 
+def test_a_run_kept_without_its_state_keeps_its_picture(finished, tmp_path):
+    """A record copied without ``runs/*.npz`` (the seed records) keeps, on a new analysis, the gallery picture its
+    run had; a run with neither has none."""
+    study, out1, _ = finished
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    execute.analyze(out, study)
+    first, second = sorted(execute.load_results(out, study)["point_id"])[:2]
+    runs = {json.loads((out / "runs" / f"{pid}.json").read_text())["run"]: pid for pid in (first, second)}
+    for pid in runs.values():
+        (out / "runs" / f"{pid}.npz").unlink()
+    gone, kept = sorted(runs)
+    (out / "analysis" / "gallery" / f"run_{gone:02d}.png").unlink()
+    execute.analyze(out, study)
+    gallery = (out / "analysis" / "report.md").read_text().split("## Gallery")[1]
+    assert f"![run {kept}](gallery/run_{kept:02d}.png)" in gallery
+    assert f"run_{gone:02d}.png" not in gallery and not (out / "analysis" / "gallery" / f"run_{gone:02d}.png").exists()
+
+
 def test_a_replicate_summary_with_too_few_values_says_so_by_nan():
     """One finite value has no SD, interval or test (NaN, not an error); NaN runs are left out; without a target
     there is no test. Checked against statsmodels on the values left."""

@@ -1143,7 +1143,9 @@ GALLERY_RUNS_PER_ROW = 3
 def _append_gallery(out: Path, study: sp.StudySpec, measure: Mapping | None) -> None:
     """A side view per finished run of a pile (``analysis/gallery/run_NN.png``, named by run number) with the
     fitted flanks drawn on it (``measure.flank_lines``: the protractor), gathered in report.md. Only the surface
-    fit is computed again (the flanks are its lines), not the run's other measurements."""
+    fit is computed again (the flanks are its lines), not the run's other measurements. A run kept without its
+    final state (a record copied without ``runs/*.npz``) keeps the picture drawn while it had one, unless the
+    piles are measured again (``measure``), which that picture would not show."""
     from warpdem.scene.export import side_view_png
     from warpdem.scene.measure import angle_surface_fit, flank_lines
     from warpdem.scene.runner import pile_select, state_walls
@@ -1151,7 +1153,10 @@ def _append_gallery(out: Path, study: sp.StudySpec, measure: Mapping | None) -> 
     shots = []
     folder = out / "analysis" / "gallery"
     for row, _, m, state in _stored_piles(out, study, measure, "gallery"):
+        name = f"run_{int(row['run']):02d}.png"
         if state is None:
+            if measure is None and (folder / name).exists():
+                shots.append((int(row["run"]), name))
             continue
         x, r, _ = pile_select(*_free_spheres(state), m)
         lines, frame, title = [], None, f"run {row['run']}: {len(r)} particles in the pile"
@@ -1171,7 +1176,6 @@ def _append_gallery(out: Path, study: sp.StudySpec, measure: Mapping | None) -> 
                 (fit["center"][0] + reach, top + 0.15 * reach),
             )
         folder.mkdir(parents=True, exist_ok=True)
-        name = f"run_{int(row['run']):02d}.png"
         glued = state["sphere_glued"] >= 0
         xs = np.concatenate([x, state["sphere_x"][glued]])
         rs = np.concatenate([r, state["sphere_r"][glued]])
