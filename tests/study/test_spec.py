@@ -41,7 +41,7 @@ COUNTS = {
     "phosphate_gamma_scan": 4,
     "main_funnel_pb": 12,
     "wetfeed_gamma_scan": 5,
-    "wetfeed_verify_large": 3,
+    "wetfeed_verify_large": 5,
 }
 
 
