@@ -42,6 +42,7 @@ COUNTS = {
     "main_funnel_pb": 12,
     "wetfeed_gamma_scan": 5,
     "wetfeed_verify_large": 5,
+    "wetfeed_large_gamma": 6,
 }
 
 
