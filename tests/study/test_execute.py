@@ -795,7 +795,7 @@ def test_replicates_flagged_by_the_checks_are_also_summarised_without_them(finis
     design.to_csv(out / "design.csv", index=False)
     slid = {"run": 2, "point_id": "x", "check": "off_axis", "detail": "the pile's centre of mass lies 21 mm off"}
     monkeypatch.setattr(execute, "run_checks", lambda out, study=None: [slid])
-    assert main(["analyze", str(out)]) == 0
+    assert main(["analyze", str(out), "--json", str(tmp_path / "r.json")]) == 0
     printed = capsys.readouterr().out
     table = execute.load_results(out1, study)
     target = load_study(out / "study.toml", check_scene=False).responses[0].target
@@ -809,6 +809,14 @@ def test_replicates_flagged_by_the_checks_are_also_summarised_without_them(finis
     assert u["t"] == pytest.approx(t, rel=1e-10) and u["p"] == pytest.approx(p, rel=1e-8, abs=1e-300)
     line = f"Without run 2 (flagged by the checks): 5 runs, mean {rest.mean:.4g}"
     assert line in printed and line in (out / "analysis" / "report.md").read_text()
+    # --json: the mean passes when its interval holds the target, with and without the flagged run
+    by = {r["name"]: r for r in json.loads((tmp_path / "r.json").read_text())}
+    for key, s in (("height", got), ("height.unflagged", u)):
+        mean = by[f"{key}.mean"]
+        assert mean["value"] == pytest.approx(s["mean"], rel=1e-12) and mean["expected"] == target
+        assert mean["pass"] == (s["ci"][0] <= target <= s["ci"][1])
+        assert by[f"{key}.n"]["value"] == s["n"] and by[f"{key}.sd"]["value"] == pytest.approx(s["sd"], rel=1e-12)
+    assert by["run 2.off_axis"]["pass"] is False
 
 
 def test_a_run_kept_without_its_state_keeps_its_picture(finished, tmp_path):

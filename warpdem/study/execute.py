@@ -1017,17 +1017,32 @@ def study_records(out, study: sp.StudySpec, summary: dict) -> list[dict]:
     """The analysis of ``out`` as ``--json`` records (name, value, expected, unit, pass), per response: the model's
     p (expected below alpha), R², adjusted and predicted R², adequate precision (expected above
     :data:`ADEQUATE_PRECISION_MIN`) and, with a target, the prediction at the chosen settings (expected: the
-    target; passes when the target is reachable); and one failing record per :func:`run_checks` flag."""
+    target; passes when the target is reachable); for replicates without a model (:func:`_replicate_report`) the
+    mean (expected: the target; passes when the mean's interval holds it), SD and count, and the same under
+    ``unflagged.`` without the flagged runs; and one failing record per :func:`run_checks` flag."""
     alpha = study.analysis.alpha
     recs: list[dict] = []
     for r in study.responses:
         s = summary.get(r.name)
-        if not isinstance(s, dict) or s.get("r2") is None:
-            continue
 
         def rec(key, value, expected=None, passed=None, unit="", name=r.name):
             v = None if value is None or (isinstance(value, float) and not math.isfinite(value)) else value
             recs.append({"name": f"{name}.{key}", "value": v, "expected": expected, "unit": unit, "pass": passed})
+
+        if isinstance(s, dict) and "ci" in s:
+            for prefix, rs in (("", s), ("unflagged.", s.get("unflagged"))):
+                if rs is None:
+                    continue
+                lo, hi = rs["ci"]
+                held = (
+                    None if r.target is None or not (math.isfinite(lo) and math.isfinite(hi)) else lo <= r.target <= hi
+                )
+                rec(f"{prefix}mean", rs["mean"], r.target, held, r.unit)
+                rec(f"{prefix}sd", rs["sd"], unit=r.unit)
+                rec(f"{prefix}n", rs["n"])
+            continue
+        if not isinstance(s, dict) or s.get("r2") is None:
+            continue
 
         p = s.get("model_p")
         rec("model_p", p, f"< {alpha:g}", None if p is None else bool(p < alpha))
