@@ -732,6 +732,23 @@ def test_json_records_of_an_analysis(finished, tmp_path):
     assert again["height.r2"]["value"] == pytest.approx(by["height.r2"]["value"], rel=1e-12)
 
 
+def _without_model(out1, tmp_path):
+    """A copy of the shared study folder whose study fits no model (``[analysis] model = "none"``)."""
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    shutil.rmtree(out / "analysis", ignore_errors=True)
+    text = (out / "study.toml").read_text()
+    (out / "study.toml").write_text(text.replace('model = "linear"', 'model = "none"'))
+    return out
+
+
+def _as_replicates(out) -> None:
+    """Folder ``out``'s runs read as replicates of one setting: its design table edited to one A and one B."""
+    design = pd.read_csv(out / "design.csv")
+    design["A_actual"], design["B_actual"] = 0.5, 0.175
+    design.to_csv(out / "design.csv", index=False)
+
+
 def test_replicates_without_a_model_are_summarised_against_their_target(finished, tmp_path, capsys):
     """``[analysis] model = "none"`` (replicate runs, as a verification study has): ``warpdem analyze`` no longer
     refuses the folder. Runs at one setting get each response's mean, SD, the mean's t interval and a one-sample t
@@ -742,20 +759,14 @@ def test_replicates_without_a_model_are_summarised_against_their_target(finished
     from warpdem.cli import main
 
     study, out1, _ = finished
-    out = tmp_path / "copy"
-    shutil.copytree(out1, out)
-    shutil.rmtree(out / "analysis", ignore_errors=True)
-    text = (out / "study.toml").read_text()
-    (out / "study.toml").write_text(text.replace('model = "linear"', 'model = "none"'))
+    out = _without_model(out1, tmp_path)
     # the fixture's six runs lie at five settings: listed, with no mean over them (a path's mean means nothing)
     assert main(["analyze", str(out)]) == 0
     assert "6 runs at 5 setting(s)" in (out / "analysis" / "report.md").read_text()
     assert json.loads((out / "analysis" / "summary.json").read_text()) == {}
     assert "t test" not in capsys.readouterr().out
-    # the same runs read as replicates of one setting (the design table edited to one A and one B)
-    design = pd.read_csv(out / "design.csv")
-    design["A_actual"], design["B_actual"] = 0.5, 0.175
-    design.to_csv(out / "design.csv", index=False)
+    # the same runs read as replicates of one setting
+    _as_replicates(out)
     assert main(["analyze", str(out)]) == 0
     printed = capsys.readouterr().out
     table = execute.load_results(out1, study)
@@ -785,14 +796,8 @@ def test_replicates_flagged_by_the_checks_are_also_summarised_without_them(finis
     from warpdem.cli import main
 
     study, out1, _ = finished
-    out = tmp_path / "copy"
-    shutil.copytree(out1, out)
-    shutil.rmtree(out / "analysis", ignore_errors=True)
-    text = (out / "study.toml").read_text()
-    (out / "study.toml").write_text(text.replace('model = "linear"', 'model = "none"'))
-    design = pd.read_csv(out / "design.csv")
-    design["A_actual"], design["B_actual"] = 0.5, 0.175
-    design.to_csv(out / "design.csv", index=False)
+    out = _without_model(out1, tmp_path)
+    _as_replicates(out)
     slid = {"run": 2, "point_id": "x", "check": "off_axis", "detail": "the pile's centre of mass lies 21 mm off"}
     monkeypatch.setattr(execute, "run_checks", lambda out, study=None: [slid])
     assert main(["analyze", str(out), "--json", str(tmp_path / "r.json")]) == 0
