@@ -210,14 +210,10 @@ def _print_analysis(out, summary: dict) -> None:
 
     for name, s in summary.items():
         if isinstance(s, dict) and "ci" in s:  # replicates, no model (execute.replicate_summary)
-            line = f"{name}: {s['n']} runs, mean {s['mean']:.4g}, SD {s['sd']:.3g}, "
-            line += f"{100 * (1 - s['alpha']):.0f} % interval of the mean [{s['ci'][0]:.4g}, {s['ci'][1]:.4g}]"
-            if s["target"] is not None:
-                line += f"; target {s['target']:g}: t {s['t']:.3g}, p {s['p']:.3g}"
-            print(line)
-            if "unflagged" in s:
-                from .study.execute import replicate_line
+            from .study.execute import replicate_line
 
+            print(f"{name}: {replicate_line(s)}")
+            if "unflagged" in s:
                 print(f"  {replicate_line(s['unflagged'])}")
         if not isinstance(s, dict) or "r2" not in s:
             continue

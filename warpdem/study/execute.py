@@ -942,14 +942,15 @@ def _replicate_report(
 
 
 def replicate_line(s: dict, unit: str = "") -> str:
-    """One line for :func:`_replicate_report`'s summary without the flagged runs (its ``unflagged``): the runs
-    left out, then n, mean, SD, the mean's interval and the t test against the target."""
-    runs = ", ".join(str(k) for k in s["left_out"])
-    line = f"Without run{'s' if len(s['left_out']) > 1 else ''} {runs} (flagged by the checks): {s['n']} runs, "
-    line += f"mean {s['mean']:.4g}{unit}, SD {s['sd']:.3g}, {100 * (1 - s['alpha']):.0f} % interval of the mean "
-    line += f"[{s['ci'][0]:.4g}, {s['ci'][1]:.4g}]"
+    """:func:`replicate_summary` ``s`` in one line: n, mean, SD, the mean's interval and the t test against the
+    target; for a summary without the flagged runs (``unflagged``, with ``left_out``) led by the runs left out."""
+    line = f"{s['n']} runs, mean {s['mean']:.4g}{unit}, SD {s['sd']:.3g}, "
+    line += f"{100 * (1 - s['alpha']):.0f} % interval of the mean [{s['ci'][0]:.4g}, {s['ci'][1]:.4g}]"
     if s["target"] is not None:
         line += f"; target {s['target']:g}: t {s['t']:.3g}, p {s['p']:.3g}"
+    if "left_out" in s:
+        runs = ", ".join(str(k) for k in s["left_out"])
+        line = f"Without run{'s' if len(s['left_out']) > 1 else ''} {runs} (flagged by the checks): " + line
     return line
 
 
