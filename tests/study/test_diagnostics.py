@@ -97,6 +97,27 @@ def test_a_planted_outlier_is_named_and_clean_runs_are_not():
     assert any("run(s) 7" in n for n in bad["notes"])
 
 
+def test_spread_across_levels_is_brown_forsythe_and_not_judged_on_levels_of_two():
+    """The spread reading is SciPy's Brown-Forsythe test on the externally studentized residuals per level: a
+    replicated 3x3 factorial with the noise ten times larger at A = +1 is uneven across A's levels and even across
+    B's. A line through three levels of two runs each (as an explicit design with two seeds a point gives) is not
+    judged: two runs sit at the same distance from their median, so the test would divide by zero and call any
+    difference between the levels uneven."""
+    d = _factorial(reps=4)
+    rng = np.random.default_rng(11)
+    d["y"] = 30 + 2 * d.A + d.B + rng.normal(0, 1, len(d)) * np.where(d.A > 0, 3.0, 0.3)
+    fit = fit_model(d, "y", ["A", "B"], "linear")
+    ext = np.asarray(influence(fit)["externally_studentized"])
+    p_a = stats.levene(*[ext[d.A.to_numpy() == v] for v in (-1, 0, 1)], center="median").pvalue
+    assert p_a < 0.05
+    reading = diagnostics(fit, range(1, len(d) + 1))["readings"]
+    assert "Residuals vs each factor: uneven spread across the levels of A (Brown-Forsythe)." in reading
+    line = pd.DataFrame({"X": [-1.0, -1.0, 0.0, 0.0, 1.0, 1.0], "y": [50.0, 51.0, 53.5, 54.5, 57.2, 58.0]})
+    with np.errstate(all="raise"):
+        reading = diagnostics(fit_model(line, "y", ["X"], "linear"), range(1, 7))["readings"]
+    assert any("Residuals vs each factor: too few runs per level to judge" in r for r in reading)
+
+
 def test_a_negative_prediction_of_a_positive_response_is_a_note(tmp_path):
     """A linear model of a response that falls steeply and levels off (all runs above zero) predicts below zero
     at a corner of the region: the report's notes say so, with the value and where; a model that stays

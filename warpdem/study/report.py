@@ -780,23 +780,24 @@ def diagnostics(fit: ModelFit, runs: Sequence, alpha: float = 0.05) -> dict:
             f"Residuals vs run order: {'a trend' if trend else 'no trend'} (Spearman rho {rho.statistic:.2f}, "
             f"p {format_p(rho.pvalue)})" + ("; look for drift in the runs." if trend else ".")
         )
-    uneven = []
+    uneven, judged = [], []
     for f in fit.factors:
         x = fit.data[f].to_numpy(dtype=float)
         groups = [ext[(x == v) & finite] for v in np.unique(x)]
-        groups = [g for g in groups if len(g) >= 2]
+        # two runs sit at the same distance from their median, so a level of two has no spread of its own to
+        # compare: Brown-Forsythe would divide by zero and call any difference between levels uneven
+        groups = [g for g in groups if len(g) >= 3]
         if len(groups) >= 2 and all(np.ptp(g) > 0 for g in groups):
+            judged.append(f)
             if stats.levene(*groups, center="median").pvalue < alpha:
                 uneven.append(f)
-    read.append(
-        "Residuals vs each factor: "
-        + (
-            f"uneven spread across the levels of {', '.join(uneven)}"
-            if uneven
-            else "even spread across every factor's levels"
-        )
-        + " (Brown-Forsythe)."
-    )
+    if uneven:
+        spread = f"uneven spread across the levels of {', '.join(uneven)}"
+    elif judged:
+        spread = f"even spread across the levels of {', '.join(judged)}"
+    else:
+        spread = "too few runs per level to judge (at least two levels of three runs each)"
+    read.append(f"Residuals vs each factor: {spread} (Brown-Forsythe).")
     read.append(f"Predicted vs actual: R² {fit.stats['r2']:.4f}; points off the line are the residuals above.")
     read.append(
         f"Cook's distance: {'no run' if not flagged['cooks'] else 'run(s) ' + runs_text(flagged['cooks'])} above the "
