@@ -1,16 +1,18 @@
-"""Where the time of a full-size pellet funnel goes as its pile builds: the rig that the Box-Behnken study
-runs (seed 000's pellets, 141-sphere clumps), built and stepped exactly as ``run_scene`` does, with
-``--worlds`` design points at the study's centre. Prints per output interval: wall seconds, steps per second,
-steps per neighbour-list rebuild and contacts per sphere; then, at each ``--profile-at`` time, per-kernel
-GPU time over ``--steps`` eager steps (Warp's timing API, CUDA only).
+"""Where the time of a full-size rig goes as it runs: the rig a study runs (by default seed 000's pellet funnel,
+141-sphere clumps, as the Box-Behnken study), built and stepped exactly as ``run_scene`` does, with ``--worlds``
+copies. Prints per output interval: wall seconds, steps per second, steps per neighbour-list rebuild, contacts per
+sphere and the spheres in play (a factory's spheres count once poured); then, at each ``--profile-at`` time,
+per-kernel GPU time over ``--steps`` eager steps (Warp's timing API, CUDA only).
 
-    python benchmarks/profile_funnel.py --device cuda --worlds 4 --until 1.6 --profile-at 0.4 --profile-at 1.5
+    python benchmarks/profile_rig.py --device cuda --worlds 4 --until 1.6 --profile-at 0.4 --profile-at 1.5
+    python benchmarks/profile_rig.py --rig lifting_cylinder --until 1.2 --interval 0.2 --profile-at 0.6
 
 ``--set KEY=VALUE`` changes a rig parameter (``--set particle=sphere --set particle_radius=0.0015``: the
 diagnosis's lab-size funnels).
 
 The 5-world launch of the Box-Behnken study on an NVIDIA H200 took 3.2 ms per step up to 1.15 s and
-15.6 ms per step from 1.7 s to 2.1 s; this script is meant to say why.
+15.6 ms per step from 1.7 s to 2.1 s; this script was written to say why. The lifting cylinder of seed 002 runs at
+a third of the bench's sphere-steps per second, the skin ruled out; ``--rig lifting_cylinder`` asks the same.
 """
 
 import argparse
@@ -27,25 +29,28 @@ wp.config.quiet = True
 
 p = argparse.ArgumentParser()
 p.add_argument("--device", default="cuda")
+p.add_argument("--rig", default="funnel", choices=sorted(rigs.RIGS))
 p.add_argument("--worlds", type=int, default=1)
 p.add_argument("--until", type=float, default=1.6, help="simulated seconds [s]")
 p.add_argument("--interval", type=float, default=0.1, help="report every this many simulated seconds [s]")
 p.add_argument("--profile-at", type=float, action="append", default=[], help="profile kernels at this time [s]")
 p.add_argument("--steps", type=int, default=100, help="eager steps per kernel profile")
 p.add_argument("--smoke", action="store_true", help="the CPU smoke size instead of the full size")
-p.add_argument("--count", type=int, help="pellets per world (default: the rig's)")
+p.add_argument("--count", type=int, help="bodies per world (default: the rig's)")
 p.add_argument("--skin", type=float, help="Verlet skin [m] (default: the solver's, 0.4 x the smallest radius)")
 p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="a rig parameter, e.g. particle=sphere")
 a = p.parse_args()
 wp.init()
-params = {"particle": "pellet", "material": "pellet"} | ({"count": a.count} if a.count else {})
+# the funnel's default is seed 000's pellets, the scene this script was first written for
+params = {"particle": "pellet", "material": "pellet"} if a.rig == "funnel" else {}
+params |= {"count": a.count} if a.count else {}
 for item in a.set:
     key, _, value = item.partition("=")
     try:
         params[key] = float(value) if key not in ("particle", "material") else value
     except ValueError:
         params[key] = value
-spec = rigs.spec("funnel", params, a.smoke)
+spec = rigs.spec(a.rig, params, a.smoke)
 model = build(spec, a.worlds).finalize(a.device)
 solver = scene_solver(model, spec.run, skin=a.skin)
 state, contacts = model.state(), solver.contacts()
