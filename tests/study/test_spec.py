@@ -43,6 +43,7 @@ COUNTS = {
     "wetfeed_gamma_scan": 5,
     "wetfeed_verify_large": 5,
     "wetfeed_large_gamma": 6,
+    "wetfeed_large_friction": 9,
 }
 
 
