@@ -4,7 +4,7 @@
 
 The steps: seed 001's wet-feed Plackett-Burman (wetfeed_pb), central composite with its verification replicates
 (wetfeed_ccd) and that verification again with the seed's 25,000 grains (wetfeed_verify_large; its surface energy
-stepped down there, wetfeed_large_gamma), then the die press at the central composite's chosen optimum, or its
+stepped down there, wetfeed_large_gamma, and its friction, wetfeed_large_friction), then the die press at the central composite's chosen optimum, or its
 closest point when the target is out of reach (die_press), and its surface-energy scan beyond the paper's range
 (wetfeed_gamma_scan); seed 002's 2^(5-1) screening (phosphate_ffd),
 Box-Behnken with its verification run (phosphate_bbd), its surface energy as printed and scaled by the coarse-graining
