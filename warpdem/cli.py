@@ -266,6 +266,17 @@ def _print_plan(plan: dict) -> None:
         f"cost: {cost['simulated_s']:g} s simulated over the launches, {cost['world_s']:g} world-seconds, "
         f"{particle_s} particle-seconds; nothing was run (output folder {plan['out']})"
     )
+    v = plan["verification"]
+    if v is None:
+        return
+    runs = f"{v['replicates']} verification run(s) for {v['response']} = {v['target']:g}"
+    if not v["analysed"]:
+        print(f"then {runs} at the chosen settings, once every design run is finished and analysed")
+    elif v["chosen"] is None:
+        print(f"no {runs}: the analysis (analysis/summary.json) chose no settings that reach the target")
+    else:
+        at = ", ".join(f"{k} = {x:.4g}" for k, x in v["chosen"].items())
+        print(f"then {runs} at {at} (analysis/summary.json): {v['finished']} of {v['replicates']} finished")
 
 
 def cmd_study(args) -> int:

@@ -363,6 +363,40 @@ def test_plan_runs_nothing(finished, tmp_path, monkeypatch, capsys):
     done_study, done_out, _ = finished
     done = execute.plan_study(done_study, done_out)
     assert set(done["table"]["status"]) == {"finished"} and done["launches"] == []
+    assert plan["verification"] is None and done["verification"] is None  # the tiny study has none
+
+
+def test_plan_says_where_the_verification_goes(finished, tmp_path, capsys):
+    """With verification replicates, ``--plan`` says what follows the design: before the design is finished and
+    analysed, that they wait for it; then the settings the analysis chose (read from its summary.json) and how
+    many replicates have a record; or that it chose none, so none will run."""
+    from warpdem.cli import main
+
+    study, done, _ = finished
+    path = tmp_path / "tiny.toml"
+    path.write_text(STUDY.format(batch=0, target=0.05, verify=2))
+    pending = execute.plan_study(load_study(path), tmp_path / "never")["verification"]
+    assert pending == {
+        "replicates": 2,
+        "response": "height",
+        "target": 0.05,
+        "finished": 0,
+        "analysed": False,
+        "chosen": None,
+    }
+    out = tmp_path / "out"
+    shutil.copytree(done, out, ignore=shutil.ignore_patterns("verification", "analysis"))
+    (out / "analysis").mkdir()
+    (out / "analysis" / "summary.json").write_text(json.dumps({"height": {"chosen": {"A": 0.35, "B": 0.125}}}))
+    (out / "verification").mkdir()
+    (out / "verification" / "replicate_1.json").write_text("{}")
+    assert main(["study", str(path), "--plan", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "then 2 verification run(s) for height = 0.05 at A = 0.35, B = 0.125" in text
+    assert "1 of 2 finished" in text
+    (out / "analysis" / "summary.json").write_text(json.dumps({"height": {"closest": {"A": 0.8, "B": 0.3}}}))
+    assert main(["study", str(path), "--plan", "--out", str(out)]) == 0
+    assert "no 2 verification run(s) for height = 0.05: the analysis" in capsys.readouterr().out
 
 
 def test_no_cuda_driver_line_unless_a_gpu_is_asked_for(tmp_path):

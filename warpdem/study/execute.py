@@ -452,7 +452,41 @@ def plan_study(study, out_dir=None, device: str = "cpu") -> dict:
         "world_s": sum(L["worlds"] * L["duration_s"] for L in launches),
         "particle_s": sum(L["worlds"] * L["particles"] * L["duration_s"] for L in launches) if known else None,
     }
-    return {"study": study, "out": str(out), "table": table, "launches": launches, "cost": cost}
+    return {
+        "study": study,
+        "out": str(out),
+        "table": table,
+        "launches": launches,
+        "cost": cost,
+        "verification": _plan_verification(study, out, finished=not pending),
+    }
+
+
+def replicate_file(vdir: Path, k: int) -> Path:
+    """Verification replicate ``k`` (1-based)'s record in ``vdir`` (``OUT/verification``)."""
+    return vdir / f"replicate_{k}.json"
+
+
+def _plan_verification(study, out: Path, finished: bool) -> dict | None:
+    """The verification runs :func:`run_study` would make after the design, or None when the study has none:
+    ``replicates``, ``response`` (the first with a target), ``finished`` (replicates with a record), ``analysed``
+    (every design run finished and ``OUT/analysis/summary.json`` written) and ``chosen`` (its chosen settings
+    for that response; None where the analysis chose none or has not run)."""
+    n = study.verification.replicates
+    resp = next((r for r in study.responses if r.target is not None), None)
+    if not n or resp is None:
+        return None
+    summary = out / "analysis" / "summary.json"
+    analysed = finished and summary.exists()
+    chosen = (json.loads(summary.read_text()).get(resp.name) or {}).get("chosen") if analysed else None
+    return {
+        "replicates": n,
+        "response": resp.name,
+        "target": resp.target,
+        "finished": sum(replicate_file(out / "verification", k + 1).exists() for k in range(n)),
+        "analysed": analysed,
+        "chosen": chosen,
+    }
 
 
 def run_study(
@@ -1307,7 +1341,7 @@ def run_verification(
             "world_seed": k + 1,
             "overrides": base,
             "row": {"stage": "verification"},
-            "file": vdir / f"replicate_{k + 1}.json",
+            "file": replicate_file(vdir, k + 1),
         }
         for k in range(n)
     ]
