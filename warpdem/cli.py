@@ -315,7 +315,7 @@ def cmd_study(args) -> int:
             from .study.spec import load_study
 
             study = load_study(args.study, check_scene=False)
-            _write_records(args.json, study_records(res["out"], study, res["analysis"]))
+            _write_records(args.json, study_records(res["out"], study, res["analysis"], res["checks"]))
     v = res.get("verification")
     if v:
         print(
@@ -370,7 +370,7 @@ def cmd_diagnose(args) -> int:
 
 
 def cmd_analyze(args) -> int:
-    from .study.execute import analyze
+    from .study.execute import analyze, run_checks
     from .study.spec import StudyError, load_study
 
     if args.runs and not args.study:
@@ -380,7 +380,9 @@ def cmd_analyze(args) -> int:
         raise StudyError(f"--measure {args.measure[0]}: give --remeasure too (the settings to measure again under)")
     measure = _sets(args.measure) if args.remeasure else None
     try:
-        summary = analyze(args.out, study, runs=args.runs, measure=measure)
+        # checked once, for the report and the records alike; runs made elsewhere have no records to check
+        flags = [] if args.runs else run_checks(args.out, study)
+        summary = analyze(args.out, study, runs=args.runs, measure=measure, flags=flags)
     except FileNotFoundError as e:
         raise StudyError(str(e)) from None
     if args.excel:
@@ -395,7 +397,7 @@ def cmd_analyze(args) -> int:
         from .study.execute import _write_records, study_records
 
         study = study or load_study(Path(args.out) / "study.toml", check_scene=False)
-        _write_records(args.json, study_records(args.out, study, summary))
+        _write_records(args.json, study_records(args.out, study, summary, flags))
     return 0
 
 

@@ -733,11 +733,12 @@ def test_runs_made_elsewhere_are_analysed_from_a_csv(finished, tmp_path, capsys)
     assert "give the study file" in capsys.readouterr().err
 
 
-def test_json_records_of_an_analysis(finished, tmp_path):
+def test_json_records_of_an_analysis(finished, tmp_path, monkeypatch):
     """``warpdem analyze DIR --json FILE``: per response the model's p (expected below alpha), R², adjusted and
     predicted R², adequate precision (expected above 4) and the prediction at the target, each a record with name,
     value, expected, unit and pass; each run check a failing record (the tiny study's piles did not settle).
-    ``warpdem study --json`` writes the same after running the study afresh (the engine is deterministic)."""
+    ``warpdem study --json`` writes the same after running the study afresh (the engine is deterministic). Each
+    command checks the runs once, for its report and its records alike."""
     import shutil
 
     from warpdem.cli import main
@@ -745,7 +746,11 @@ def test_json_records_of_an_analysis(finished, tmp_path):
     study, out1, _ = finished
     out = tmp_path / "copy"
     shutil.copytree(out1, out)
+    checked = []
+    real_checks = execute.run_checks
+    monkeypatch.setattr(execute, "run_checks", lambda *a, **k: checked.append(a) or real_checks(*a, **k))
     assert main(["analyze", str(out), "--json", str(tmp_path / "a.json")]) == 0
+    assert len(checked) == 1
     recs = json.loads((tmp_path / "a.json").read_text())
     assert all(set(r) >= {"name", "value", "expected", "unit", "pass"} for r in recs)
     by = {r["name"]: r for r in recs}
@@ -762,6 +767,7 @@ def test_json_records_of_an_analysis(finished, tmp_path):
     # warpdem study --json writes the same records after its analysis
     argv = ["study", str(study.path), "--out", str(tmp_path / "s"), "--device", "cpu", "--no-progress"]
     assert main(argv + ["--json", str(tmp_path / "s.json")]) == 0
+    assert len(checked) == 2
     again = {r["name"]: r for r in json.loads((tmp_path / "s.json").read_text())}
     assert again["height.r2"]["value"] == pytest.approx(by["height.r2"]["value"], rel=1e-12)
 

@@ -636,7 +636,7 @@ def _finish_study(
         log(f"{study.name}: stopped, {finished} of {len(rows)} runs finished; {stopped}")
         return result
     if analyze_after:
-        result["analysis"] = analyze(out, study)
+        result["analysis"] = analyze(out, study, flags=flags)
         if verify and study.verification.replicates > 0 and study.analysis.model != "none":
             try:
                 result["verification"] = run_verification(
@@ -826,13 +826,16 @@ def external_runs(path, study: sp.StudySpec) -> pd.DataFrame:
     return out
 
 
-def analyze(out, study: sp.StudySpec | None = None, runs=None, measure: Mapping | None = None) -> dict:
+def analyze(
+    out, study: sp.StudySpec | None = None, runs=None, measure: Mapping | None = None, flags: list | None = None
+) -> dict:
     """Fit the study's model to the finished runs of ``out`` and write ``out/analysis`` (report.md, ANOVA
     tables, Pareto and contour plots, target solutions, the gallery of the runs). With ``runs`` (a CSV run table,
     :func:`external_runs`) analyse those instead, into ``out``. With ``measure`` ({``measure.FIELD``: value},
     possibly empty) every run is measured again from its stored final state under those settings
-    (:func:`remeasure`) and analysed so. Returns :func:`report.write_report`'s summary (with ``[analysis] model =
-    "none"``, :func:`_replicate_report`'s)."""
+    (:func:`remeasure`) and analysed so. ``flags``: :func:`run_checks` of ``out`` where the caller has them
+    already (default: checked here; none for ``runs``). Returns :func:`report.write_report`'s summary (with
+    ``[analysis] model = "none"``, :func:`_replicate_report`'s)."""
     out = Path(out)
     study = study or sp.load_study(out / "study.toml", check_scene=False)
     notes = []
@@ -847,7 +850,8 @@ def analyze(out, study: sp.StudySpec | None = None, runs=None, measure: Mapping 
     finished = data[[r.name for r in study.responses]].notna().any(axis=1)
     if not finished.all():
         notes.append(f"{int((~finished).sum())} of {len(data)} runs have not finished; they are left out.")
-    flags = run_checks(out, study) if runs is None else []
+    if flags is None:
+        flags = run_checks(out, study) if runs is None else []
     if runs is None:
         notes += [f"Check: {line}." for line in check_lines(flags)]
     else:
@@ -1048,13 +1052,14 @@ ADEQUATE_PRECISION_MIN = 4.0
 space."""
 
 
-def study_records(out, study: sp.StudySpec, summary: dict) -> list[dict]:
+def study_records(out, study: sp.StudySpec, summary: dict, flags: list | None = None) -> list[dict]:
     """The analysis of ``out`` as ``--json`` records (name, value, expected, unit, pass), per response: the model's
     p (expected below alpha), R², adjusted and predicted R², adequate precision (expected above
     :data:`ADEQUATE_PRECISION_MIN`) and, with a target, the prediction at the chosen settings (expected: the
     target; passes when the target is reachable); for replicates without a model (:func:`_replicate_report`) the
     mean (expected: the target; passes when the mean's interval holds it), SD and count, and the same under
-    ``unflagged.`` without the flagged runs; and one failing record per :func:`run_checks` flag."""
+    ``unflagged.`` without the flagged runs; and one failing record per :func:`run_checks` flag (``flags``, where
+    the caller has them already: the ones the analysis used)."""
     alpha = study.analysis.alpha
     recs: list[dict] = []
     for r in study.responses:
@@ -1091,7 +1096,7 @@ def study_records(out, study: sp.StudySpec, summary: dict) -> list[dict]:
             if pred is None and isinstance(s.get("closest"), dict):
                 pred = s["closest"].get("predicted")
             rec("predicted", pred, r.target, bool(s.get("reachable")), r.unit)
-    for f in run_checks(out, study):
+    for f in run_checks(out, study) if flags is None else flags:
         recs.append(
             {"name": f"run {f['run']}.{f['check']}", "value": f["detail"], "expected": None, "unit": "", "pass": False}
         )
