@@ -467,15 +467,23 @@ def replicate_file(vdir: Path, k: int) -> Path:
     return vdir / f"replicate_{k}.json"
 
 
+def verification_response(study: sp.StudySpec):
+    """The response the verification runs check (the first with a target), or None where the study makes no
+    verification runs: no replicates, no model to choose their settings, or no target."""
+    if study.verification.replicates <= 0 or study.analysis.model == "none":
+        return None
+    return next((r for r in study.responses if r.target is not None), None)
+
+
 def _plan_verification(study, out: Path, finished: bool) -> dict | None:
     """The verification runs :func:`run_study` would make after the design, or None when the study has none:
     ``replicates``, ``response`` (the first with a target), ``finished`` (replicates with a record), ``analysed``
     (every design run finished and ``OUT/analysis/summary.json`` written) and ``chosen`` (its chosen settings
     for that response; None where the analysis chose none or has not run)."""
-    n = study.verification.replicates
-    resp = next((r for r in study.responses if r.target is not None), None)
-    if not n or resp is None:
+    resp = verification_response(study)
+    if resp is None:
         return None
+    n = study.verification.replicates
     summary = out / "analysis" / "summary.json"
     analysed = finished and summary.exists()
     chosen = (json.loads(summary.read_text()).get(resp.name) or {}).get("chosen") if analysed else None
@@ -637,7 +645,7 @@ def _finish_study(
         return result
     if analyze_after:
         result["analysis"] = analyze(out, study, flags=flags)
-        if verify and study.verification.replicates > 0 and study.analysis.model != "none":
+        if verify and verification_response(study) is not None:
             try:
                 result["verification"] = run_verification(
                     study,
@@ -1323,7 +1331,7 @@ def run_verification(
     design runs (one file per replicate); each launch checkpoints into ``out/verification/launches/<id>/`` and,
     with ``stop_after`` (wall seconds), returns {"stopped": message} once it has saved its checkpoint."""
     out = Path(out)
-    resp = next((r for r in study.responses if r.target is not None), None)
+    resp = verification_response(study)
     if resp is None:
         return None
     s = summary.get(resp.name) or {}
