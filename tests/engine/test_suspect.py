@@ -55,6 +55,15 @@ def test_off_axis_threshold():
     assert hit["check"] == "off_axis" and "26.1 mm off" in hit["detail"] and "the 20 mm it" in hit["detail"]
 
 
+def test_pile_apart_threshold():
+    """A heap holding less than four fifths of the spheres above its base is flagged, with both counts and the
+    share; one holding four fifths is not, nor an empty world."""
+    assert suspect.pile_apart_warning(20, 80) is None
+    assert suspect.pile_apart_warning(0, 0) is None
+    hit = suspect.pile_apart_warning(109590, 17835)
+    assert hit["check"] == "pile_apart" and "109590 of the 127425" in hit["detail"] and "(86.0 %)" in hit["detail"]
+
+
 def test_coincident_spheres_warn_at_finalize():
     """Two spheres placed at one point: finalize warns (they would push in no direction and stay together);
     two spheres apart do not."""

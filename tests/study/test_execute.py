@@ -508,6 +508,30 @@ def test_runs_that_may_be_wrong_are_flagged(finished, tmp_path):
     assert "- Check: did not settle: runs 1, 2, 3, 4, 5, 6" in report
 
 
+def test_a_pile_holding_too_little_of_its_bed_is_flagged_once(finished, tmp_path):
+    """A run whose record says 30 of its 40 spheres lie apart from the pile (75 %, over the 20 % allowed) is
+    flagged ``pile_apart`` from its metrics, as records made before the run itself checked are; one that carries
+    the run's own warning is flagged once, not twice; 8 of 40 (20 %) is not flagged."""
+    import shutil
+
+    from warpdem.engine import suspect
+
+    study, out1, _ = finished
+    out = tmp_path / "copy"
+    shutil.copytree(out1, out)
+    pids = execute.load_results(out, study)["point_id"]
+    for k, (detached, particles, own) in enumerate([(30, 10, False), (30, 10, True), (8, 32, False)]):
+        path = out / "runs" / f"{pids[k]}.json"
+        rec = json.loads(path.read_text())
+        rec["metrics"].update(detached=detached, particles=particles)
+        rec["metrics"]["warnings"] = [suspect.pile_apart_warning(detached, particles)] if own else []
+        path.write_text(json.dumps(rec))
+    flags = [(f["run"], f["detail"]) for f in execute.run_checks(out, study) if f["check"] == "pile_apart"]
+    assert [run for run, _ in flags] == [1, 2]
+    assert flags[0][1].startswith("30 of the 40 particle spheres above the base (75.0 %) are not in the pile")
+    assert suspect.pile_apart_warning(8, 32) is None and suspect.pile_apart_warning(9, 31)["check"] == "pile_apart"
+
+
 def test_settling_of_every_run_is_kept_and_drawn(finished, tmp_path):
     """Each run keeps its kinetic energy per particle at every output tick and its scene's settle threshold; the
     report draws them all (settling.png) and says how many ended below it: none of the tiny study's 0.3 s piles,

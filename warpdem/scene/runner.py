@@ -786,6 +786,9 @@ def run_scene_iter(
         }
         if m.kind == "angle_of_repose":
             mw.update(measure_pile(*_particles(model, state, h, w), m))
+            found = suspect.pile_apart_warning(mw["detached"], mw["particles"])
+            if found is not None:
+                mw["warnings"].append(found)
             if measures[w].pour_radius > 0 and "pile_offset_m" in mw:
                 found = suspect.off_axis_warning(mw["pile_offset_m"], measures[w].pour_radius)
                 if found is not None:

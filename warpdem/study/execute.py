@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from warpdem.engine import suspect
 from warpdem.engine.types import device_kind, device_names
 from warpdem.scene.runner import _json_default
 
@@ -710,7 +711,13 @@ def _checks_of(rec: dict, scene, study: sp.StudySpec) -> list[tuple[str, str]]:
     if scene.run.settle_energy > 0 and m.get("stop", info.get("stop")) == "duration":
         found.append(("unsettled", f"still moving at the end of its {m.get('time_s', scene.run.duration):.3g} s"))
     # the run's own physics warnings (warpdem.engine.suspect): lost bodies, too long a step, overlaps
-    found += [(x["check"], x["detail"]) for x in m.get("warnings", [])]
+    warned = m.get("warnings", [])
+    found += [(x["check"], x["detail"]) for x in warned]
+    # a pile measured before runs checked their pile's share of the bed is checked from its record
+    if "detached" in m and not any(x["check"] == "pile_apart" for x in warned):
+        late = suspect.pile_apart_warning(m["detached"], m.get("particles", 0))
+        if late is not None:
+            found.append((late["check"], late["detail"]))
     inertial = m.get("inertial_number_max")
     if inertial is not None and inertial > QUASI_STATIC_INERTIAL_NUMBER:
         found.append(
@@ -732,8 +739,9 @@ def run_checks(out, study: sp.StudySpec | None = None) -> list[dict]:
     bodies left the domain), ``fast``, ``start_overlap``, ``soft`` and ``outlet`` (the run's own warnings, see
     :mod:`warpdem.engine.suspect`), ``inertial`` (a press faster than
     :data:`warpdem.scene.measure.QUASI_STATIC_INERTIAL_NUMBER`), ``step`` (the step exceeded the stable step
-    in some tick), ``outlet`` (a pile that grew up to its funnel's outlet) and ``off_axis`` (a pile that moved off
-    the axis it was poured on), the last two the run's own warnings."""
+    in some tick), ``outlet`` (a pile that grew up to its funnel's outlet), ``off_axis`` (a pile that moved off
+    the axis it was poured on) and ``pile_apart`` (a heap that holds too little of its bed), the last three the
+    run's own warnings (``pile_apart`` is also read off older records' metrics)."""
     out = Path(out)
     study = study or sp.load_study(out / "study.toml", check_scene=False)
     flags, scene = [], _scene_cache(study)
@@ -790,6 +798,7 @@ CHECK_WORDS = {
     "step": "step above the stable step",
     "outlet": "pile reached the funnel",
     "off_axis": "pile off its axis",
+    "pile_apart": "bed not in the pile",
 }
 """How the report and the console name each of :func:`run_checks`' checks."""
 
