@@ -281,7 +281,7 @@ def _print_plan(plan: dict) -> None:
 
 def cmd_study(args) -> int:
     _quiet_warp(args.device)
-    from .study.execute import plan_study, run_study
+    from .study.execute import check_lines, plan_study, run_study
 
     if args.plan:
         _print_plan(plan_study(args.study, args.out, args.device))
@@ -322,6 +322,8 @@ def cmd_study(args) -> int:
             f"verification: {len(v['values'])} runs, mean {v['mean']:.4g} (SD {v['sd']:.3g}), target "
             f"{v['target']}, relative error {v['relative_error_pct']:.3g} %"
         )
+        for line in check_lines(v.get("checks", []), key="replicate"):
+            print(f"verification: check: {line}")
     return 0
 
 

@@ -201,6 +201,52 @@ def test_analysis_and_verification(finished, tmp_path):
     assert (out / "analysis" / "report.md").read_text().count("## Verification") == 1
 
 
+def test_verification_replicates_are_checked_like_design_runs(finished, tmp_path, capsys):
+    """Each verification replicate goes through the design runs' checks. The tiny study's 0.3 s piles are all
+    still moving, so all three replicates are flagged "unsettled" and no summary without them is left. Edited so
+    that replicate 1 carries a slid pile's warning and replicates 2 and 3 settled, replicate 1 alone is flagged
+    (both checks) and the summary without it is the mean, SD and t test of the other two (scipy), in
+    verification.json and report.md, and the console names the flag; the t test of all three is scipy's too."""
+    from scipy import stats
+
+    from warpdem.engine import suspect
+
+    study, done, _ = finished
+    out = tmp_path / "out"
+    shutil.copytree(done, out, ignore=shutil.ignore_patterns("verification"))
+    target = float(execute.load_results(out, study)["height"].median())
+    path = tmp_path / "tiny.toml"
+    path.write_text(STUDY.format(batch=0, target=target, verify=3))
+    study3 = load_study(path)
+    v = _run(study3, out)["verification"]
+    assert [(c["replicate"], c["check"]) for c in v["checks"]] == [(1, "unsettled"), (2, "unsettled"), (3, "unsettled")]
+    assert "unflagged" not in v
+    test = stats.ttest_1samp(v["values"], target)
+    assert v["t"] == pytest.approx(test.statistic, rel=1e-12) and v["p"] == pytest.approx(test.pvalue, rel=1e-12)
+    for k in (1, 2, 3):
+        f = out / "verification" / f"replicate_{k}.json"
+        rec = json.loads(f.read_text())
+        if k == 1:
+            rec["metrics"]["warnings"] = [suspect.off_axis_warning(0.03, 0.02)]
+        else:
+            rec["metrics"]["stop"] = "settled"
+        f.write_text(json.dumps(rec))
+    v = _run(study3, out)["verification"]
+    assert [(c["replicate"], c["check"]) for c in v["checks"]] == [(1, "unsettled"), (1, "off_axis")]
+    u, kept = v["unflagged"], v["values"][1:]
+    assert u["left_out"] == [1] and u["n"] == 2 and u["mean"] == pytest.approx(sum(kept) / 2)
+    assert u["p"] == pytest.approx(stats.ttest_1samp(kept, target).pvalue, rel=1e-12)
+    assert json.loads((out / "verification" / "verification.json").read_text())["unflagged"]["left_out"] == [1]
+    report = (out / "analysis" / "report.md").read_text()
+    assert "- Check: pile off its axis: replicate 1: the pile's centre of mass lies 30 mm off" in report
+    assert "Without replicate 1 (flagged by the checks): 2 runs, mean" in report
+    from warpdem.cli import main
+
+    capsys.readouterr()
+    assert main(["study", str(path), "--out", str(out), "--no-progress", "--device", "cpu"]) == 0
+    assert "verification: check: pile off its axis: replicate 1: the pile's" in capsys.readouterr().out
+
+
 def _assert_resumed_like_uninterrupted(study, tmp_path):
     """tmp_path/out was resumed from a checkpoint and holds the responses of an uninterrupted study."""
     rec = json.loads(next((tmp_path / "out" / "runs").glob("*.json")).read_text())
@@ -512,8 +558,6 @@ def test_a_pile_holding_too_little_of_its_bed_is_flagged_once(finished, tmp_path
     """A run whose record says 30 of its 40 spheres lie apart from the pile (75 %, over the 20 % allowed) is
     flagged ``pile_apart`` from its metrics, as records made before the run itself checked are; one that carries
     the run's own warning is flagged once, not twice; 8 of 40 (20 %) is not flagged."""
-    import shutil
-
     from warpdem.engine import suspect
 
     study, out1, _ = finished

@@ -773,17 +773,18 @@ def _scene_cache(study: sp.StudySpec):
     return scene
 
 
-def check_lines(flags: list[dict]) -> list[str]:
-    """:func:`run_checks`' flags as one line per check: its runs, and the first one's detail."""
+def check_lines(flags: list[dict], key: str = "run") -> list[str]:
+    """:func:`run_checks`' flags as one line per check: its runs (or, with ``key="replicate"``, a verification's
+    replicates), and the first one's detail."""
     lines = []
     for check in dict.fromkeys(f["check"] for f in flags):
         these = [f for f in flags if f["check"] == check]
         first = these[0]
         if len(these) == 1:
-            lines.append(f"{CHECK_WORDS[check]}: run {first['run']}: {first['detail']}")
+            lines.append(f"{CHECK_WORDS[check]}: {key} {first[key]}: {first['detail']}")
         else:
-            runs = ", ".join(str(f["run"]) for f in these)
-            lines.append(f"{CHECK_WORDS[check]}: runs {runs} (run {first['run']}: {first['detail']})")
+            runs = ", ".join(str(f[key]) for f in these)
+            lines.append(f"{CHECK_WORDS[check]}: {key}s {runs} ({key} {first[key]}: {first['detail']})")
     return lines
 
 
@@ -996,16 +997,17 @@ def _replicate_report(
     return summary
 
 
-def replicate_line(s: dict, unit: str = "") -> str:
+def replicate_line(s: dict, unit: str = "", key: str = "run") -> str:
     """:func:`replicate_summary` ``s`` in one line: n, mean, SD, the mean's interval and the t test against the
-    target; for a summary without the flagged runs (``unflagged``, with ``left_out``) led by the runs left out."""
+    target; for a summary without the flagged runs (``unflagged``, with ``left_out``) led by the runs (``key``:
+    or replicates) left out."""
     line = f"{s['n']} runs, mean {s['mean']:.4g}{unit}, SD {s['sd']:.3g}, "
     line += f"{100 * (1 - s['alpha']):.0f} % interval of the mean [{s['ci'][0]:.4g}, {s['ci'][1]:.4g}]"
     if s["target"] is not None:
         line += f"; target {s['target']:g}: t {s['t']:.3g}, p {s['p']:.3g}"
     if "left_out" in s:
         runs = ", ".join(str(k) for k in s["left_out"])
-        line = f"Without run{'s' if len(s['left_out']) > 1 else ''} {runs} (flagged by the checks): " + line
+        line = f"Without {key}{'s' if len(s['left_out']) > 1 else ''} {runs} (flagged by the checks): " + line
     return line
 
 
@@ -1307,6 +1309,13 @@ def _append_verification(out: Path, v: dict) -> None:
         f"relative error of the mean {v['relative_error_pct']:.3g} %.",
         "",
     ]
+    # records written before the verification was t-tested and checked have neither
+    if math.isfinite(v.get("p", math.nan)):
+        lines += [f"One-sample t test of the mean against the target: t = {v['t']:.3g}, p = {v['p']:.3g}.", ""]
+    checks = v.get("checks", [])
+    lines += [f"- Check: {line}." for line in check_lines(checks, key="replicate")] + ([""] if checks else [])
+    if "unflagged" in v:
+        lines += [replicate_line(v["unflagged"], key="replicate") + ".", ""]
     pi, within = v.get("prediction_interval"), v.get("within_prediction_interval")
     if within is not None:
         level = 100.0 * (1.0 - v["interval_alpha"])
@@ -1336,7 +1345,10 @@ def run_verification(
     """Verification replicates at the chosen optimum of the first response with a target: ``replicates``
     runs (world seeds 1..n, so they differ from each other) as one launch per device of ``executor`` (the
     study's; by default ``device`` in this process); writes ``out/verification/verification.json`` with each
-    value, the mean, SD and relative error against the target, and appends them to the report. Resumes like the
+    value, the mean, SD, relative error and one-sample t test against the target, each replicate's run checks
+    (``checks``: replicate, check, detail, as :func:`run_checks` gives a design run's) and, where some are
+    flagged and at least two are left, the summary without them (``unflagged``, with ``left_out``), and appends
+    them to the report. Resumes like the
     design runs (one file per replicate); each launch checkpoints into ``out/verification/launches/<id>/`` and,
     with ``stop_after`` (wall seconds), returns {"stopped": message} once it has saved its checkpoint."""
     out = Path(out)
@@ -1399,11 +1411,15 @@ def run_verification(
                 bar.close()
         if stopped:
             return {"stopped": stopped}
-    values = []
+    values, checks, scene = [], [], _scene(study, base)
     for r in rows:
         with open(r["file"]) as fh:
-            values.append(json.load(fh)["responses"][resp.name])
-    rep = replicate_summary(values, resp.target)
+            rec = json.load(fh)
+        values.append(rec["responses"][resp.name])
+        # a replicate is checked like a design run: a pile that slid or a bed that hung is no replicate
+        checks += [{"replicate": r["run"], "check": c, "detail": d} for c, d in _checks_of(rec, scene, study)]
+    alpha = study.analysis.alpha
+    rep = replicate_summary(values, resp.target, alpha)
     mean = rep["mean"]
     # Design-Expert's confirmation: the mean of the k runs against the prediction interval for a mean of k runs
     conf, k = s.get("confirmation"), rep["n"]
@@ -1420,7 +1436,14 @@ def run_verification(
         "prediction_interval": list(pi),
         "within_prediction_interval": bool(pi[0] <= mean <= pi[1]) if math.isfinite(pi[0]) else None,
         "interval_alpha": conf["alpha"] if conf else None,
+        "t": rep["t"],
+        "p": rep["p"],
+        "checks": checks,
     }
+    left_out = sorted({c["replicate"] for c in checks})
+    if left_out and len(values) - len(left_out) >= 2:
+        kept = [v for k, v in enumerate(values, start=1) if k not in left_out]
+        result["unflagged"] = replicate_summary(kept, resp.target, alpha) | {"left_out": left_out}
     _write_json(vdir / "verification.json", result)
     _append_verification(out, result)
     return result
