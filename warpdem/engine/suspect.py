@@ -188,8 +188,8 @@ def pile_apart_warning(detached: int, particles: int) -> dict | None:
             particles: the pile's own spheres (``particles``).
 
     More than :data:`PILE_APART_MAX` of them apart means a good part of the bed stayed where the test should
-    have emptied it, or left the heap (seed 002's cohesive phosphate with the surface energy times 25.6 kept 86 %
-    of one bed in the lifted cylinder, and the 14 % that fell read 27.4 deg against 28.9-42.7 deg for its
+    have emptied it, or left the heap (in seed 002's screening with the surface energy times 25.6, 86 % of one
+    cohesive phosphate bed never joined the heap, and the 14 % in it read 27.4 deg against 28.9-42.7 deg for the
     screening's other runs)."""
     total = detached + particles
     if total == 0 or detached <= PILE_APART_MAX * total:

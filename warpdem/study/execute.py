@@ -1348,9 +1348,9 @@ def run_verification(
     value, the mean, SD, relative error and one-sample t test against the target, each replicate's run checks
     (``checks``: replicate, check, detail, as :func:`run_checks` gives a design run's) and, where some are
     flagged and at least two are left, the summary without them (``unflagged``, with ``left_out``), and appends
-    them to the report. Resumes like the
-    design runs (one file per replicate); each launch checkpoints into ``out/verification/launches/<id>/`` and,
-    with ``stop_after`` (wall seconds), returns {"stopped": message} once it has saved its checkpoint."""
+    them to the report. Resumes like the design runs (one file per replicate); each launch checkpoints into
+    ``out/verification/launches/<id>/`` and, with ``stop_after`` (wall seconds), returns {"stopped": message}
+    once it has saved its checkpoint."""
     out = Path(out)
     resp = verification_response(study)
     if resp is None:
