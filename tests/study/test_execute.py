@@ -206,7 +206,8 @@ def test_verification_replicates_are_checked_like_design_runs(finished, tmp_path
     still moving, so all three replicates are flagged "unsettled" and no summary without them is left. Edited so
     that replicate 1 carries a slid pile's warning and replicates 2 and 3 settled, replicate 1 alone is flagged
     (both checks) and the summary without it is the mean, SD and t test of the other two (scipy), in
-    verification.json and report.md, and the console names the flag; the t test of all three is scipy's too."""
+    verification.json and report.md, and the console names the flag; the t test of all three is scipy's too, and
+    the report's replicate table gives each replicate's other pile metrics beside the response."""
     from scipy import stats
 
     from warpdem.engine import suspect
@@ -223,6 +224,14 @@ def test_verification_replicates_are_checked_like_design_runs(finished, tmp_path
     assert "unflagged" not in v
     test = stats.ttest_1samp(v["values"], target)
     assert v["t"] == pytest.approx(test.statistic, rel=1e-12) and v["p"] == pytest.approx(test.pvalue, rel=1e-12)
+    # what else each replicate measured, the response's own metric (pile_height_m) left out
+    recs = [json.loads((out / "verification" / f"replicate_{k}.json").read_text()) for k in (1, 2, 3)]
+    assert "pile_height_m" not in v["metrics"]
+    assert v["metrics"]["angle_cone_deg"] == [r["metrics"]["angle_cone_deg"] for r in recs]
+    head = next(
+        line for line in (out / "analysis" / "report.md").read_text().splitlines() if line.startswith("| replicate |")
+    )
+    assert head.startswith("| replicate | height | ") and "| angle_cone_deg |" in head
     for k in (1, 2, 3):
         f = out / "verification" / f"replicate_{k}.json"
         rec = json.loads(f.read_text())

@@ -1288,6 +1288,11 @@ def _append_settling(out: Path, study: sp.StudySpec) -> None:
             fh.write("\n".join(lines))
 
 
+def _cell(x) -> str:
+    """A table cell of a number to 4 significant digits; a response a replicate could not measure is a dash."""
+    return f"{x:.4g}" if x is not None and math.isfinite(x) else "–"
+
+
 def _append_verification(out: Path, v: dict) -> None:
     """Add the verification section to the report (report.md is rewritten by every analysis)."""
     n = len(v["values"])
@@ -1299,10 +1304,14 @@ def _append_verification(out: Path, v: dict) -> None:
         + ", ".join(f"{k} = {val:.6g}" for k, val in v["settings"].items())
         + ":",
         "",
-        "| replicate | " + v["response"] + " |",
-        "|---|---|",
     ]
-    lines += [f"| {k + 1} | {val:.4g} |" for k, val in enumerate(v["values"])]
+    # records written before the replicates' other metrics were kept have none
+    other = v.get("metrics", {})
+    lines += ["| replicate | " + " | ".join([v["response"], *other]) + " |", "|---|" + "---|" * (1 + len(other))]
+    lines += [
+        f"| {k + 1} | " + " | ".join(_cell(x) for x in [val, *(vals[k] for vals in other.values())]) + " |"
+        for k, val in enumerate(v["values"])
+    ]
     lines += [
         "",
         f"Mean {v['mean']:.4g}, SD {v['sd']:.3g}, predicted {v['predicted']}, target {v['target']}, "
@@ -1345,7 +1354,9 @@ def run_verification(
     """Verification replicates at the chosen optimum of the first response with a target: ``replicates``
     runs (world seeds 1..n, so they differ from each other) as one launch per device of ``executor`` (the
     study's; by default ``device`` in this process); writes ``out/verification/verification.json`` with each
-    value, the mean, SD, relative error and one-sample t test against the target, each replicate's run checks
+    value, the mean, SD, relative error and one-sample t test against the target, each replicate's other scalar
+    metrics of its measure (``metrics``: name -> one value per replicate, from
+    :data:`warpdem.scene.runner.MEASURE_METRICS`), each replicate's run checks
     (``checks``: replicate, check, detail, as :func:`run_checks` gives a design run's) and, where some are
     flagged and at least two are left, the summary without them (``unflagged``, with ``left_out``), and appends
     them to the report. Resumes like the design runs (one file per replicate); each launch checkpoints into
@@ -1411,11 +1422,14 @@ def run_verification(
                 bar.close()
         if stopped:
             return {"stopped": stopped}
-    values, checks, scene = [], [], _scene(study, base)
+    from warpdem.scene.runner import MEASURE_METRICS
+
+    values, checks, scene, metrics = [], [], _scene(study, base), []
     for r in rows:
         with open(r["file"]) as fh:
             rec = json.load(fh)
         values.append(rec["responses"][resp.name])
+        metrics.append(rec["metrics"])
         # a replicate is checked like a design run: a pile that slid or a bed that hung is no replicate
         checks += [{"replicate": r["run"], "check": c, "detail": d} for c, d in _checks_of(rec, scene, study)]
     alpha = study.analysis.alpha
@@ -1439,6 +1453,13 @@ def run_verification(
         "t": rep["t"],
         "p": rep["p"],
         "checks": checks,
+        # what else each replicate measured (a pile's height and offset, the other angle readings): where
+        # replicates scatter, these say how their piles differ
+        "metrics": {
+            k: [float(m[k]) for m in metrics]
+            for k in MEASURE_METRICS.get(scene.measure.kind, ())
+            if k != resp.measure.split(".")[0] and all(isinstance(m.get(k), (int, float)) for m in metrics)
+        },
     }
     left_out = sorted({c["replicate"] for c in checks})
     if left_out and len(values) - len(left_out) >= 2:
