@@ -962,11 +962,10 @@ def _replicate_report(
     count = len(data[settings].drop_duplicates()) if len(data) else 0
     one = count == 1
     summary = {r.name: replicate_summary(data[r.name], r.target, alpha) for r in study.responses} if one else {}
-    left_out = sorted(set(flagged) & {int(k) for k in data["run"]}) if one and "run" in data else []
-    kept = data[~data["run"].isin(left_out)] if left_out else data
-    if left_out and len(kept) >= 2:
-        for r in study.responses:
-            summary[r.name]["unflagged"] = replicate_summary(kept[r.name], r.target, alpha) | {"left_out": left_out}
+    for r in study.responses if one and "run" in data else ():
+        unflagged = unflagged_summary(data[r.name], [int(k) for k in data["run"]], flagged, r.target, alpha)
+        if unflagged is not None:
+            summary[r.name]["unflagged"] = unflagged
     cols = [c for c in ("run", "world_seed") if c in data] + settings + [r.name for r in study.responses]
     lines = [
         f"# {study.title or study.name}",
@@ -995,6 +994,17 @@ def _replicate_report(
             lines += ["", replicate_line(s["unflagged"], unit) + "."]
     (folder / "report.md").write_text("\n".join(lines) + "\n")
     return summary
+
+
+def unflagged_summary(values, ids, flagged, target: float | None, alpha: float = 0.05) -> dict | None:
+    """:func:`replicate_summary` of ``values`` without those whose id (``ids``, one per value: run or replicate
+    numbers) is among ``flagged``, with ``left_out`` (the flagged ids present, sorted); None when none is flagged
+    or fewer than two are left. A pile that slid as a body is not a replicate of the angle."""
+    left_out = sorted(set(flagged) & set(ids))
+    kept = [v for i, v in zip(ids, values) if i not in left_out]
+    if not left_out or len(kept) < 2:
+        return None
+    return replicate_summary(kept, target, alpha) | {"left_out": left_out}
 
 
 def replicate_line(s: dict, unit: str = "", key: str = "run") -> str:
@@ -1461,10 +1471,11 @@ def run_verification(
             if k != resp.measure.split(".")[0] and all(isinstance(m.get(k), (int, float)) for m in metrics)
         },
     }
-    left_out = sorted({c["replicate"] for c in checks})
-    if left_out and len(values) - len(left_out) >= 2:
-        kept = [v for k, v in enumerate(values, start=1) if k not in left_out]
-        result["unflagged"] = replicate_summary(kept, resp.target, alpha) | {"left_out": left_out}
+    unflagged = unflagged_summary(
+        values, [r["run"] for r in rows], [c["replicate"] for c in checks], resp.target, alpha
+    )
+    if unflagged is not None:
+        result["unflagged"] = unflagged
     _write_json(vdir / "verification.json", result)
     _append_verification(out, result)
     return result
