@@ -550,13 +550,17 @@ def test_cli_reports_a_bad_data_file_without_a_traceback(tmp_path, capsys):
 
 def test_repository_data_files():
     """The data files under studies/diagnose load as written: the worked example, and seeds 000's and 001's one
-    measured angle each, no more values than free parameters, which the diagnosis takes as a reach question."""
+    measured angle each (seed 001's at two sizes), no more values than free parameters, which the diagnosis takes as a reach question."""
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "press_plasticity.toml")
     assert spec.rig == "die_press" and list(ex.responses) == ["residual_set_ratio"]
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed000_pellets.toml")
     assert training_values(ex) == 1 == len(spec.parameters)
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed001_wetfeed.toml")
     assert training_values(ex) == 1 and spec.parameter_names == ["X1", "X2", "X3"]
+    spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed001_wetfeed_large.toml")
+    assert training_values(ex) == 1 and spec.parameter_names == ["X1", "X2"]
+    # the scatter seeds and the design share one launch, then the confirming seeds: 13 worlds of 25,000 grains
+    assert spec.sim_seeds + spec.calibration_points + spec.confirm_seeds == 13
 
 
 def test_cli_prints_a_reach_verdict(monkeypatch, capsys):
