@@ -559,8 +559,8 @@ def test_repository_data_files():
     assert training_values(ex) == 1 and spec.parameter_names == ["X1", "X2", "X3"]
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed001_wetfeed_large.toml")
     assert training_values(ex) == 1 and spec.parameter_names == ["X1", "X2"]
-    # the scatter seeds and the design share one launch, then the confirming seeds: 13 worlds of 25,000 grains
-    assert spec.sim_seeds + spec.calibration_points + spec.confirm_seeds == 13
+    # the scatter seeds and the design share one launch, then the confirming seeds: 12 worlds of 25,000 grains
+    assert spec.sim_seeds + spec.calibration_points + spec.confirm_seeds == 12
 
 
 def test_cli_prints_a_reach_verdict(monkeypatch, capsys):
