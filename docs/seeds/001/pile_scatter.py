@@ -1,0 +1,155 @@
+"""Every pile of seed 001's wet feed at the seed's 25,000 grains in the friction box, read together: does the
+friction move the pile, and how much do piles of one setting scatter against the seed's own?
+
+    python docs/seeds/001/pile_scatter.py [--out FILE]
+
+Reads the run records kept in the repository, all of one scene (studies/wetfeed_large_friction.toml: 2 mm
+spheres, JKR surface energy 0.5506 J/m^2) with the particle-particle rolling friction X1 and static friction X2
+set per pile: the face-centred composite (``large_friction/results.csv``, 9 piles), its verification
+(``large_friction/verification/``, 5), the first verification at the small composite's optimum
+(``verify_large/results.csv``, 5, X1 0.3241 just past the box's 0.32) and the reach diagnosis
+(``reach_large/runs/``, 12). Prints, for the image angle [deg] (the seed's response):
+
+- each pile, with the composite model's prediction and 95 % prediction interval for the piles made after it;
+- the full quadratic in X1, X2 refitted on every pile (statsmodels OLS), its R^2 and overall F test;
+- the pure error (piles that repeat one setting) against the seed's nine centre points of Table 6
+  (``studies/reference/wetfeed_ccd_runs.csv``) and its five verification angles (seed text, section 3.3),
+  with the F test of the two variances;
+- the mean of every pile against the measured 54.25 deg, and the piles a 1 deg, 95 % interval would need.
+
+Output of this script for the fifteenth stage: ``pile_scatter.txt`` beside it (README, "Seed 001 at full size:
+every pile together").
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[2]
+TARGET = 54.25
+"""The seed's measured angle of repose [deg]."""
+SEED_VERIFICATION = (54.72, 53.95, 53.63, 53.23, 54.18)
+"""The seed's five verification angles at its optimum [deg] (001_7b23801dd6850ee1.txt, optimisation section)."""
+X1_KEY, X2_KEY = "interaction.grain.grain.rolling_friction", "interaction.grain.grain.static_friction"
+CENTRE, HALF = (0.24, 0.50), 0.08
+"""The friction box's centre (X1, X2) and half-width, as coded in studies/wetfeed_large_friction.toml."""
+MODEL = "y ~ X1 + X2 + X1:X2 + I(X1**2) + I(X2**2)"
+
+
+def piles():
+    """One row per pile (a pandas DataFrame): source, X1 and X2 (actual), world seed and image angle [deg]."""
+    import pandas as pd
+
+    rows = []
+    for name, folder in (("composite", "large_friction"), ("old optimum", "verify_large")):
+        with open(HERE / folder / "results.csv", newline="") as f:
+            for r in csv.DictReader(f):
+                rows.append(
+                    (name, float(r["X1_actual"]), float(r["X2_actual"]), int(r["world_seed"]), float(r["aor_deg"]))
+                )
+    for f in sorted((HERE / "large_friction" / "verification").glob("replicate_*.json")):
+        d = json.loads(f.read_text())
+        o = d["overrides"]
+        rows.append(("verification", o[X1_KEY], o[X2_KEY], d["world_seed"], d["responses"]["aor_deg"]))
+    for f in sorted((HERE / "reach_large" / "runs").glob("*.json")):
+        d = json.loads(f.read_text())
+        o = d["overrides"]
+        stage = d["design"]["stage"].split(": ")[1]
+        rows.append((f"diagnosis {stage}", o[X1_KEY], o[X2_KEY], d["world_seed"], d["metrics"]["angle_image_deg"]))
+    df = pd.DataFrame(rows, columns=["source", "X1_actual", "X2_actual", "seed", "y"])
+    df["X1"] = (df.X1_actual - CENTRE[0]) / HALF
+    df["X2"] = (df.X2_actual - CENTRE[1]) / HALF
+    return df
+
+
+def seed_centre_points() -> np.ndarray:
+    """The seed's central-composite centre points (Table 6, every factor coded 0) [deg]."""
+    with open(ROOT / "studies" / "reference" / "wetfeed_ccd_runs.csv", newline="") as f:
+        return np.array([float(r["aor_deg"]) for r in csv.DictReader(f) if r["X1"] == r["X2"] == r["X3"] == "0"])
+
+
+def pure_error(df) -> tuple[float, int, list[np.ndarray]]:
+    """The pure-error variance [deg^2] and its degrees of freedom, pooled over the settings (X1, X2) that ``df``
+    repeats, and each repeated setting's angles."""
+    groups = [g.y.to_numpy() for _, g in df.groupby(["X1_actual", "X2_actual"]) if len(g) > 1]
+    dof = sum(len(g) - 1 for g in groups)
+    return sum(((g - g.mean()) ** 2).sum() for g in groups) / dof, dof, groups
+
+
+def report(df) -> str:
+    """The printed analysis of :func:`piles` (``df``)."""
+    import statsmodels.formula.api as smf
+    from scipy import stats
+
+    out = []
+    comp = smf.ols(MODEL, df[df.source == "composite"]).fit()
+    later = df.source != "composite"
+    pred = comp.get_prediction(df).summary_frame(alpha=0.05)
+    df = df.assign(pred=pred["mean"].to_numpy(), pi_low=pred["obs_ci_lower"].to_numpy())
+    df = df.assign(pi_high=pred["obs_ci_upper"].to_numpy())
+    out.append(f"{len(df)} piles of 25,000 grains (image angle, deg); pred: the composite's quadratic (9 piles)")
+    out.append(df.round(4).to_string(index=False))
+    res = df.y[later] - df.pred[later]
+    t = stats.ttest_1samp(res, 0.0)
+    inside = ((df.y >= df.pi_low) & (df.y <= df.pi_high))[later].sum()
+    out.append(
+        f"\nThe {later.sum()} later piles against the composite's model: residual mean {res.mean():.2f}, "
+        f"SD {res.std(ddof=1):.2f} (t {t.statistic:.2f}, p {t.pvalue:.3f}); {inside} inside its 95 % prediction "
+        f"interval; the composite's own residual SD {np.sqrt(comp.scale):.2f} on {comp.df_resid:.0f} df"
+    )
+    full = smf.ols(MODEL, df).fit()
+    out.append(f"\nThe quadratic refitted on all {len(df)} piles:")
+    out.append(full.summary2().tables[1].round(3).to_string())
+    out.append(
+        f"R^2 {full.rsquared:.3f} (adjusted {full.rsquared_adj:.3f}), residual SD {np.sqrt(full.scale):.2f} on "
+        f"{full.df_resid:.0f} df; overall F {full.fvalue:.2f}, p {full.f_pvalue:.3f}"
+    )
+    pe_var, pe_df, groups = pure_error(df)
+    out.append("\nPure error (piles repeating one setting):")
+    for (x1, x2), g in df.groupby(["X1_actual", "X2_actual"]):
+        if len(g) > 1:
+            out.append(f"  X1 {x1:.4f}, X2 {x2:.4f}: {len(g)} piles, {g.y.mean():.2f} +- {g.y.std(ddof=1):.2f}")
+    lev = stats.levene(*groups)
+    out.append(f"  pooled SD {np.sqrt(pe_var):.2f} on {pe_df} df (Levene across the settings: p {lev.pvalue:.2f})")
+    centre, ver = seed_centre_points(), np.array(SEED_VERIFICATION)
+    out.append(
+        f"The seed's {len(centre)} centre points: {centre.mean():.2f} +- {centre.std(ddof=1):.2f}; its "
+        f"{len(ver)} verification runs: {ver.mean():.2f} +- {ver.std(ddof=1):.2f}"
+    )
+    f_ratio = pe_var / centre.var(ddof=1)
+    out.append(
+        f"Variance ratio, ours / the seed's centre points: F {f_ratio:.1f} on ({pe_df}, {len(centre) - 1}) df, "
+        f"p {stats.f.sf(f_ratio, pe_df, len(centre) - 1):.2g}; SD ratio {np.sqrt(f_ratio):.1f}"
+    )
+    m, s, n = df.y.mean(), df.y.std(ddof=1), len(df)
+    t = stats.ttest_1samp(df.y, TARGET)
+    lo, hi = stats.t.interval(0.95, n - 1, m, s / np.sqrt(n))
+    out.append(
+        f"\nEvery pile: {m:.2f} +- {s:.2f} deg ({n} piles), 95 % interval of the mean {lo:.1f}-{hi:.1f}; against "
+        f"{TARGET}: t {t.statistic:.2f}, p {t.pvalue:.2f}"
+    )
+    out.append(
+        f"Piles at one setting for a 95 % interval of +-1 deg at the pure-error SD: "
+        f"{(1.96 * np.sqrt(pe_var)) ** 2:.0f}; at the seed's centre-point SD: {(1.96 * centre.std(ddof=1)) ** 2:.1f}"
+    )
+    return "\n".join(out) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, help="also write the report to this file")
+    args = parser.parse_args()
+    text = report(piles())
+    print(text, end="")
+    if args.out:
+        args.out.write_text(text)
+
+
+if __name__ == "__main__":
+    main()
