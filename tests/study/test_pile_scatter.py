@@ -28,6 +28,8 @@ def test_every_kept_pile_is_read(scatter):
     ]
     assert df.X1.abs().max() < 1.06 and df.X2.abs().max() < 1.0 + 1e-9
     assert df.y.between(0.0, 90.0).all()
+    # the two piles earlier stages found slid off the axis: the composite's run 2 and the old optimum's seed 1
+    assert sorted(df[df.flagged].offset_mm.round(1)) == [20.5, 21.1]
 
 
 def test_pure_error_is_the_one_way_residual(scatter):

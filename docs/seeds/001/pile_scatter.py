@@ -15,7 +15,10 @@ set per pile: the face-centred composite (``large_friction/results.csv``, 9 pile
 - the pure error (piles that repeat one setting) against the seed's nine centre points of Table 6
   (``studies/reference/wetfeed_ccd_runs.csv``) and its five verification angles (seed text, section 3.3),
   with the F test of the two variances;
-- the mean of every pile against the measured 54.25 deg, and the piles a 1 deg, 95 % interval would need.
+- the mean of every pile against the measured 54.25 deg, and the piles a 1 deg, 95 % interval would need;
+
+the last three again without the piles the runs' off-axis check flags (a pile that slid off the funnel's axis
+after it was built: two, each read on its side).
 
 Output of this script for the fifteenth stage: ``pile_scatter.txt`` beside it (README, "Seed 001 at full size:
 every pile together").
@@ -42,27 +45,39 @@ CENTRE, HALF = (0.24, 0.50), 0.08
 MODEL = "y ~ X1 + X2 + X1:X2 + I(X1**2) + I(X2**2)"
 
 
+SOURCES = (
+    ("composite", "large_friction/runs/*.json"),
+    ("old optimum", "verify_large/runs/*.json"),
+    ("verification", "large_friction/verification/replicate_*.json"),
+    ("diagnosis", "reach_large/runs/*.json"),
+)
+"""Where each group's run records lie, under this folder."""
+
+
 def piles():
-    """One row per pile (a pandas DataFrame): source, X1 and X2 (actual), world seed and image angle [deg]."""
+    """One row per pile (a pandas DataFrame, in the order of :data:`SOURCES` and then of the file names): source,
+    X1 and X2 (actual), world seed, image angle ``y`` [deg], the pile's centre off the funnel's axis
+    ``offset_mm`` and ``flagged`` (the run's off-axis check, :func:`warpdem.engine.suspect.off_axis_warning`)."""
     import pandas as pd
 
+    from warpdem.engine.suspect import off_axis_warning
+    from warpdem.scene.rigs import Funnel
+
+    outlet_radius = Funnel().outlet_diameter / 2
     rows = []
-    for name, folder in (("composite", "large_friction"), ("old optimum", "verify_large")):
-        with open(HERE / folder / "results.csv", newline="") as f:
-            for r in csv.DictReader(f):
-                rows.append(
-                    (name, float(r["X1_actual"]), float(r["X2_actual"]), int(r["world_seed"]), float(r["aor_deg"]))
-                )
-    for f in sorted((HERE / "large_friction" / "verification").glob("replicate_*.json")):
-        d = json.loads(f.read_text())
-        o = d["overrides"]
-        rows.append(("verification", o[X1_KEY], o[X2_KEY], d["world_seed"], d["responses"]["aor_deg"]))
-    for f in sorted((HERE / "reach_large" / "runs").glob("*.json")):
-        d = json.loads(f.read_text())
-        o = d["overrides"]
-        stage = d["design"]["stage"].split(": ")[1]
-        rows.append((f"diagnosis {stage}", o[X1_KEY], o[X2_KEY], d["world_seed"], d["metrics"]["angle_image_deg"]))
-    df = pd.DataFrame(rows, columns=["source", "X1_actual", "X2_actual", "seed", "y"])
+    for name, pattern in SOURCES:
+        for f in sorted(HERE.glob(pattern)):
+            d = json.loads(f.read_text())
+            o, m = d["overrides"], d["metrics"]
+            if "design" in d and "stage" in d["design"]:
+                name_ = f"{name} {d['design']['stage'].split(': ')[1]}"
+            else:
+                name_ = name
+            off = m["pile_offset_m"]
+            flagged = off_axis_warning(off, outlet_radius) is not None
+            rows.append((name_, o[X1_KEY], o[X2_KEY], d["world_seed"], m["angle_image_deg"], 1000 * off, flagged))
+    cols = ["source", "X1_actual", "X2_actual", "seed", "y", "offset_mm", "flagged"]
+    df = pd.DataFrame(rows, columns=cols)
     df["X1"] = (df.X1_actual - CENTRE[0]) / HALF
     df["X2"] = (df.X2_actual - CENTRE[1]) / HALF
     return df
@@ -82,29 +97,15 @@ def pure_error(df) -> tuple[float, int, list[np.ndarray]]:
     return sum(((g - g.mean()) ** 2).sum() for g in groups) / dof, dof, groups
 
 
-def report(df) -> str:
-    """The printed analysis of :func:`piles` (``df``)."""
+def together(df, label: str) -> list[str]:
+    """Lines on the piles of ``df`` read together: the quadratic refitted on them, their pure error against the
+    seed's, and their mean against the target; ``label`` names them."""
     import statsmodels.formula.api as smf
     from scipy import stats
 
     out = []
-    comp = smf.ols(MODEL, df[df.source == "composite"]).fit()
-    later = df.source != "composite"
-    pred = comp.get_prediction(df).summary_frame(alpha=0.05)
-    df = df.assign(pred=pred["mean"].to_numpy(), pi_low=pred["obs_ci_lower"].to_numpy())
-    df = df.assign(pi_high=pred["obs_ci_upper"].to_numpy())
-    out.append(f"{len(df)} piles of 25,000 grains (image angle, deg); pred: the composite's quadratic (9 piles)")
-    out.append(df.round(4).to_string(index=False))
-    res = df.y[later] - df.pred[later]
-    t = stats.ttest_1samp(res, 0.0)
-    inside = ((df.y >= df.pi_low) & (df.y <= df.pi_high))[later].sum()
-    out.append(
-        f"\nThe {later.sum()} later piles against the composite's model: residual mean {res.mean():.2f}, "
-        f"SD {res.std(ddof=1):.2f} (t {t.statistic:.2f}, p {t.pvalue:.3f}); {inside} inside its 95 % prediction "
-        f"interval; the composite's own residual SD {np.sqrt(comp.scale):.2f} on {comp.df_resid:.0f} df"
-    )
     full = smf.ols(MODEL, df).fit()
-    out.append(f"\nThe quadratic refitted on all {len(df)} piles:")
+    out.append(f"\nThe quadratic refitted on {label}:")
     out.append(full.summary2().tables[1].round(3).to_string())
     out.append(
         f"R^2 {full.rsquared:.3f} (adjusted {full.rsquared_adj:.3f}), residual SD {np.sqrt(full.scale):.2f} on "
@@ -131,13 +132,40 @@ def report(df) -> str:
     t = stats.ttest_1samp(df.y, TARGET)
     lo, hi = stats.t.interval(0.95, n - 1, m, s / np.sqrt(n))
     out.append(
-        f"\nEvery pile: {m:.2f} +- {s:.2f} deg ({n} piles), 95 % interval of the mean {lo:.1f}-{hi:.1f}; against "
+        f"\n{label.capitalize()}: {m:.2f} +- {s:.2f} deg, 95 % interval of the mean {lo:.1f}-{hi:.1f}; against "
         f"{TARGET}: t {t.statistic:.2f}, p {t.pvalue:.2f}"
     )
     out.append(
         f"Piles at one setting for a 95 % interval of +-1 deg at the pure-error SD: "
         f"{(1.96 * np.sqrt(pe_var)) ** 2:.0f}; at the seed's centre-point SD: {(1.96 * centre.std(ddof=1)) ** 2:.1f}"
     )
+    return out
+
+
+def report(df) -> str:
+    """The printed analysis of :func:`piles` (``df``)."""
+    import statsmodels.formula.api as smf
+    from scipy import stats
+
+    out = []
+    comp = smf.ols(MODEL, df[df.source == "composite"]).fit()
+    later = df.source != "composite"
+    pred = comp.get_prediction(df).summary_frame(alpha=0.05)
+    df = df.assign(pred=pred["mean"].to_numpy(), pi_low=pred["obs_ci_lower"].to_numpy())
+    df = df.assign(pi_high=pred["obs_ci_upper"].to_numpy())
+    out.append(f"{len(df)} piles of 25,000 grains (image angle, deg); pred: the composite's quadratic (9 piles)")
+    out.append(df.round(4).to_string(index=False))
+    res = df.y[later] - df.pred[later]
+    t = stats.ttest_1samp(res, 0.0)
+    inside = ((df.y >= df.pi_low) & (df.y <= df.pi_high))[later].sum()
+    out.append(
+        f"\nThe {later.sum()} later piles against the composite's model: residual mean {res.mean():.2f}, "
+        f"SD {res.std(ddof=1):.2f} (t {t.statistic:.2f}, p {t.pvalue:.3f}); {inside} inside its 95 % prediction "
+        f"interval; the composite's own residual SD {np.sqrt(comp.scale):.2f} on {comp.df_resid:.0f} df"
+    )
+    out += together(df, f"all {len(df)} piles")
+    kept = df[~df.flagged]
+    out += together(kept, f"the {len(kept)} piles the off-axis check leaves (without {int(df.flagged.sum())})")
     return "\n".join(out) + "\n"
 
 
