@@ -44,6 +44,7 @@ COUNTS = {
     "wetfeed_verify_large": 5,
     "wetfeed_large_gamma": 6,
     "wetfeed_large_friction": 9,
+    "wetfeed_scatter_bond": 8,
 }
 
 
