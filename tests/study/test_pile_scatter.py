@@ -1,5 +1,6 @@
 """docs/seeds/001/pile_scatter.py reads every 25,000-grain pile kept in the repository, and its pure error is the
-residual of the one-way model (one mean per repeated setting) that statsmodels fits to the same piles."""
+residual of the one-way model (one mean per repeated setting) that statsmodels fits to the same piles; it reads the
+Bond-number study's piles too."""
 
 import importlib.util
 from pathlib import Path
@@ -48,3 +49,11 @@ def test_the_seed_centre_points(scatter):
     # Table 6 of the seed: runs 15-23 are its nine centre points
     assert len(scatter.seed_centre_points()) == 9
     assert scatter.seed_centre_points().mean() == pytest.approx(54.05, abs=0.005)
+
+
+def test_the_bond_study_piles(scatter):
+    df = scatter.bond_piles()
+    assert sorted(df.groupby("gamma").size().items()) == [(0.1, 4), (0.5, 4)]
+    assert list(df[df.gamma == 0.1].seed) == [0, 1, 2, 3]
+    assert df.pile_height_m.between(10.0, 300.0).all()  # read in mm
+    assert "variance ratio F" in scatter.bond_report()

@@ -18,7 +18,9 @@ set per pile: the face-centred composite (``large_friction/results.csv``, 9 pile
 - the mean of every pile against the measured 54.25 deg, and the piles a 1 deg, 95 % interval would need;
 
 the last three again without the piles the runs' off-axis check flags (a pile that slid off the funnel's axis
-after it was built: two, each read on its side).
+after it was built: two, each read on its side). Then the piles of ``scatter_bond/`` (studies/wetfeed_scatter_bond.toml:
+6,000 grains, four world seeds at each of two surface energies): each reading's mean and SD per surface energy, and
+the F test of the two variances (one-sided: more scatter at the higher Bond number).
 
 Output of this script for the fifteenth stage: ``pile_scatter.txt`` beside it (README, "Seed 001 at full size:
 every pile together").
@@ -169,11 +171,55 @@ def report(df) -> str:
     return "\n".join(out) + "\n"
 
 
+READINGS = {
+    "angle_image_deg": "image angle [deg]",
+    "angle_fit_deg": "surface fit [deg]",
+    "angle_cone_deg": "cone formula [deg]",
+    "pile_height_m": "pile height [mm]",
+}
+"""The readings of each pile compared at two Bond numbers (metric: label); heights printed in mm."""
+GAMMA_KEY = "interaction.grain.grain.surface_energy"
+
+
+def bond_piles():
+    """The piles of ``scatter_bond/runs`` (a pandas DataFrame): surface energy [J/m^2], world seed and
+    :data:`READINGS` (heights in mm)."""
+    import pandas as pd
+
+    rows = []
+    for f in sorted((HERE / "scatter_bond" / "runs").glob("*.json")):
+        d = json.loads(f.read_text())
+        m = d["metrics"]
+        row = {"gamma": d["overrides"][GAMMA_KEY], "seed": d["world_seed"]}
+        row.update({k: m[k] * (1000.0 if k.endswith("_m") else 1.0) for k in READINGS})
+        rows.append(row)
+    return pd.DataFrame(rows).sort_values(["gamma", "seed"], ignore_index=True)
+
+
+def bond_report() -> str:
+    """Each reading's scatter at the two surface energies of ``scatter_bond/`` and the F test of the two."""
+    from scipy import stats
+
+    df = bond_piles()
+    low, high = sorted(df.gamma.unique())
+    out = [f"\nScatter at two Bond numbers, 6,000 grains (scatter_bond/: surface energy {low:g} and {high:g} J/m^2)"]
+    out.append(df.rename(columns={"pile_height_m": "pile_height_mm"}).round(3).to_string(index=False))
+    for key, label in READINGS.items():
+        a, b = df[df.gamma == low][key], df[df.gamma == high][key]
+        f = b.var(ddof=1) / a.var(ddof=1)
+        p = stats.f.sf(f, len(b) - 1, len(a) - 1)
+        out.append(
+            f"{label}: {a.mean():.1f} +- {a.std(ddof=1):.2f} at {low:g}, {b.mean():.1f} +- {b.std(ddof=1):.2f} at "
+            f"{high:g}; variance ratio F {f:.1f} on ({len(b) - 1}, {len(a) - 1}) df, p {p:.3g} (one-sided)"
+        )
+    return "\n".join(out) + "\n"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, help="also write the report to this file")
     args = parser.parse_args()
-    text = report(piles())
+    text = report(piles()) + bond_report()
     print(text, end="")
     if args.out:
         args.out.write_text(text)
