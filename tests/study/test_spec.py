@@ -45,6 +45,7 @@ COUNTS = {
     "wetfeed_large_gamma": 6,
     "wetfeed_large_friction": 9,
     "wetfeed_scatter_bond": 8,
+    "wetfeed_scatter_bond_standard": 8,
 }
 
 
