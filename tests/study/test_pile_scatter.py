@@ -51,9 +51,17 @@ def test_the_seed_centre_points(scatter):
     assert scatter.seed_centre_points().mean() == pytest.approx(54.05, abs=0.005)
 
 
-def test_the_bond_study_piles(scatter):
+def test_the_bond_studies_piles(scatter):
     df = scatter.bond_piles()
-    assert sorted(df.groupby("gamma").size().items()) == [(0.1, 4), (0.5, 4)]
-    assert list(df[df.gamma == 0.1].seed) == [0, 1, 2, 3]
+    counts = df.groupby(["rolling_model", "gamma"]).size()
+    assert sorted(counts.items()) == [
+        (("EPSD", 0.1), 4),
+        (("EPSD", 0.5), 4),
+        (("standard", 0.1), 4),
+        (("standard", 0.5), 4),
+    ]
+    for _, g in df.groupby(["rolling_model", "gamma"]):
+        assert list(g.seed) == [0, 1, 2, 3]
     assert df.pile_height_m.between(10.0, 300.0).all()  # read in mm
-    assert "variance ratio F" in scatter.bond_report()
+    text = scatter.bond_report()
+    assert text.count("EPSD scatters more than standard") == len(scatter.READINGS) and "nan" not in text

@@ -18,9 +18,10 @@ set per pile: the face-centred composite (``large_friction/results.csv``, 9 pile
 - the mean of every pile against the measured 54.25 deg, and the piles a 1 deg, 95 % interval would need;
 
 the last three again without the piles the runs' off-axis check flags (a pile that slid off the funnel's axis
-after it was built: two, each read on its side). Then the piles of ``scatter_bond/`` (studies/wetfeed_scatter_bond.toml:
-6,000 grains, four world seeds at each of two surface energies): each reading's mean and SD per surface energy, and
-the F test of the two variances (one-sided: more scatter at the higher Bond number).
+after it was built: two, each read on its side). Then the piles of ``scatter_bond/`` and ``scatter_bond_standard/``
+(studies/wetfeed_scatter_bond.toml and its twin with EDEM's standard rolling friction: 6,000 grains, four world
+seeds at each of two surface energies): each reading's mean and SD per rolling model and surface energy, the F tests
+of their variances, and the standard model's low-Bond piles against the target and the seed's centre points.
 
 Output of this script for the fifteenth stage: ``pile_scatter.txt`` beside it (README, "Seed 001 at full size:
 every pile together").
@@ -179,39 +180,68 @@ READINGS = {
 }
 """The readings of each pile compared at two Bond numbers (metric: label); heights printed in mm."""
 GAMMA_KEY = "interaction.grain.grain.surface_energy"
+BOND_STUDIES = {"EPSD": "scatter_bond", "standard": "scatter_bond_standard"}
+"""The grain-grain rolling model of each Bond-number study (its folder under this one)."""
 
 
 def bond_piles():
-    """The piles of ``scatter_bond/runs`` (a pandas DataFrame): surface energy [J/m^2], world seed and
-    :data:`READINGS` (heights in mm)."""
+    """The piles of the :data:`BOND_STUDIES` (a pandas DataFrame): rolling model, surface energy [J/m^2], world
+    seed and :data:`READINGS` (heights in mm)."""
     import pandas as pd
 
     rows = []
-    for f in sorted((HERE / "scatter_bond" / "runs").glob("*.json")):
-        d = json.loads(f.read_text())
-        m = d["metrics"]
-        row = {"gamma": d["overrides"][GAMMA_KEY], "seed": d["world_seed"]}
-        row.update({k: m[k] * (1000.0 if k.endswith("_m") else 1.0) for k in READINGS})
-        rows.append(row)
-    return pd.DataFrame(rows).sort_values(["gamma", "seed"], ignore_index=True)
+    for rolling, folder in BOND_STUDIES.items():
+        for f in sorted((HERE / folder / "runs").glob("*.json")):
+            d = json.loads(f.read_text())
+            m = d["metrics"]
+            row = {"rolling_model": rolling, "gamma": d["overrides"][GAMMA_KEY], "seed": d["world_seed"]}
+            row.update({k: m[k] * (1000.0 if k.endswith("_m") else 1.0) for k in READINGS})
+            rows.append(row)
+    return pd.DataFrame(rows).sort_values(["rolling_model", "gamma", "seed"], ignore_index=True)
+
+
+def _ratio(stats, a, b) -> str:
+    """The variance ratio of ``b`` over ``a`` and its one-sided p-value (``b`` scatters more)."""
+    f = b.var(ddof=1) / a.var(ddof=1)
+    return f"F {f:.1f} on ({len(b) - 1}, {len(a) - 1}) df, p {stats.f.sf(f, len(b) - 1, len(a) - 1):.3g}"
 
 
 def bond_report() -> str:
-    """Each reading's scatter at the two surface energies of ``scatter_bond/`` and the F test of the two."""
+    """Each reading's mean and scatter per rolling model and surface energy of the :data:`BOND_STUDIES`, the
+    one-sided F tests of the higher Bond number against the lower (per model) and of EPSD against the standard
+    model at the lower, and the standard model's low-Bond piles against the seed's target and centre points."""
     from scipy import stats
 
     df = bond_piles()
     low, high = sorted(df.gamma.unique())
-    out = [f"\nScatter at two Bond numbers, 6,000 grains (scatter_bond/: surface energy {low:g} and {high:g} J/m^2)"]
+    out = [
+        f"\nScatter at two Bond numbers, 6,000 grains, X1 0.3, X2 0.6 (surface energy {low:g} and {high:g} J/m^2), "
+        f"with our spheres' EPSD rolling friction ({BOND_STUDIES['EPSD']}/) and EDEM's standard "
+        f"({BOND_STUDIES['standard']}/)"
+    ]
     out.append(df.rename(columns={"pile_height_m": "pile_height_mm"}).round(3).to_string(index=False))
     for key, label in READINGS.items():
-        a, b = df[df.gamma == low][key], df[df.gamma == high][key]
-        f = b.var(ddof=1) / a.var(ddof=1)
-        p = stats.f.sf(f, len(b) - 1, len(a) - 1)
+        out.append(f"{label}:")
+        g = {(r, x): df[(df.rolling_model == r) & (df.gamma == x)][key] for r in BOND_STUDIES for x in (low, high)}
+        for r in BOND_STUDIES:
+            a, b = g[r, low], g[r, high]
+            out.append(
+                f"  {r}: {a.mean():.1f} +- {a.std(ddof=1):.2f} at {low:g}, {b.mean():.1f} +- {b.std(ddof=1):.2f} "
+                f"at {high:g}; more scatter at {high:g}: {_ratio(stats, a, b)}"
+            )
         out.append(
-            f"{label}: {a.mean():.1f} +- {a.std(ddof=1):.2f} at {low:g}, {b.mean():.1f} +- {b.std(ddof=1):.2f} at "
-            f"{high:g}; variance ratio F {f:.1f} on ({len(b) - 1}, {len(a) - 1}) df, p {p:.3g} (one-sided)"
+            f"  at {low:g}, EPSD scatters more than standard: {_ratio(stats, g['standard', low], g['EPSD', low])}"
         )
+    std = df[(df.rolling_model == "standard") & (df.gamma == low)].angle_image_deg
+    t = stats.ttest_1samp(std, TARGET)
+    centre = seed_centre_points()
+    f = std.var(ddof=1) / centre.var(ddof=1)
+    p = 2 * min(stats.f.sf(f, len(std) - 1, len(centre) - 1), stats.f.cdf(f, len(std) - 1, len(centre) - 1))
+    out.append(
+        f"Standard rolling friction at {low:g} J/m^2, image angle {std.mean():.2f} +- {std.std(ddof=1):.2f}: against "
+        f"{TARGET}, t {t.statistic:.2f}, p {t.pvalue:.3f}; its variance against the seed's centre points: F {f:.2f} "
+        f"on ({len(std) - 1}, {len(centre) - 1}) df, p {p:.2f} (two-sided)"
+    )
     return "\n".join(out) + "\n"
 
 
