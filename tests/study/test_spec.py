@@ -46,6 +46,9 @@ COUNTS = {
     "wetfeed_large_friction": 9,
     "wetfeed_scatter_bond": 8,
     "wetfeed_scatter_bond_standard": 8,
+    "wetfeed_pb_standard": 12,
+    "wetfeed_ccd_standard": 23,
+    "phosphate_ffd_standard": 16,
 }
 
 
@@ -141,6 +144,29 @@ def test_later_standard_stages_differ_from_their_twins_only_in_the_rolling_model
     assert dict(std.fixed) == dict(twin.fixed) | model
     assert std.analysis == twin.analysis and std.verification == twin.verification
     assert std.responses == twin.responses
+    cols = [c for c in tables[name].columns if c != "point_id"]
+    assert tables[f"{name}_standard"][cols].equals(tables[name][cols])
+
+
+@pytest.mark.parametrize(
+    "name, pairs",
+    [
+        ("wetfeed_pb", ("grain.grain", "grain.steel")),
+        ("wetfeed_ccd", ("grain.grain", "grain.steel")),
+        ("wetfeed_scatter_bond", ("grain.grain", "grain.steel")),
+        ("phosphate_ffd", ("ore.ore", "ore.steel")),
+    ],
+)
+def test_seed_001_and_002_standard_twins_differ_only_in_the_rolling_model(studies, tables, name, pairs):
+    """Seed 001's and 002's studies with EDEM's standard rolling friction run their twins' points with the same
+    factors, analysis, verification and responses; only the named pairs' rolling model is fixed on top (and seed
+    002's screening is cut into launches of 8 worlds, one GPU's side-by-side limit at 131,000 spheres each)."""
+    model = {f"interaction.{p}.rolling_model": "standard" for p in pairs}
+    twin, std = studies[name], studies[f"{name}_standard"]
+    assert dict(std.fixed) == dict(twin.fixed) | model
+    assert std.factors == twin.factors and std.responses == twin.responses
+    assert std.analysis == twin.analysis and std.verification == twin.verification
+    assert std.batch == (8 if name == "phosphate_ffd" else twin.batch)
     cols = [c for c in tables[name].columns if c != "point_id"]
     assert tables[f"{name}_standard"][cols].equals(tables[name][cols])
 
