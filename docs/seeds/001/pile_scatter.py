@@ -5,15 +5,15 @@ friction move the pile, and how much do piles of one setting scatter against the
 
 Reads the run records kept in the repository, all of one scene (studies/wetfeed_large_friction.toml: 2 mm
 spheres, JKR surface energy 0.5506 J/m^2) with the particle-particle rolling friction X1 and static friction X2
-set per pile: the face-centred composite (``large_friction/results.csv``, 9 piles), its verification
+set per pile (:data:`SOURCES`): the face-centred composite (``large_friction/runs/``, 9 piles), its verification
 (``large_friction/verification/``, 5), the first verification at the small composite's optimum
-(``verify_large/results.csv``, 5, X1 0.3241 just past the box's 0.32) and the reach diagnosis
-(``reach_large/runs/``, 12). Prints, for the image angle [deg] (the seed's response):
+(``verify_large/runs/``, 5, X1 0.3241 just past the box's 0.32) and the reach diagnosis (``reach_large/runs/``,
+12). Prints, for the image angle [deg] (the seed's response):
 
 - each pile, with the composite model's prediction and 95 % prediction interval for the piles made after it;
 - the full quadratic in X1, X2 refitted on every pile (statsmodels OLS), its R^2 and overall F test;
 - the pure error (piles that repeat one setting) against the seed's nine centre points of Table 6
-  (``studies/reference/wetfeed_ccd_runs.csv``) and its five verification angles (seed text, section 3.3),
+  (``studies/reference/wetfeed_ccd_runs.csv``) and its five verification angles (:data:`SEED_VERIFICATION`),
   with the F test of the two variances;
 - the mean of every pile against the measured 54.25 deg, and the piles a 1 deg, 95 % interval would need;
 
@@ -23,8 +23,8 @@ after it was built: two, each read on its side). Then the piles of ``scatter_bon
 seeds at each of two surface energies): each reading's mean and SD per rolling model and surface energy, the F tests
 of their variances, and the standard model's low-Bond piles against the target and the seed's centre points.
 
-Output of this script for the fifteenth stage: ``pile_scatter.txt`` beside it (README, "Seed 001 at full size:
-every pile together").
+Output of this script for the fifteenth stage: ``pile_scatter.txt`` beside it (README, "Seed 001 diagnosed",
+issue 23's fifteenth stage).
 """
 
 from __future__ import annotations
