@@ -67,6 +67,7 @@ __all__ = [
     "optimize_desirability",
     "outlier_limit",
     "parse_term",
+    "pure_error",
     "response_range",
     "solve_target",
     "term_label",
@@ -342,6 +343,14 @@ def _sse(X: np.ndarray, y: np.ndarray) -> float:
     return float(r @ r)
 
 
+def pure_error(y, settings: Sequence) -> tuple[float, int]:
+    """The pure-error sum of squares and its degrees of freedom: the squared deviations of each response in ``y``
+    (n,) from the mean of those sharing its setting (``settings``: n hashable keys, e.g. rounded factor tuples),
+    summed over the settings; n minus the number of distinct settings df."""
+    groups = pd.Series(np.asarray(y, dtype=float)).groupby(pd.Series(list(settings), dtype=object).astype(str))
+    return float(groups.apply(lambda g: ((g - g.mean()) ** 2).sum()).sum()), int((groups.size() - 1).sum())
+
+
 def _f_p(ms: float, ms_err: float, df1: float, df2: float) -> tuple[float, float]:
     if not (df1 > 0 and df2 > 0 and ms_err > 0 and np.isfinite(ms_err)):
         return math.nan, math.nan
@@ -403,11 +412,7 @@ def fit_model(
         f, pv = _f_p(ss, ms_res, 1, df_res)
         rows.append((lab, ss, 1, ss, f, pv))
     rows.append(("Residual", sse, df_res, ms_res, math.nan, math.nan))
-    # pure error from replicated settings
-    key = [tuple(np.round(r, 9)) for r in xk]
-    groups = pd.Series(y).groupby(pd.Series(key, dtype=object).astype(str))
-    ss_pe = float(groups.apply(lambda g: ((g - g.mean()) ** 2).sum()).sum())
-    df_pe = int((groups.size() - 1).sum())
+    ss_pe, df_pe = pure_error(y, [tuple(np.round(r, 9)) for r in xk])
     df_lof = df_res - df_pe
     if df_pe > 0 and df_lof > 0:
         ss_lof = sse - ss_pe
