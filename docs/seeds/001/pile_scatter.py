@@ -94,10 +94,13 @@ def seed_centre_points() -> np.ndarray:
 
 def pure_error(df) -> tuple[float, int, list[np.ndarray]]:
     """The pure-error variance [deg^2] and its degrees of freedom, pooled over the settings (X1, X2) that ``df``
-    repeats, and each repeated setting's angles."""
+    repeats (:func:`warpdem.study.analysis.pure_error`, as the studies' ANOVA takes it), and each repeated
+    setting's angles."""
+    from warpdem.study.analysis import pure_error as sums
+
+    ss, dof = sums(df.y, zip(df.X1_actual, df.X2_actual))
     groups = [g.y.to_numpy() for _, g in df.groupby(["X1_actual", "X2_actual"]) if len(g) > 1]
-    dof = sum(len(g) - 1 for g in groups)
-    return sum(((g - g.mean()) ** 2).sum() for g in groups) / dof, dof, groups
+    return ss / dof, dof, groups
 
 
 def together(df, label: str) -> list[str]:
@@ -200,8 +203,10 @@ def bond_piles():
     return pd.DataFrame(rows).sort_values(["rolling_model", "gamma", "seed"], ignore_index=True)
 
 
-def _ratio(stats, a, b) -> str:
+def _ratio(a, b) -> str:
     """The variance ratio of ``b`` over ``a`` and its one-sided p-value (``b`` scatters more)."""
+    from scipy import stats
+
     f = b.var(ddof=1) / a.var(ddof=1)
     return f"F {f:.1f} on ({len(b) - 1}, {len(a) - 1}) df, p {stats.f.sf(f, len(b) - 1, len(a) - 1):.3g}"
 
@@ -227,11 +232,9 @@ def bond_report() -> str:
             a, b = g[r, low], g[r, high]
             out.append(
                 f"  {r}: {a.mean():.1f} +- {a.std(ddof=1):.2f} at {low:g}, {b.mean():.1f} +- {b.std(ddof=1):.2f} "
-                f"at {high:g}; more scatter at {high:g}: {_ratio(stats, a, b)}"
+                f"at {high:g}; more scatter at {high:g}: {_ratio(a, b)}"
             )
-        out.append(
-            f"  at {low:g}, EPSD scatters more than standard: {_ratio(stats, g['standard', low], g['EPSD', low])}"
-        )
+        out.append(f"  at {low:g}, EPSD scatters more than standard: {_ratio(g['standard', low], g['EPSD', low])}")
     std = df[(df.rolling_model == "standard") & (df.gamma == low)].angle_image_deg
     t = stats.ttest_1samp(std, TARGET)
     centre = seed_centre_points()
