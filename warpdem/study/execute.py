@@ -962,10 +962,12 @@ def _replicate_report(
     count = len(data[settings].drop_duplicates()) if len(data) else 0
     one = count == 1
     summary = {r.name: replicate_summary(data[r.name], r.target, alpha) for r in study.responses} if one else {}
-    for r in study.responses if one and "run" in data else ():
-        unflagged = unflagged_summary(data[r.name], [int(k) for k in data["run"]], flagged, r.target, alpha)
-        if unflagged is not None:
-            summary[r.name]["unflagged"] = unflagged
+    if one and "run" in data:
+        ids = [int(k) for k in data["run"]]
+        for r in study.responses:
+            unflagged = unflagged_summary(data[r.name], ids, flagged, r.target, alpha)
+            if unflagged is not None:
+                summary[r.name]["unflagged"] = unflagged
     cols = [c for c in ("run", "world_seed") if c in data] + settings + [r.name for r in study.responses]
     lines = [
         f"# {study.title or study.name}",
