@@ -4,6 +4,7 @@ stable, and every class of bad input is refused with a message naming the file a
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
 
@@ -16,6 +17,7 @@ from warpdem.study.spec import StudyError, batch_key, design_table, load_study, 
 ROOT = Path(__file__).resolve().parents[2]
 STUDIES = ROOT / "studies"
 REF = STUDIES / "reference"
+RECORDS_001 = ROOT / "docs" / "seeds" / "001"
 FILES = sorted(STUDIES.glob("*.toml"))
 
 COUNTS = {
@@ -49,6 +51,10 @@ COUNTS = {
     "wetfeed_pb_standard": 12,
     "wetfeed_ccd_standard": 23,
     "phosphate_ffd_standard": 16,
+    "wetfeed_verify_large_standard": 5,
+    "wetfeed_pb_standard_scaled": 12,
+    "wetfeed_ccd_standard_scaled": 23,
+    "wetfeed_verify_standard_scaled_step": 5,
 }
 
 
@@ -169,6 +175,61 @@ def test_seed_001_and_002_standard_twins_differ_only_in_the_rolling_model(studie
     assert std.batch == (8 if name == "phosphate_ffd" else twin.batch)
     cols = [c for c in tables[name].columns if c != "point_id"]
     assert tables[f"{name}_standard"][cols].equals(tables[name][cols])
+
+
+@pytest.mark.parametrize("name, factor", [("wetfeed_pb", "G"), ("wetfeed_ccd", "X3")])
+def test_seed_001_scaled_studies_differ_from_their_standard_twins_only_in_the_surface_energy(
+    studies, tables, name, factor
+):
+    """wetfeed_pb_standard_scaled and wetfeed_ccd_standard_scaled run their standard-rolling twins' coded points
+    with the surface energy's levels (and the fixed value that switches JKR on) times 0.2; nothing else changes."""
+    twin, scaled = studies[f"{name}_standard"], studies[f"{name}_standard_scaled"]
+    assert dict(scaled.fixed) == dict(twin.fixed) | {"surface_energy": round(0.2 * twin.fixed["surface_energy"], 12)}
+    for a, b in zip(scaled.factors, twin.factors, strict=True):
+        expected = (
+            dataclasses.replace(b, low=round(0.2 * b.low, 12), high=round(0.2 * b.high, 12)) if a.name == factor else b
+        )
+        assert a == expected
+    assert scaled.responses == twin.responses and scaled.analysis == twin.analysis
+    assert scaled.verification == twin.verification
+    t, t_twin = tables[f"{name}_standard_scaled"], tables[f"{name}_standard"]
+    coded = [c for c in t.columns if c != "point_id" and not c.endswith("_actual")]
+    assert t[coded].equals(t_twin[coded])
+    np.testing.assert_allclose(t[f"{factor}_actual"], 0.2 * t_twin[f"{factor}_actual"], rtol=1e-12)
+
+
+def test_seed_001_verification_points_come_from_their_records(studies, tables):
+    """wetfeed_verify_large_standard pours the seed's 25,000 grains at wetfeed_ccd_standard's chosen settings (its
+    record's verification.json, to 4 decimals). wetfeed_verify_standard_scaled_step keeps the scaled composite's
+    X1 and X2 and moves X3 by (54.25 - the verification's mean) over the fitted surface's slope in X3 there (its
+    record's actual coefficients), the step its header states: 0.0941 + 1.86 / 166.9 = 0.1052 J/m^2."""
+    import json
+
+    names = ("X1", "X2", "X3")
+    large, ccd = studies["wetfeed_verify_large_standard"], studies["wetfeed_ccd_standard"]
+    resized = {"count": 25000, "outlet_height": 0.35, "duration": 16.0}
+    assert dict(large.fixed) == dict(ccd.fixed) | resized
+    chosen = json.loads((RECORDS_001 / "ccd_standard" / "verification" / "verification.json").read_text())
+    t = tables["wetfeed_verify_large_standard"]
+    assert {tuple(r) for r in t[[f"{n}_actual" for n in names]].to_numpy()} == {
+        tuple(round(chosen["settings"][n], 4) for n in names)
+    }
+    assert list(t["world_seed"]) == [0, 1, 2, 3, 4]
+
+    step = studies["wetfeed_verify_standard_scaled_step"]
+    assert dict(step.fixed) == dict(studies["wetfeed_ccd_standard_scaled"].fixed)
+    record = RECORDS_001 / "ccd_standard_scaled"
+    v = json.loads((record / "verification" / "verification.json").read_text())
+    x1, x2, x3 = (v["settings"][n] for n in names)
+    b = pd.read_csv(record / "analysis" / "coefficients_aor_deg.csv").set_index("Term")["Actual Coefficient"]
+    slope = b["X3"] + b["X1*X3"] * x1 + b["X2*X3"] * x2 + 2.0 * b["X3^2"] * x3
+    assert slope == pytest.approx(166.9, abs=0.05)
+    x3_step = x3 + (v["target"] - float(np.mean(v["values"]))) / slope
+    t = tables["wetfeed_verify_standard_scaled_step"]
+    assert {tuple(r) for r in t[[f"{n}_actual" for n in names]].to_numpy()} == {
+        (round(x1, 4), round(x2, 4), round(x3_step, 4))
+    }
+    assert list(t["world_seed"]) == [0, 1, 2, 3, 4]
 
 
 def test_plate_held_screening_differs_only_in_the_plate(studies, tables):
