@@ -1,0 +1,209 @@
+"""Seed 001 recalibrated with EDEM's standard rolling friction: our screenings, composites and verifications beside
+the paper's, run by run.
+
+    python docs/seeds/001/standard_recalibration.py [--out FILE]
+
+Reads the records kept in the repository (``results.csv`` and ``verification/verification.json`` of each folder in
+:data:`SCREENINGS`, :data:`COMPOSITES` and :data:`VERIFICATIONS`) and the paper's run tables
+(``studies/reference/wetfeed_pb_runs.csv``, Table 3; ``wetfeed_ccd_runs.csv``, Table 6). For the image angle [deg],
+the seed's response, it prints:
+
+- the paper's own screening and composite fitted the same way; its published coefficients (Table 4) and sums of
+  squares (Table 7) check the reading;
+- each Plackett-Burman screening's range and mean, each factor's effect (high minus low, the coded least-squares
+  coefficient times 2, statsmodels OLS on the coded columns) with its p-value, and the Pearson correlation of its
+  12 angles with the paper's, run matched to run by the coded settings;
+- each central composite's range, the quadratic's R^2 and its terms significant at 0.05 (statsmodels OLS on the
+  coded columns), the centre points' mean and SD with the F test of their variance against the paper's nine (one
+  sided), and the Pearson correlation with the paper's angles over the 14 non-centre points and the centre mean;
+- each verification's piles, mean, SD, 95 % interval of the mean and t test against the measured 54.25 deg, beside
+  the paper's five verification angles.
+
+Output of this script for the sixteenth stage: ``standard_recalibration.txt`` beside it
+(README, "Seed 001 recalibrated", issue 23's sixteenth stage).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+REF = HERE.parents[2] / "studies" / "reference"
+TARGET = 54.25
+"""The seed's measured angle of repose [deg]."""
+SEED_VERIFICATION = (54.72, 53.95, 53.63, 53.23, 54.18)
+"""The seed's five verification angles at its optimum [deg] (001_7b23801dd6850ee1.txt, optimisation section)."""
+PB = tuple("ABCDEFG")
+CCD = ("X1", "X2", "X3")
+QUADRATIC = "y ~ X1 + X2 + X3 + X1:X2 + X1:X3 + X2:X3 + I(X1**2) + I(X2**2) + I(X3**2)"
+
+SCREENINGS = (
+    ("our spheres' EPSD", "pb"),
+    ("EDEM's standard", "pb_standard"),
+    ("EDEM's standard, surface energy x 0.2", "pb_standard_scaled"),
+)
+COMPOSITES = (
+    ("our spheres' EPSD", "ccd"),
+    ("EDEM's standard", "ccd_standard"),
+    ("EDEM's standard, surface energy x 0.2", "ccd_standard_scaled"),
+)
+VERIFICATIONS = (
+    ("EPSD composite's optimum, 6,000 grains", "ccd/verification/verification.json"),
+    ("standard composite's optimum, 6,000 grains", "ccd_standard/verification/verification.json"),
+    ("standard composite's optimum, 25,000 grains", "verify_large_standard/results.csv"),
+    ("scaled composite's optimum, 6,000 grains", "ccd_standard_scaled/verification/verification.json"),
+    ("one step in X3 past it, 6,000 grains", "verify_standard_scaled_step/results.csv"),
+)
+"""(label, file under this folder): a verification.json's ``values`` or a results.csv's ``aor_deg``."""
+
+
+def _read(path: Path):
+    import pandas as pd
+
+    return pd.read_csv(path)
+
+
+def paper_screening():
+    """The paper's Table 3: coded A..G and the angle, as a DataFrame with column ``y``."""
+    return _read(REF / "wetfeed_pb_runs.csv").rename(columns={"aor_deg": "y"})
+
+
+def paper_composite():
+    """The paper's Table 6: coded X1..X3 and the angle, as a DataFrame with column ``y``."""
+    return _read(REF / "wetfeed_ccd_runs.csv").rename(columns={"aor_deg": "y"})
+
+
+def ours(folder: str):
+    """A record's design runs: coded factor columns and the angle as ``y``."""
+    return _read(HERE / folder / "results.csv").rename(columns={"aor_deg": "y"})
+
+
+def screening_fit(df):
+    """(effects, p-values) of the linear model in coded A..G: effect = 2 x coded coefficient [deg]."""
+    import statsmodels.formula.api as smf
+
+    fit = smf.ols("y ~ " + " + ".join(PB), df).fit()
+    return {f: 2.0 * fit.params[f] for f in PB}, {f: fit.pvalues[f] for f in PB}
+
+
+def composite_fit(df):
+    """The quadratic in coded X1..X3 (statsmodels OLS result)."""
+    import statsmodels.formula.api as smf
+
+    return smf.ols(QUADRATIC, df).fit()
+
+
+def _key(row, names):
+    return tuple(round(float(row[n]), 6) for n in names)
+
+
+def matched(df, ref, names):
+    """Pairs (ours, paper's) matched by coded point; repeated points (centres) enter once, as their means."""
+    a = df.groupby([df[n].round(6) for n in names]).y.mean()
+    b = ref.groupby([ref[n].round(6) for n in names]).y.mean()
+    common = a.index.intersection(b.index)
+    return a.loc[common].to_numpy(), b.loc[common].to_numpy()
+
+
+def _term(name: str) -> str:
+    """A formula term as Design-Expert writes it: X1*X2, X1^2."""
+    return name.replace(":", "*").replace("I(", "").replace(" ** 2)", "^2")
+
+
+def centre(df, names):
+    """The angles at the design centre (every coded factor 0)."""
+    return df[np.all(np.isclose(df[list(names)].to_numpy(), 0.0), axis=1)].y.to_numpy()
+
+
+def verification_values(rel: str):
+    """The piles [deg] of one verification, from its record."""
+    path = HERE / rel
+    if path.suffix == ".json":
+        return np.asarray(json.loads(path.read_text())["values"], float)
+    return _read(path).aor_deg.to_numpy(float)
+
+
+def one_sample(values):
+    """(mean, SD, 95 % interval of the mean, t, p) against :data:`TARGET`."""
+    from scipy import stats
+
+    v = np.asarray(values, float)
+    m, s = v.mean(), v.std(ddof=1)
+    half = stats.t.ppf(0.975, v.size - 1) * s / np.sqrt(v.size)
+    t = stats.ttest_1samp(v, TARGET)
+    return m, s, (m - half, m + half), float(t.statistic), float(t.pvalue)
+
+
+def report() -> str:
+    from scipy import stats
+
+    lines: list[str] = []
+    put = lines.append
+    paper_pb, paper_ccd = paper_screening(), paper_composite()
+
+    put("== Plackett-Burman screenings (Table 3 coded points; effect = high - low [deg], p)")
+    eff, p = screening_fit(paper_pb)
+    put(f"paper: {paper_pb.y.min():.1f}-{paper_pb.y.max():.1f} deg, mean {paper_pb.y.mean():.2f}")
+    put("  " + ", ".join(f"{f} {eff[f]:+.2f} ({p[f]:.2g})" for f in PB))
+    for label, folder in SCREENINGS:
+        df = ours(folder)
+        eff, p = screening_fit(df)
+        a, b = matched(df, paper_pb, PB)
+        r = stats.pearsonr(a, b)
+        put(f"{label} ({folder}): {df.y.min():.1f}-{df.y.max():.1f} deg, mean {df.y.mean():.2f}")
+        put("  " + ", ".join(f"{f} {eff[f]:+.2f} ({p[f]:.2g})" for f in PB))
+        put(f"  significant at 0.05: {', '.join(f for f in PB if p[f] < 0.05) or 'none'}")
+        put(f"  Pearson with the paper's 12 angles: {r.statistic:.2f} (p {r.pvalue:.2g}, {a.size} points)")
+
+    put("")
+    put("== Central composites (Table 6 coded points; quadratic in coded units)")
+    paper_centre = centre(paper_ccd, CCD)
+    for label, df in [("paper", paper_ccd)] + [(f"{lab} ({fol})", ours(fol)) for lab, fol in COMPOSITES]:
+        fit = composite_fit(df)
+        terms = [_term(t) for t in fit.params.index[1:] if fit.pvalues[t] < 0.05]
+        c = centre(df, CCD)
+        put(f"{label}: {df.y.min():.1f}-{df.y.max():.1f} deg; R^2 {fit.rsquared:.3f}, model F p {fit.f_pvalue:.2g}")
+        put(f"  significant at 0.05: {', '.join(terms) or 'none'}")
+        put(f"  centre: {c.size} points, {c.mean():.2f} +- {c.std(ddof=1):.2f} deg")
+        if label != "paper":
+            f = c.var(ddof=1) / paper_centre.var(ddof=1)
+            pf = stats.f.sf(f, c.size - 1, paper_centre.size - 1)
+            a, b = matched(df, paper_ccd, CCD)
+            r = stats.pearsonr(a, b)
+            put(f"  centre variance against the paper's: F {f:.2f}, p {pf:.2g} (one-sided)")
+            put(f"  Pearson with the paper's angles: {r.statistic:.2f} (p {r.pvalue:.2g}, {a.size} points)")
+        else:
+            import statsmodels.api as sm
+
+            ss = sm.stats.anova_lm(fit, typ=2)["sum_sq"]
+            put("  coded coefficients: " + ", ".join(f"{_term(t)} {fit.params[t]:+.3f}" for t in fit.params.index[1:]))
+            put("  sums of squares: " + ", ".join(f"{_term(t)} {ss[t]:.2f}" for t in ss.index[:-1]))
+
+    put("")
+    put(f"== Verifications against {TARGET} deg (mean +- SD, 95 % interval of the mean, t, p)")
+    rows = [("paper's optimum (seed, EDEM)", np.asarray(SEED_VERIFICATION))]
+    rows += [(label, verification_values(rel)) for label, rel in VERIFICATIONS]
+    for label, v in rows:
+        m, s, (lo, hi), t, pt = one_sample(v)
+        put(f"{label}: {', '.join(f'{x:.1f}' for x in v)}")
+        put(f"  {m:.2f} +- {s:.2f} deg ({lo:.2f}-{hi:.2f}); {m - TARGET:+.2f} deg; t {t:.2f}, p {pt:.2g}")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, help="also write the report to this file")
+    args = ap.parse_args(argv)
+    text = report()
+    print(text, end="")
+    if args.out:
+        args.out.write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,71 @@
+"""docs/seeds/001/standard_recalibration.py reads the paper's tables as published (its coefficients, Table 4, and
+sums of squares, Table 7, come out of the run tables), pairs our runs with the paper's by coded point, reads every
+record it names, and its kept output is what it prints now."""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+HERE = ROOT / "docs" / "seeds" / "001"
+REF = ROOT / "studies" / "reference"
+
+
+@pytest.fixture(scope="module")
+def recal():
+    spec = importlib.util.spec_from_file_location("standard_recalibration", HERE / "standard_recalibration.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_the_paper_screening_gives_its_published_coefficients(recal):
+    effects, pvalues = recal.screening_fit(recal.paper_screening())
+    published = pd.read_csv(REF / "wetfeed_pb_anova_published.csv").set_index("source")
+    for f in recal.PB:
+        # Table 4 prints 2-3 significant digits: the coded coefficient is half the effect
+        assert effects[f] / 2.0 == pytest.approx(published.loc[f, "coefficient"], abs=0.006), f
+    assert {f for f in recal.PB if pvalues[f] < 0.01} == {"B", "C", "G"}
+
+
+def test_the_paper_composite_gives_its_published_sums_of_squares(recal):
+    import statsmodels.api as sm
+
+    fit = recal.composite_fit(recal.paper_composite())
+    ss = sm.stats.anova_lm(fit, typ=2)["sum_sq"].rename(lambda t: recal._term(t).replace("*", ""))
+    published = pd.read_csv(REF / "wetfeed_ccd_anova_published.csv").set_index("source")["sum_sq"]
+    for term in ("X1", "X2", "X3", "X1X2", "X1X3", "X2X3", "X1^2", "X2^2", "X3^2"):
+        assert ss[term] == pytest.approx(published[term], abs=0.01), term
+    assert ss["Residual"] == pytest.approx(published["Residual"], abs=0.02)
+
+
+def test_runs_pair_with_the_paper_by_coded_point(recal):
+    for _, folder in recal.SCREENINGS:
+        a, b = recal.matched(recal.ours(folder), recal.paper_screening(), recal.PB)
+        assert a.size == b.size == 12
+    for _, folder in recal.COMPOSITES:
+        df = recal.ours(folder)
+        assert len(df) == 23 and recal.centre(df, recal.CCD).size == 9
+        a, b = recal.matched(df, recal.paper_composite(), recal.CCD)
+        # 8 factorial + 6 axial points, and the nine centre points as one mean
+        assert a.size == b.size == 15
+        assert b[np.isclose(b, 54.05, atol=0.005)].size == 1
+
+
+def test_every_verification_has_five_piles_and_its_interval(recal):
+    from statsmodels.stats.weightstats import DescrStatsW
+
+    for _, rel in recal.VERIFICATIONS:
+        v = recal.verification_values(rel)
+        assert v.size == 5 and np.all((v > 0.0) & (v < 90.0))
+        m, s, (lo, hi), t, p = recal.one_sample(v)
+        d = DescrStatsW(v)
+        assert (lo, hi) == pytest.approx(d.tconfint_mean(0.05), rel=1e-12)
+        assert t == pytest.approx(d.ttest_mean(recal.TARGET)[0], rel=1e-12)
+
+
+def test_the_kept_output_is_current(recal):
+    assert (HERE / "standard_recalibration.txt").read_text() == recal.report()
