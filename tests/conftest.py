@@ -1,3 +1,6 @@
+import importlib.util
+from pathlib import Path
+
 import pytest
 import warp as wp
 
@@ -25,3 +28,15 @@ def kill_past(fraction: float):
             raise RunKilled
 
     return kill
+
+
+DOCS_SEEDS = Path(__file__).resolve().parents[1] / "docs" / "seeds"
+
+
+def load_seed_script(relpath: str):
+    """A script under docs/seeds (not part of the package), imported as a module by its file path."""
+    path = DOCS_SEEDS / relpath
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod

@@ -2,20 +2,14 @@
 residual of the one-way model (one mean per repeated setting) that statsmodels fits to the same piles; it reads the
 Bond-number study's piles too."""
 
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.conftest import load_seed_script
 
 
 @pytest.fixture(scope="module")
 def scatter():
-    spec = importlib.util.spec_from_file_location("pile_scatter", ROOT / "docs" / "seeds" / "001" / "pile_scatter.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_seed_script("001/pile_scatter.py")
 
 
 def test_every_kept_pile_is_read(scatter):

@@ -1,20 +1,14 @@
 """docs/seeds/run_seeds.py's step names: a study file is a step without an entry of its own, a misspelt one is
 refused by name."""
 
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.conftest import load_seed_script
 
 
 @pytest.fixture(scope="module")
 def run_seeds():
-    spec = importlib.util.spec_from_file_location("run_seeds", ROOT / "docs" / "seeds" / "run_seeds.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_seed_script("run_seeds.py")
 
 
 def test_a_study_file_is_a_step(run_seeds, tmp_path):

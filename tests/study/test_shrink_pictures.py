@@ -1,21 +1,15 @@
 """docs/seeds/shrink_pictures.py makes a plot-like picture smaller as a palette image without visibly changing it,
 and leaves a picture alone when the palette would not be smaller."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.conftest import load_seed_script
 
 
 @pytest.fixture(scope="module")
 def shrink():
-    spec = importlib.util.spec_from_file_location("shrink_pictures", ROOT / "docs" / "seeds" / "shrink_pictures.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.shrink
+    return load_seed_script("shrink_pictures.py").shrink
 
 
 def test_a_plot_shrinks_and_keeps_its_colours(shrink, tmp_path):

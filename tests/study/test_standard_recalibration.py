@@ -2,12 +2,13 @@
 sums of squares, Table 7, come out of the run tables), pairs our runs with the paper's by coded point, reads every
 record it names, and its kept output is what it prints now."""
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+
+from tests.conftest import load_seed_script
 
 ROOT = Path(__file__).resolve().parents[2]
 HERE = ROOT / "docs" / "seeds" / "001"
@@ -16,10 +17,7 @@ REF = ROOT / "studies" / "reference"
 
 @pytest.fixture(scope="module")
 def recal():
-    spec = importlib.util.spec_from_file_location("standard_recalibration", HERE / "standard_recalibration.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_seed_script("001/standard_recalibration.py")
 
 
 def test_the_paper_screening_gives_its_published_coefficients(recal):
