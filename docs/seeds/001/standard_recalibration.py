@@ -166,7 +166,7 @@ def report() -> str:
         fit = composite_fit(df)
         terms = [_term(t) for t in fit.params.index[1:] if fit.pvalues[t] < 0.05]
         c = centre(df, CCD)
-        put(f"{label}: {df.y.min():.1f}-{df.y.max():.1f} deg; R^2 {fit.rsquared:.3f}, model F p {fit.f_pvalue:.2g}")
+        put(f"{label}: {df.y.min():.2f}-{df.y.max():.2f} deg; R^2 {fit.rsquared:.3f}, model F p {fit.f_pvalue:.2g}")
         put(f"  significant at 0.05: {', '.join(terms) or 'none'}")
         put(f"  centre: {c.size} points, {c.mean():.2f} +- {c.std(ddof=1):.2f} deg")
         if label != "paper":
