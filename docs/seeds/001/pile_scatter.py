@@ -38,9 +38,19 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[2]
-TARGET = 54.25
-"""The seed's measured angle of repose [deg]."""
-SEED_VERIFICATION = (54.72, 53.95, 53.63, 53.23, 54.18)
+
+
+def _published() -> dict:
+    """Seed 001's published figures (the [wetfeed] table of studies/reference/published.toml)."""
+    from warpdem.study.spec import tomllib  # tomli before Python 3.11
+
+    return tomllib.loads((ROOT / "studies" / "reference" / "published.toml").read_text())["wetfeed"]
+
+
+_PUBLISHED = _published()
+TARGET = float(_PUBLISHED["measured_aor_deg"])
+"""The seed's measured angle of repose [deg] (studies/reference/published.toml)."""
+SEED_VERIFICATION = tuple(float(v) for v in _PUBLISHED["verification_aor_deg"])
 """The seed's five verification angles at its optimum [deg] (001_7b23801dd6850ee1.txt, optimisation section)."""
 X1_KEY, X2_KEY = "interaction.grain.grain.rolling_friction", "interaction.grain.grain.static_friction"
 CENTRE, HALF = (0.24, 0.50), 0.08
