@@ -55,6 +55,7 @@ COUNTS = {
     "wetfeed_pb_standard_scaled": 12,
     "wetfeed_ccd_standard_scaled": 23,
     "wetfeed_verify_standard_scaled_step": 5,
+    "wetfeed_verify_large_standard_scaled": 5,
 }
 
 
@@ -202,7 +203,8 @@ def test_seed_001_verification_points_come_from_their_records(studies, tables):
     """wetfeed_verify_large_standard pours the seed's 25,000 grains at wetfeed_ccd_standard's chosen settings (its
     record's verification.json, to 4 decimals). wetfeed_verify_standard_scaled_step keeps the scaled composite's
     X1 and X2 and moves X3 by (54.25 - the verification's mean) over the fitted surface's slope in X3 there (its
-    record's actual coefficients), the step its header states: 0.0941 + 1.86 / 166.9 = 0.1052 J/m^2."""
+    record's actual coefficients), the step its header states: 0.0941 + 1.86 / 166.9 = 0.1052 J/m^2.
+    wetfeed_verify_large_standard_scaled pours the seed's 25,000 grains at that step's point."""
     import json
 
     names = ("X1", "X2", "X3")
@@ -230,6 +232,12 @@ def test_seed_001_verification_points_come_from_their_records(studies, tables):
         (round(x1, 4), round(x2, 4), round(x3_step, 4))
     }
     assert list(t["world_seed"]) == [0, 1, 2, 3, 4]
+
+    # wetfeed_verify_large_standard_scaled: the step's point, resized to the seed's 25,000 grains as above
+    large_step = studies["wetfeed_verify_large_standard_scaled"]
+    assert dict(large_step.fixed) == dict(step.fixed) | resized
+    assert large_step.factors == step.factors
+    assert tables["wetfeed_verify_large_standard_scaled"].drop(columns="point_id").equals(t.drop(columns="point_id"))
 
 
 def test_plate_held_screening_differs_only_in_the_plate(studies, tables):
