@@ -67,3 +67,20 @@ def test_every_verification_has_five_piles_and_its_interval(recal):
 
 def test_the_kept_output_is_current(recal):
     assert (HERE / "standard_recalibration.txt").read_text() == recal.report()
+
+
+def test_size_pairs_pour_one_setting_and_agree_with_statsmodels(recal):
+    """Each pair's two records share their settings, and the Welch t test and variance ratio equal statsmodels'
+    (ttest_ind with unequal variances) and the ratio of the sample variances."""
+    from statsmodels.stats.weightstats import ttest_ind
+
+    for _, small, large in recal.SIZE_PAIRS:
+        a, b = recal.verification_values(small), recal.verification_values(large)
+        d, t, p, f, pf = recal.size_effect(a, b)
+        t_sm, p_sm, _ = ttest_ind(b, a, usevar="unequal")
+        assert (d, t, p) == pytest.approx((b.mean() - a.mean(), t_sm, p_sm), rel=1e-10)
+        assert f == pytest.approx(a.var(ddof=1) / b.var(ddof=1), rel=1e-12) and 0.0 < pf < 1.0
+    # the step's point: the 25,000-grain record runs it with the 6,000-grain record's settings
+    cols = ["X1_actual", "X2_actual", "X3_actual"]
+    small, large = (pd.read_csv(HERE / rel) for rel in recal.SIZE_PAIRS[1][1:])
+    assert small[cols].equals(large[cols])

@@ -17,10 +17,12 @@ the seed's response, it prints:
   coded columns), the centre points' mean and SD with the F test of their variance against the paper's nine (one
   sided), and the Pearson correlation with the paper's angles over the 14 non-centre points and the centre mean;
 - each verification's piles, mean, SD, 95 % interval of the mean and t test against the measured 54.25 deg, beside
-  the paper's five verification angles.
+  the paper's five verification angles;
+- for each setting poured with 6,000 and with the seed's 25,000 grains (:data:`SIZE_PAIRS`), the difference of the
+  means (Welch's t test) and the ratio of the variances (F test, one-sided: does the smaller pile scatter more).
 
-Output of this script for the sixteenth stage: ``standard_recalibration.txt`` beside it
-(README, "Seed 001 recalibrated", issue 23's sixteenth stage).
+Output of this script: ``standard_recalibration.txt`` beside it (README, "Seed 001 recalibrated", issue 23's
+sixteenth and seventeenth stages).
 """
 
 from __future__ import annotations
@@ -67,8 +69,18 @@ VERIFICATIONS = (
     ("standard composite's optimum, 25,000 grains", "verify_large_standard/results.csv"),
     ("scaled composite's optimum, 6,000 grains", "ccd_standard_scaled/verification/verification.json"),
     ("one step in X3 past it, 6,000 grains", "verify_standard_scaled_step/results.csv"),
+    ("the same point, 25,000 grains", "verify_large_standard_scaled/results.csv"),
 )
 """(label, file under this folder): a verification.json's ``values`` or a results.csv's ``aor_deg``."""
+SIZE_PAIRS = (
+    (
+        "standard composite's optimum",
+        "ccd_standard/verification/verification.json",
+        "verify_large_standard/results.csv",
+    ),
+    ("one step in X3 past the scaled optimum", VERIFICATIONS[4][1], VERIFICATIONS[5][1]),
+)
+"""(label, 6,000-grain piles, 25,000-grain piles): one setting poured at both sizes."""
 
 
 def _read(path: Path):
@@ -148,6 +160,17 @@ def one_sample(values):
     return m, s, (m - half, m + half), float(t.statistic), float(t.pvalue)
 
 
+def size_effect(small, large):
+    """(mean difference large - small [deg], Welch's t, its two-sided p, variance ratio small / large, its one-sided
+    F p) for the piles of one setting poured at two sizes."""
+    from scipy import stats
+
+    a, b = np.asarray(small, float), np.asarray(large, float)
+    w = stats.ttest_ind(b, a, equal_var=False)
+    f = a.var(ddof=1) / b.var(ddof=1)
+    return b.mean() - a.mean(), float(w.statistic), float(w.pvalue), f, float(stats.f.sf(f, a.size - 1, b.size - 1))
+
+
 def report() -> str:
     from scipy import stats
 
@@ -201,6 +224,12 @@ def report() -> str:
         m, s, (lo, hi), t, pt = one_sample(v)
         put(f"{label}: {', '.join(f'{x:.1f}' for x in v)}")
         put(f"  {m:.2f} +- {s:.2f} deg ({lo:.2f}-{hi:.2f}); {m - TARGET:+.2f} deg; t {t:.2f}, p {pt:.2g}")
+
+    put("")
+    put("== One setting at both sizes (25,000 grains minus 6,000: Welch's t; variance ratio 6,000 / 25,000, F)")
+    for label, small, large in SIZE_PAIRS:
+        d, t, pt, f, pf = size_effect(verification_values(small), verification_values(large))
+        put(f"{label}: {d:+.2f} deg, t {t:.2f}, p {pt:.2g}; variance ratio {f:.1f}, p {pf:.2g} (one-sided)")
     return "\n".join(lines) + "\n"
 
 
