@@ -56,6 +56,7 @@ COUNTS = {
     "wetfeed_ccd_standard_scaled": 23,
     "wetfeed_verify_standard_scaled_step": 5,
     "wetfeed_verify_large_standard_scaled": 5,
+    "wetfeed_verify_large_standard_scaled_step": 5,
 }
 
 
@@ -204,7 +205,8 @@ def test_seed_001_verification_points_come_from_their_records(studies, tables):
     record's verification.json, to 4 decimals). wetfeed_verify_standard_scaled_step keeps the scaled composite's
     X1 and X2 and moves X3 by (54.25 - the verification's mean) over the fitted surface's slope in X3 there (its
     record's actual coefficients), the step its header states: 0.0941 + 1.86 / 166.9 = 0.1052 J/m^2.
-    wetfeed_verify_large_standard_scaled pours the seed's 25,000 grains at that step's point."""
+    wetfeed_verify_large_standard_scaled pours the seed's 25,000 grains at that step's point, and
+    wetfeed_verify_large_standard_scaled_step steps again from its mean: 0.1052 - 2.36 / 165.5 = 0.0909 J/m^2."""
     import json
 
     names = ("X1", "X2", "X3")
@@ -238,6 +240,19 @@ def test_seed_001_verification_points_come_from_their_records(studies, tables):
     assert dict(large_step.fixed) == dict(step.fixed) | resized
     assert large_step.factors == step.factors
     assert tables["wetfeed_verify_large_standard_scaled"].drop(columns="point_id").equals(t.drop(columns="point_id"))
+
+    # wetfeed_verify_large_standard_scaled_step: the same step again, from that record's mean, along the slope there
+    again = studies["wetfeed_verify_large_standard_scaled_step"]
+    assert dict(again.fixed) == dict(large_step.fixed) and again.factors == large_step.factors
+    x3 = round(x3_step, 4)
+    slope = b["X3"] + b["X1*X3"] * x1 + b["X2*X3"] * x2 + 2.0 * b["X3^2"] * x3
+    assert slope == pytest.approx(165.5, abs=0.05)
+    mean = pd.read_csv(RECORDS_001 / "verify_large_standard_scaled" / "results.csv")["aor_deg"].mean()
+    t = tables["wetfeed_verify_large_standard_scaled_step"]
+    assert {tuple(r) for r in t[[f"{n}_actual" for n in names]].to_numpy()} == {
+        (round(x1, 4), round(x2, 4), round(x3 + (v["target"] - mean) / slope, 4))
+    }
+    assert list(t["world_seed"]) == [0, 1, 2, 3, 4]
 
 
 def test_plate_held_screening_differs_only_in_the_plate(studies, tables):
