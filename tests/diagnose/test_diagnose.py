@@ -219,6 +219,30 @@ def test_one_angle_within_reach_is_not_testable(tmp_path, reach_runs):
     assert res["mode"] == "reach" and res["verdict"] == "not_testable", res
     assert res["base"]["reaches"] and res["base"]["p"] >= 0.05 and not res["extended"]
     assert "NOT TESTABLE" in (tmp_path / "out" / "report.md").read_text()
+    # the measurement repeats as the model does (its replicates are the model's own runs plus noise)
+    s = res["scatter"]["angle_cone_deg"]
+    assert s["measured_df"] == 2 and s["simulated_df"] == 1 and not s["exceeds"]  # confirm_seeds = 2
+
+
+@pytest.mark.slow  # about 1 minute of two cores after the case above (they share the base's worlds)
+def test_one_angle_that_repeats_closer_than_the_model_is_overdispersed(tmp_path, reach_runs):
+    """The same angle (the base model at rolling friction 0.15), but measured as a material that repeats to 0.02
+    deg: the three replicates are the three runs' mean plus that noise. The mean is within reach, as above; the
+    hidden effect is the repeatability, which the base model's world seeds cannot match: OVERDISPERSED, and the
+    report says why."""
+    rows = _one_angle({"interaction.ore.ore.rolling_friction": 0.15}, np.random.default_rng(3))
+    mean = float(np.mean([r["angle_cone_deg"] for r in rows]))
+    rng = np.random.default_rng(5)
+    rows = [{**r, "angle_cone_deg": mean + float(rng.normal(0.0, 0.02))} for r in rows]
+    path = syn.write_case(tmp_path, "lift_one_tight", _reach_toml(), rows)
+    res = _diagnose(path, tmp_path / "out", reach_runs)
+    assert res["mode"] == "reach" and res["base"]["reaches"], res
+    assert res["verdict"] == "overdispersed" and not res["extended"], res
+    s = res["scatter"]["angle_cone_deg"]
+    assert s["exceeds"] and s["p_holm"] < 0.05 and s["measured_sd"] < 0.1 < s["simulated_sd"]
+    assert res["verdict_words"].startswith("OVERDISPERSED") and "angle_cone_deg: SD" in res["verdict_words"]
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert "## Repeatability at the base model's closest point" in report and "## What it means" in report
 
 
 @pytest.mark.slow  # about 2 minutes of two cores

@@ -45,6 +45,7 @@ __all__ = [
     "gaussian_nll",
     "holm",
     "lrt_boundary",
+    "scatter_excess",
     "screen",
     "space_filling",
 ]
@@ -379,6 +380,36 @@ def holm(pvalues) -> np.ndarray:
     if ok.any():
         out[ok] = multipletests(p[ok], method="holm")[1]
     return out
+
+
+def scatter_excess(sim_var: float, sim_df: int, meas_var: float, meas_df: float) -> tuple[float, float]:
+    """One-sided test that a model's runs at one parameter point scatter more than the measurement repeats:
+    (F, p) with F = sim_var / meas_var.
+
+    Args:
+        sim_var: pooled variance of the simulated response over world seeds [unit^2], >= 0.
+        sim_df: its degrees of freedom, >= 1.
+        meas_var: the variance of one measurement [unit^2], > 0: the replicates' pooled variance, or a stated SD
+            squared.
+        meas_df: its degrees of freedom, >= 1; ``math.inf`` for a stated SD, taken as known.
+
+    Both sample variances of normal scatter: F on (sim_df, meas_df) degrees of freedom. A known measurement
+    variance: sim_df * F is chi-square on sim_df. A mean alone cannot show a model whose piles scatter far more
+    than the material's, since the noise budget takes the larger of the two scatters (``Problem.budget``); this
+    test can.
+    """
+    from scipy import stats
+
+    if not (sim_df >= 1 and meas_df >= 1):
+        raise InputError(f"scatter_excess: degrees of freedom ({sim_df}, {meas_df}) are not allowed; expected >= 1")
+    if not (np.isfinite(sim_var) and sim_var >= 0 and np.isfinite(meas_var) and meas_var > 0):
+        raise InputError(
+            f"scatter_excess: variances ({sim_var}, {meas_var}) are not allowed; expected finite, the second > 0"
+        )
+    f = float(sim_var / meas_var)
+    if math.isinf(meas_df):
+        return f, float(stats.chi2.sf(sim_df * f, sim_df))
+    return f, float(stats.f.sf(f, sim_df, meas_df))
 
 
 def adequacy(

@@ -13,8 +13,14 @@ one number can still test is reach. Stages (the simulations stored and reused as
    parameters, since the test asks whether any point fits, and one that fits exactly scores 0). Then real
    simulations at the closest point (the confirming world seeds): the same chi-square from their means against
    the noise budget. The model **reaches** the data when that confirmed p-value is at least alpha.
-3. **The verdict** (:data:`VERDICTS`). The base reaches the data: NOT TESTABLE (no evidence of a model error, and
-   none could show in these data). It does not: every candidate of the library is taken through stage 2 with
+3. **Repeatability** (:func:`repeatability`). The base model's scatter over the confirming world seeds at its
+   closest point against the measurement's (its replicates' pooled SD, or the stated SD), one-sided
+   (:func:`inference.scatter_excess`), Holm-corrected over the responses. The noise budget takes the larger of
+   the two scatters, so a model whose piles scatter far more than the material's reaches any mean near its own;
+   this is the one model error a single mean can still show.
+4. **The verdict** (:data:`VERDICTS`). The base reaches the data and repeats no worse than the measurement: NOT
+   TESTABLE (no evidence of a model error, and none could show in the mean). It reaches the data but scatters
+   more: OVERDISPERSED (a model error; the candidates, judged by the mean, are not tried). It does not reach: every candidate of the library is taken through stage 2 with
    its parameter added. One reaches: it is the only one (named by reach alone, never by held-out data, which
    one value cannot give); several: NOT IDENTIFIABLE, with the measurement that best separates them
    (:func:`pipeline.separating_measurement`); none: UNEXPLAINED. Each model that reaches the data gives its
@@ -39,19 +45,23 @@ from . import inference as inf
 DENSE = 4096
 """Points of the space-filling cover of a model's parameter box on which its reach is read off its surrogates."""
 
-VERDICTS = ("not_testable", "only_one_reaches", "not_identifiable", "unexplained")
+VERDICTS = ("not_testable", "overdispersed", "only_one_reaches", "not_identifiable", "unexplained")
 """The verdicts of a reach diagnosis (diagnosis.json's ``verdict``, with ``mode`` "reach")."""
 
 WORDS = {
     "not_testable": "NOT TESTABLE: the base model reaches the data; no evidence of a model error, and with no more "
     "measured values than free parameters none could show",
+    "overdispersed": "OVERDISPERSED: the base model reaches the data's mean, but its runs there scatter more than the "
+    "measurement repeats ({scatter}): a model error one mean cannot show; the candidates, judged by the mean, are "
+    "not tried",
     "only_one_reaches": "OUT OF REACH of the base model; only {names} reaches the data (named by reach alone: one "
     "value per free parameter leaves no held-out test)",
     "not_identifiable": "NOT IDENTIFIABLE: out of reach of the base model; {names} each reach the data, and these "
     "data cannot tell them apart",
     "unexplained": "UNEXPLAINED: out of reach of the base model and of every candidate tried",
 }
-"""One line per verdict (``{names}``: the candidates that reach the data), for the report and the CLI."""
+"""One line per verdict (``{names}``: the candidates that reach the data; ``{scatter}``: the responses that scatter
+more, :func:`scatter_words`), for the report and the CLI."""
 
 
 def fit(ev, model) -> dict:
@@ -117,6 +127,55 @@ def finish(ev, fitted: dict) -> dict:
     }
 
 
+def repeatability(ev, ex, res: dict) -> dict:
+    """Stage 3: per response, the scatter of ``res``'s confirming simulations (a :func:`finish` result) over world
+    seeds, pooled over the training conditions, against the measurement's: the stated SD where the data give
+    ``sd_<response>`` (taken as known), else the replicates' pooled SD (:meth:`Experiments.replicate_sd`).
+    {response: {"simulated_sd", "simulated_df", "measured_sd", "measured_df" (None for a stated SD), "ratio" (SD
+    over SD), "F", "p", "p_holm" (over the responses), "exceeds" (p_holm < alpha)}}; a response with fewer than
+    two finite runs at every condition is left out."""
+    prob = ev.prob
+    conds = sorted(set(prob.obs.loc[prob.train, "condition"]))
+    out = {}
+    for j, r in enumerate(ev.responses):
+        groups = (res["confirm"][c]["values"][:, j] for c in conds if c in res["confirm"])
+        sim_var, sim_df = inf.pooled_variance(groups)
+        rows = prob.obs[prob.train & (prob.obs["response"] == r).to_numpy()]
+        if not sim_df or rows.empty:
+            continue
+        col = f"sd_{r}"
+        if col in ex.table and ex.table[col].notna().any():
+            meas_var, meas_df = float(rows["var_one"].mean()), math.inf
+        else:
+            sd, meas_df = ex.replicate_sd(r)
+            meas_var = sd**2
+        if not meas_var > 0:  # replicates that agree exactly leave no scale to compare with
+            continue
+        f, p = inf.scatter_excess(sim_var, sim_df, meas_var, meas_df)
+        out[r] = {
+            "simulated_sd": math.sqrt(sim_var),
+            "simulated_df": int(sim_df),
+            "measured_sd": math.sqrt(meas_var),
+            "measured_df": None if math.isinf(meas_df) else int(meas_df),
+            "ratio": math.sqrt(f),
+            "F": f,
+            "p": p,
+        }
+    for o, q in zip(out.values(), inf.holm([o["p"] for o in out.values()]) if out else []):
+        o["p_holm"] = float(q)
+        o["exceeds"] = bool(q < ev.spec.alpha)
+    return out
+
+
+def scatter_words(scatter: dict) -> str:
+    """The responses that scatter more, for the verdict line: "r: SD a against b, p q; ..."."""
+    return "; ".join(
+        f"{r}: SD {_num(s['simulated_sd'], 3)} against {_num(s['measured_sd'], 3)}, p {_num(s['p_holm'], 2)}"
+        for r, s in scatter.items()
+        if s["exceeds"]
+    )
+
+
 def _z_rms(res: dict) -> float:
     z2 = res["residual"] ** 2 / res["variance"]
     return float(math.sqrt(np.nanmean(z2)))
@@ -138,7 +197,7 @@ def gain(ev, base: dict, ext: dict) -> dict:
 
 
 def run(ev, base_model, spec, ex, log) -> tuple[dict, dict]:
-    """Stages 2 and 3 (the noise budget is set): {model name: result} and the decision {"verdict",
+    """Stages 2 to 4 (the noise budget is set): {model name: result} and the decision {"verdict", "scatter",
     "reaching", "cause", "skipped", "separating", "gains"}."""
     from .data import DiagnoseError
     from .pipeline import Model, _library, separating_measurement
@@ -147,8 +206,10 @@ def run(ev, base_model, spec, ex, log) -> tuple[dict, dict]:
     base_fit = fit(ev, base_model)
     sims.run(base_fit["requests"], "base: confirm")
     results = {"base": finish(ev, base_fit)}
+    scatter = repeatability(ev, ex, results["base"])
     decision = {
         "verdict": "not_testable",
+        "scatter": scatter,
         "reaching": [],
         "cause": None,
         "skipped": {},
@@ -157,6 +218,8 @@ def run(ev, base_model, spec, ex, log) -> tuple[dict, dict]:
         "gains": {},
     }
     if results["base"]["reaches"]:
+        if any(s["exceeds"] for s in scatter.values()):
+            decision["verdict"] = "overdispersed"
         return results, decision
     lib, skipped = _library(spec, ex, ev.prob.conditions)
     models = [Model.extended(base_model, c) for c in lib]
@@ -280,7 +343,7 @@ def write(out: Path, prob, results: dict, decision: dict, checks=None) -> dict:
         "name": spec.name,
         "mode": "reach",
         "verdict": decision["verdict"],
-        "verdict_words": WORDS[decision["verdict"]].format(names=names),
+        "verdict_words": WORDS[decision["verdict"]].format(names=names, scatter=scatter_words(decision["scatter"])),
         "cause": decision["cause"],
         "cause_words": cands.CAUSES.get(decision["cause"] or "", None),
         "reaching": decision["reaching"],
@@ -294,6 +357,7 @@ def write(out: Path, prob, results: dict, decision: dict, checks=None) -> dict:
             "simulation_sd": {r: math.sqrt(v) for r, v in prob.sim_var.items()},
             "seed_sd": {r: math.sqrt(v) for r, v in prob.seed_var.items()},
         },
+        "scatter": decision["scatter"],
         "base": _model_json(results["base"]),
         "extended": {n: _model_json(r) for n, r in results.items() if n != "base"},
         "not_applicable": decision["skipped"],
@@ -336,6 +400,25 @@ def _markdown(prob, results: dict, diag: dict) -> str:
                 f"| {name} | {o['response']} | {_num(o['mean'])} ({_num(sd, 2)}) | {_num(lo)}–{_num(hi)} | {point} | "
                 f"{_num(res['simulated'][i])} ({int(res['simulations'][i])}) | {_num(z, 3)} | {_num(res['p'], 2)} | "
                 f"{'yes' if res['reaches'] else 'no'} |"
+            )
+    if diag["scatter"]:
+        lines += [
+            "",
+            "## Repeatability at the base model's closest point",
+            "",
+            "The noise budget takes the larger of the measurement's scatter and the model's, so a model whose runs "
+            "scatter more than the material repeats reaches any mean near its own. Its scatter over the confirming "
+            "world seeds against the measurement's (one-sided F test; chi-square against a stated SD, taken as "
+            "known; Holm over the responses):",
+            "",
+            "| response | model's SD (df) | measurement's SD (df) | ratio | p (Holm) | scatters more |",
+            "|---|---|---|---|---|---|",
+        ]
+        for r, s in diag["scatter"].items():
+            df = "stated" if s["measured_df"] is None else s["measured_df"]
+            lines.append(
+                f"| {r} | {_num(s['simulated_sd'], 3)} ({s['simulated_df']}) | {_num(s['measured_sd'], 3)} ({df}) | "
+                f"{_num(s['ratio'], 3)} | {_num(s['p_holm'], 2)} | {'yes' if s['exceeds'] else 'no'} |"
             )
     reaching = diag["reaching"]
     if reaching:
@@ -394,6 +477,17 @@ def _markdown(prob, results: dict, diag: dict) -> str:
             "",
             "More measured values than free parameters: a second response of the same material (its bulk density, "
             "say) or the same response at a second condition (grain size, plate, fill).",
+        ]
+    elif diag["verdict"] == "overdispersed":
+        lines += [
+            "",
+            "## What it means",
+            "",
+            "The model reaches the measured mean only inside its own scatter: one run of it may read anywhere in "
+            "that spread, where the material repeats more closely. The candidates are judged by whether they reach "
+            "the mean, which the base already does, so none is tried. What to look for is what makes the runs "
+            "repeat: how the grains lock (the rolling-friction law, the cohesion's strength at the grains' size) "
+            "and the pile's size in grains. Test a change by the same check: its runs' SD against the measurement's.",
         ]
     if diag["not_applicable"]:
         lines += ["", "## Candidates not tried", ""]
