@@ -1,0 +1,96 @@
+"""The reach diagnoses' repeatability check applied to the seed records' stored runs.
+
+    python docs/seeds/reach_repeatability.py [--out FILE]
+
+The three reach diagnoses kept under ``docs/seeds/`` (:data:`RECORDS`) ran before the check existed and said NOT
+TESTABLE. Each record keeps its simulated worlds (``runs/*.json``), among them the confirming runs at the base
+model's closest point (stage "base: confirm"). This script reads those runs and the data file the diagnosis read
+(``studies/diagnose/NAME.toml``, its experiments checked equal to the record's ``experiments.csv``) and applies
+:func:`warpdem.diagnose.reach.repeatability` to them, as a diagnosis run now would at that closest point (a rerun
+recalibrates, and its closest point moves with the code's surrogates, so its confirming runs would be new ones).
+It prints, per record, the runs, their SD against the measurement's, the test and the verdict it gives now.
+
+Its output: ``reach_repeatability.txt`` beside it (README, "Diagnose", the repeatability check).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+STUDIES = HERE.parents[1] / "studies" / "diagnose"
+RECORDS = (
+    ("000/reach", "seed000_pellets"),
+    ("001/reach", "seed001_wetfeed"),
+    ("001/reach_large", "seed001_wetfeed_large"),
+)
+"""(record folder under docs/seeds, its data file's name under studies/diagnose)."""
+STAGE = "base: confirm"
+
+
+def confirming_runs(record: Path, responses) -> np.ndarray:
+    """The base model's confirming runs in ``record``: shape (runs, responses), ordered by world seed."""
+    runs = [json.loads(p.read_text()) for p in sorted((record / "runs").glob("*.json"))]
+    runs = sorted((r for r in runs if r["design"].get("stage") == STAGE), key=lambda r: r["world_seed"])
+    return np.array([[r["responses"].get(k, np.nan) for k in responses] for r in runs], float)
+
+
+def check(folder: str, name: str) -> tuple[dict, np.ndarray, dict]:
+    """(repeatability result, the confirming runs, the record's diagnosis.json) of one record."""
+    import pandas as pd
+
+    from warpdem.diagnose import pipeline, reach
+    from warpdem.diagnose.data import load_diagnosis
+
+    record = HERE / folder
+    spec, ex = load_diagnosis(STUDIES / f"{name}.toml", check_scene=False)
+    kept = pd.read_csv(record / "experiments.csv")
+    if not kept.equals(pd.read_csv(spec.experiments_path)):
+        raise SystemExit(f"{record / 'experiments.csv'}: not the data file's experiments ({spec.experiments_path})")
+    prob = pipeline._problem(spec, ex)
+    if len(prob.conditions) != 1:
+        raise SystemExit(f"{record}: {len(prob.conditions)} conditions; this script reads records of one")
+    values = confirming_runs(record, list(ex.responses))
+    ev = SimpleNamespace(prob=prob, responses=list(ex.responses), spec=spec)
+    diag = json.loads((record / "diagnosis.json").read_text())
+    return reach.repeatability(ev, ex, {"confirm": {0: {"values": values}}}), values, diag
+
+
+def report() -> str:
+    from warpdem.diagnose import reach
+
+    lines = []
+    for folder, name in RECORDS:
+        scatter, values, diag = check(folder, name)
+        lines.append(f"{folder} ({name}): recorded verdict {diag['verdict']}, base reaches: {diag['base']['reaches']}")
+        for j, (r, s) in enumerate(scatter.items()):
+            df = "stated" if s["measured_df"] is None else f"{s['measured_df']} df"
+            lines.append(f"  {r}: runs {', '.join(f'{v:.2f}' for v in values[:, j])}")
+            lines.append(
+                f"  SD {s['simulated_sd']:.2f} ({s['simulated_df']} df) against {s['measured_sd']:.2f} ({df}): "
+                f"ratio {s['ratio']:.2f}, p {s['p_holm']:.2g}, scatters more: {'yes' if s['exceeds'] else 'no'}"
+            )
+        overdispersed = diag["base"]["reaches"] and any(s["exceeds"] for s in scatter.values())
+        now = "overdispersed" if overdispersed else diag["verdict"]
+        lines.append(f"  verdict now: {reach.WORDS[now].split(':')[0]}")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, help="also write the report to this file")
+    args = ap.parse_args(argv)
+    text = report()
+    print(text, end="")
+    if args.out:
+        args.out.write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
