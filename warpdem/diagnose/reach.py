@@ -20,11 +20,12 @@ one number can still test is reach. Stages (the simulations stored and reused as
    this is the one model error a single mean can still show.
 4. **The verdict** (:data:`VERDICTS`). The base reaches the data and repeats no worse than the measurement: NOT
    TESTABLE (no evidence of a model error, and none could show in the mean). It reaches the data but scatters
-   more: OVERDISPERSED (a model error; the candidates, judged by the mean, are not tried). It does not reach: every candidate of the library is taken through stage 2 with
-   its parameter added. One reaches: it is the only one (named by reach alone, never by held-out data, which
-   one value cannot give); several: NOT IDENTIFIABLE, with the measurement that best separates them
-   (:func:`pipeline.separating_measurement`); none: UNEXPLAINED. Each model that reaches the data gives its
-   predictions of the measurements the data lack (:func:`predictions`): the held-out test to make next.
+   more: OVERDISPERSED (a model error; the candidates, judged by the mean, are not tried). It does not reach:
+   every candidate of the library is taken through stage 2 with its parameter added. One reaches: it is the only
+   one (named by reach alone, never by held-out data, which one value cannot give); several: NOT IDENTIFIABLE,
+   with the measurement that best separates them (:func:`pipeline.separating_measurement`); none: UNEXPLAINED.
+   Each model that reaches the data gives its predictions of the measurements the data lack
+   (:func:`predictions`): the held-out test to make next.
 
 The gain of a candidate is measured on the confirming simulations at each model's closest point: the base's
 misfit against the candidate's, in the response's unit and in noise-budget SDs. It is a gain on the data fitted,
@@ -132,8 +133,8 @@ def repeatability(ev, ex, res: dict) -> dict:
     seeds, pooled over the training conditions, against the measurement's: the stated SD where the data give
     ``sd_<response>`` (taken as known), else the replicates' pooled SD (:meth:`Experiments.replicate_sd`).
     {response: {"simulated_sd", "simulated_df", "measured_sd", "measured_df" (None for a stated SD), "ratio" (SD
-    over SD), "F", "p", "p_holm" (over the responses), "exceeds" (p_holm < alpha)}}; a response with fewer than
-    two finite runs at every condition is left out."""
+    over SD), "F", "p", "p_holm" (over the responses), "exceeds" (p_holm < alpha)}}. A response is left out when
+    no condition has two finite runs, or when its replicates agree exactly (no scale to compare with)."""
     prob = ev.prob
     conds = sorted(set(prob.obs.loc[prob.train, "condition"]))
     out = {}
@@ -149,7 +150,7 @@ def repeatability(ev, ex, res: dict) -> dict:
         else:
             sd, meas_df = ex.replicate_sd(r)
             meas_var = sd**2
-        if not meas_var > 0:  # replicates that agree exactly leave no scale to compare with
+        if not meas_var > 0:
             continue
         f, p = inf.scatter_excess(sim_var, sim_df, meas_var, meas_df)
         out[r] = {
