@@ -15,7 +15,6 @@ Its output: ``reach_repeatability.txt`` beside it (README, "Diagnose", the repea
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 from types import SimpleNamespace
@@ -82,14 +81,12 @@ def report() -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, help="also write the report to this file")
-    args = ap.parse_args(argv)
-    text = report()
-    print(text, end="")
-    if args.out:
-        args.out.write_text(text)
-    return 0
+    import sys
+
+    sys.path.insert(0, str(HERE))  # for the shared command line beside this script
+    from report_cli import main as report_main
+
+    return report_main(__doc__, report, argv)
 
 
 if __name__ == "__main__":

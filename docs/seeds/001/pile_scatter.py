@@ -29,7 +29,6 @@ issue 23's fifteenth stage).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 from pathlib import Path
@@ -258,15 +257,14 @@ def bond_report() -> str:
     return "\n".join(out) + "\n"
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, help="also write the report to this file")
-    args = parser.parse_args()
-    text = report(piles()) + bond_report()
-    print(text, end="")
-    if args.out:
-        args.out.write_text(text)
+def main(argv=None) -> int:
+    import sys
+
+    sys.path.insert(0, str(HERE.parent))  # docs/seeds, for the shared command line
+    from report_cli import main as report_main
+
+    return report_main(__doc__, lambda: report(piles()) + bond_report(), argv)
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -27,7 +27,6 @@ sixteenth and seventeenth stages).
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
@@ -234,14 +233,12 @@ def report() -> str:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, help="also write the report to this file")
-    args = ap.parse_args(argv)
-    text = report()
-    print(text, end="")
-    if args.out:
-        args.out.write_text(text)
-    return 0
+    import sys
+
+    sys.path.insert(0, str(HERE.parent))  # docs/seeds, for the shared command line
+    from report_cli import main as report_main
+
+    return report_main(__doc__, report, argv)
 
 
 if __name__ == "__main__":
