@@ -7,7 +7,8 @@ TESTABLE. Each record keeps its simulated worlds (``runs/*.json``), among them t
 model's closest point (stage "base: confirm"). This script reads those runs and the data file the diagnosis read
 (``studies/diagnose/NAME.toml``, its experiments checked equal to the record's ``experiments.csv``) and applies
 :func:`warpdem.diagnose.reach.repeatability` to them, as a diagnosis run now would at that closest point (a rerun
-recalibrates, and its closest point moves with the code's surrogates, so its confirming runs would be new ones).
+recalibrates: on another machine's CPU its closest point is not bit-identical to the recorded one, so it asks for
+new confirming runs, at the seed's size a GPU's work).
 It prints, per record, the runs, their SD against the measurement's, the test and the verdict it gives now.
 
 Its output: ``reach_repeatability.txt`` beside it (README, "Diagnose", the repeatability check).
