@@ -550,13 +550,21 @@ def test_cli_reports_a_bad_data_file_without_a_traceback(tmp_path, capsys):
 
 def test_repository_data_files():
     """The data files under studies/diagnose load as written: the worked example, and seeds 000's and 001's one
-    measured angle each (seed 001's at two sizes), no more values than free parameters, which the diagnosis takes as a reach question."""
+    measured angle each (seed 001's at two sizes, and with its recalibrated model), no more values than free
+    parameters, which the diagnosis takes as a reach question."""
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "press_plasticity.toml")
     assert spec.rig == "die_press" and list(ex.responses) == ["residual_set_ratio"]
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed000_pellets.toml")
     assert training_values(ex) == 1 == len(spec.parameters)
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed001_wetfeed.toml")
     assert training_values(ex) == 1 and spec.parameter_names == ["X1", "X2", "X3"]
+    base = spec
+    spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed001_wetfeed_standard_scaled.toml")
+    # the recalibrated model: the standard rolling law and the surface energy times 0.2, nothing else changed
+    law = {f"interaction.grain.{m}.rolling_model": "standard" for m in ("grain", "steel")}
+    assert dict(spec.fixed) == dict(base.fixed) | law | {"surface_energy": 0.1}
+    assert [(p.low, p.high) for p in spec.parameters] == [(0.1, 0.5), (0.3, 0.9), (0.04, 0.16)]
+    assert spec.experiments_path == base.experiments_path
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed001_wetfeed_large.toml")
     assert training_values(ex) == 1 and spec.parameter_names == ["X1", "X2"]
     # the scatter seeds and the design share one launch, then the confirming seeds: 12 worlds of 25,000 grains
