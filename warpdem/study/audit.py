@@ -110,6 +110,14 @@ def reference_dir(path: str | os.PathLike | None = None) -> Path:
     return p
 
 
+def published(reference: str | os.PathLike | None = None) -> dict:
+    """The seed papers' published figures, ``published.toml`` of :func:`reference_dir` (``reference``): one table
+    per seed ("pellets", "wetfeed", "phosphate"). Raises FileNotFoundError when the reference data cannot be
+    found."""
+    with open(reference_dir(reference) / "published.toml", "rb") as fh:
+        return tomllib.load(fh)
+
+
 def _csv(ref: Path, name: str) -> pd.DataFrame:
     """A reference CSV read as text (the printed digits matter)."""
     return pd.read_csv(ref / name, dtype=str, keep_default_na=False)
@@ -1517,8 +1525,7 @@ def run_audit(reference: str | os.PathLike | None = None) -> list[dict]:
     cannot be found.
     """
     ref = reference_dir(reference)
-    with open(ref / "published.toml", "rb") as fh:
-        pub = tomllib.load(fh)
+    pub = published(ref)
     a = _Audit()
     _pellets(a, ref, pub)
     _wetfeed(a, ref, pub)

@@ -35,18 +35,12 @@ from pathlib import Path
 
 import numpy as np
 
+from warpdem.study.audit import published
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[2]
-
-
-def _published() -> dict:
-    """Seed 001's published figures (the [wetfeed] table of studies/reference/published.toml)."""
-    from warpdem.study.spec import tomllib  # tomli before Python 3.11
-
-    return tomllib.loads((ROOT / "studies" / "reference" / "published.toml").read_text())["wetfeed"]
-
-
-_PUBLISHED = _published()
+_PUBLISHED = published()["wetfeed"]
+"""Seed 001's published figures (studies/reference/published.toml)."""
 TARGET = float(_PUBLISHED["measured_aor_deg"])
 """The seed's measured angle of repose [deg] (studies/reference/published.toml)."""
 SEED_VERIFICATION = tuple(float(v) for v in _PUBLISHED["verification_aor_deg"])
