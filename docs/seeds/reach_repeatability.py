@@ -75,8 +75,7 @@ def report() -> str:
                 f"  SD {s['simulated_sd']:.2f} ({s['simulated_df']} df) against {s['measured_sd']:.2f} ({df}): "
                 f"ratio {s['ratio']:.2f}, p {s['p_holm']:.2g}, scatters more: {'yes' if s['exceeds'] else 'no'}"
             )
-        overdispersed = diag["base"]["reaches"] and any(s["exceeds"] for s in scatter.values())
-        now = "overdispersed" if overdispersed else diag["verdict"]
+        now = reach.reached_verdict(scatter) if diag["base"]["reaches"] else diag["verdict"]
         lines.append(f"  verdict now: {reach.WORDS[now].split(':')[0]}")
     return "\n".join(lines) + "\n"
 

@@ -168,6 +168,12 @@ def repeatability(ev, ex, res: dict) -> dict:
     return out
 
 
+def reached_verdict(scatter: dict) -> str:
+    """The verdict of a base model that reaches the data, given its :func:`repeatability`: "overdispersed" when a
+    response scatters more than its measurement, else "not_testable"."""
+    return "overdispersed" if any(s["exceeds"] for s in scatter.values()) else "not_testable"
+
+
 def scatter_words(scatter: dict) -> str:
     """The responses that scatter more, for the verdict line: "r: SD a against b, p q; ..."."""
     return "; ".join(
@@ -219,8 +225,7 @@ def run(ev, base_model, spec, ex, log) -> tuple[dict, dict]:
         "gains": {},
     }
     if results["base"]["reaches"]:
-        if any(s["exceeds"] for s in scatter.values()):
-            decision["verdict"] = "overdispersed"
+        decision["verdict"] = reached_verdict(scatter)
         return results, decision
     lib, skipped = _library(spec, ex, ev.prob.conditions)
     models = [Model.extended(base_model, c) for c in lib]
