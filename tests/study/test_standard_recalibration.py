@@ -84,3 +84,22 @@ def test_size_pairs_pour_one_setting_and_agree_with_statsmodels(recal):
     cols = ["X1_actual", "X2_actual", "X3_actual"]
     small, large = (pd.read_csv(HERE / rel) for rel in recal.SIZE_PAIRS[1][1:])
     assert small[cols].equals(large[cols])
+
+
+def test_x3_slopes_agree_with_statsmodels(recal):
+    """Each slope pair holds X1 and X2 and steps X3 alone; the slope is the difference of the means over the step
+    and its interval statsmodels' Welch interval of that difference over the same step. The composite's slope at
+    the scaled optimum is the 166.9 deg per J/m^2 that wetfeed_verify_standard_scaled_step.toml stepped along."""
+    from statsmodels.stats.weightstats import CompareMeans, DescrStatsW
+
+    for _, first, second in recal.SLOPES:
+        a, b = recal.verification_values(first), recal.verification_values(second)
+        dx = recal.settings(second)["X3"] - recal.settings(first)["X3"]
+        slope, (lo, hi), p, _ = recal.x3_slope(first, second)
+        cm = CompareMeans(DescrStatsW(b), DescrStatsW(a))
+        d_lo, d_hi = cm.tconfint_diff(usevar="unequal")
+        assert slope == pytest.approx((b.mean() - a.mean()) / dx, rel=1e-12)
+        assert (lo, hi) == pytest.approx(tuple(sorted((d_lo / dx, d_hi / dx))), rel=1e-9)
+        assert p == pytest.approx(cm.ttest_ind(usevar="unequal")[1], rel=1e-9)
+    optimum = recal.settings(recal.VERIFICATIONS[3][1])
+    assert recal.composite_slope(optimum) == pytest.approx(166.9, abs=0.05)

@@ -19,10 +19,13 @@ the seed's response, it prints:
 - each verification's piles, mean, SD, 95 % interval of the mean and t test against the measured 54.25 deg, beside
   the paper's five verification angles;
 - for each setting poured with 6,000 and with the seed's 25,000 grains (:data:`SIZE_PAIRS`), the difference of the
-  means (Welch's t test) and the ratio of the variances (F test, one-sided: does the smaller pile scatter more).
+  means (Welch's t test) and the ratio of the variances (F test, one-sided: does the smaller pile scatter more);
+- for each pair of verifications that differ in the surface energy X3 alone (:data:`SLOPES`), the pile's slope in
+  X3 measured between them with its 95 % interval (Welch's for the difference of the means, over the step), beside
+  the scaled composite's slope at the midpoint.
 
 Output of this script: ``standard_recalibration.txt`` beside it (README, "Seed 001 recalibrated", issue 23's
-sixteenth and seventeenth stages).
+sixteenth to eighteenth stages).
 """
 
 from __future__ import annotations
@@ -63,6 +66,7 @@ VERIFICATIONS = (
     ("scaled composite's optimum, 6,000 grains", "ccd_standard_scaled/verification/verification.json"),
     ("one step in X3 past it, 6,000 grains", "verify_standard_scaled_step/results.csv"),
     ("the same point, 25,000 grains", "verify_large_standard_scaled/results.csv"),
+    ("one more step in X3, 25,000 grains", "verify_large_standard_scaled_step/results.csv"),
 )
 """(label, file under this folder): a verification.json's ``values`` or a results.csv's ``aor_deg``."""
 SIZE_PAIRS = (
@@ -74,6 +78,13 @@ SIZE_PAIRS = (
     ("one step in X3 past the scaled optimum", VERIFICATIONS[4][1], VERIFICATIONS[5][1]),
 )
 """(label, 6,000-grain piles, 25,000-grain piles): one setting poured at both sizes."""
+SLOPES = (
+    ("6,000 grains, the scaled optimum to the step past it", VERIFICATIONS[3][1], VERIFICATIONS[4][1]),
+    ("25,000 grains, the step's point to one more step", VERIFICATIONS[5][1], VERIFICATIONS[6][1]),
+)
+"""(label, piles at one surface energy, piles at another, X1 and X2 the same): the pile's slope in X3 measured
+between two verifications, beside the scaled composite's (fitted on 6,000-grain piles)."""
+COMPOSITE_FOR_SLOPE = "ccd_standard_scaled"
 
 
 def _read(path: Path):
@@ -140,6 +151,49 @@ def verification_values(rel: str):
     if path.suffix == ".json":
         return np.asarray(json.loads(path.read_text())["values"], float)
     return _read(path).aor_deg.to_numpy(float)
+
+
+def settings(rel: str) -> dict:
+    """The X1, X2, X3 [actual units] of one verification record (a one-point ``results.csv`` or a
+    verification.json's ``settings``)."""
+    path = HERE / rel
+    if path.suffix == ".json":
+        return {n: float(v) for n, v in json.loads(path.read_text())["settings"].items()}
+    t = _read(path)
+    out = {}
+    for n in CCD:
+        values = t[f"{n}_actual"].unique()
+        if values.size != 1:
+            raise SystemExit(f"{path}: {n}_actual holds {list(values)}; a one-point verification expected")
+        out[n] = float(values[0])
+    return out
+
+
+def composite_slope(x: dict) -> float:
+    """The scaled composite's d(angle)/d(X3) [deg per J/m^2] at the point ``x`` (its record's actual
+    coefficients)."""
+    b = _read(HERE / COMPOSITE_FOR_SLOPE / "analysis" / "coefficients_aor_deg.csv").set_index("Term")
+    b = b["Actual Coefficient"]
+    return float(b["X3"] + b["X1*X3"] * x["X1"] + b["X2*X3"] * x["X2"] + 2.0 * b["X3^2"] * x["X3"])
+
+
+def x3_slope(first: str, second: str):
+    """(measured slope [deg per J/m^2], its 95 % interval, Welch's two-sided p, the composite's slope at the
+    midpoint) between two verifications that differ only in X3; the interval is Welch's for the difference of
+    the means over the step in X3."""
+    from scipy import stats
+
+    xa, xb = settings(first), settings(second)
+    # the studies write a chosen point to 4 decimals
+    if any(round(xa[n], 4) != round(xb[n], 4) for n in ("X1", "X2")) or round(xa["X3"], 4) == round(xb["X3"], 4):
+        raise SystemExit(f"{first}, {second}: not one step in X3 alone ({xa}, {xb})")
+    a, b = verification_values(first), verification_values(second)
+    w = stats.ttest_ind(b, a, equal_var=False)
+    lo, hi = w.confidence_interval(0.95)
+    dx = xb["X3"] - xa["X3"]
+    mid = xa | {"X3": 0.5 * (xa["X3"] + xb["X3"])}
+    ends = sorted((lo / dx, hi / dx))
+    return (b.mean() - a.mean()) / dx, (ends[0], ends[1]), float(w.pvalue), composite_slope(mid)
 
 
 def one_sample(values):
@@ -223,6 +277,15 @@ def report() -> str:
     for label, small, large in SIZE_PAIRS:
         d, t, pt, f, pf = size_effect(verification_values(small), verification_values(large))
         put(f"{label}: {d:+.2f} deg, t {t:.2f}, p {pt:.2g}; variance ratio {f:.1f}, p {pf:.2g} (one-sided)")
+
+    put("")
+    put("== The pile's slope in X3 between two verifications [deg per J/m^2] (95 % interval, Welch), beside the")
+    put(f"   scaled composite's at the midpoint ({COMPOSITE_FOR_SLOPE}, fitted on 6,000-grain piles)")
+    for label, first, second in SLOPES:
+        slope, (lo, hi), pw, model = x3_slope(first, second)
+        xa, xb = settings(first)["X3"], settings(second)["X3"]
+        put(f"{label} (X3 {xa:.4f} to {xb:.4f} J/m^2): {slope:.1f} ({lo:.1f} to {hi:.1f}), p {pw:.2g}")
+        put(f"  the composite's: {model:.1f}; measured / composite {slope / model:.2f}")
     return "\n".join(lines) + "\n"
 
 
