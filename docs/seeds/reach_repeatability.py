@@ -2,14 +2,17 @@
 
     python docs/seeds/reach_repeatability.py [--out FILE]
 
-The three reach diagnoses kept under ``docs/seeds/`` (:data:`RECORDS`) ran before the check existed and said NOT
-TESTABLE. Each record keeps its simulated worlds (``runs/*.json``), among them the confirming runs at the base
+The first three reach diagnoses kept under ``docs/seeds/`` (:data:`RECORDS`) ran before the check existed and said
+NOT TESTABLE; the fourth, seed 001's recalibrated model (EDEM's standard rolling friction, the surface energy's range
+times 0.2), ran with it. Each record keeps its simulated worlds (``runs/*.json``), among them the confirming runs at the base
 model's closest point (stage "base: confirm"). This script reads those runs and the data file the diagnosis read
 (``studies/diagnose/NAME.toml``, its experiments checked equal to the record's ``experiments.csv``) and applies
 :func:`warpdem.diagnose.reach.repeatability` to them, as a diagnosis run now would at that closest point (a rerun
 recalibrates: on another machine's CPU its closest point is not bit-identical to the recorded one, so it asks for
 new confirming runs, at the seed's size a GPU's work).
-It prints, per record, the runs, their SD against the measurement's, the test and the verdict it gives now.
+It prints, per record, the runs, their SD against the measurement's, the test and the verdict it gives now; then
+the gain in repeatability of the recalibrated model over the one it replaced (:data:`GAIN`): the ratio of the two
+models' confirming-run variances at their closest points, one-sided F test.
 
 Its output: ``reach_repeatability.txt`` beside it (README, "Diagnose", the repeatability check).
 """
@@ -28,8 +31,12 @@ RECORDS = (
     ("000/reach", "seed000_pellets"),
     ("001/reach", "seed001_wetfeed"),
     ("001/reach_large", "seed001_wetfeed_large"),
+    ("001/reach_standard_scaled", "seed001_wetfeed_standard_scaled"),
 )
 """(record folder under docs/seeds, its data file's name under studies/diagnose)."""
+GAIN = (RECORDS[1], RECORDS[3])
+"""(the base model's record, the recalibrated model's): seed 001 at 6,000 grains, our spheres' EPSD against EDEM's
+standard rolling friction with the surface energy scaled."""
 STAGE = "base: confirm"
 
 
@@ -77,7 +84,22 @@ def report() -> str:
             )
         now = reach.reached_verdict(scatter) if diag["base"]["reaches"] else diag["verdict"]
         lines.append(f"  verdict now: {reach.WORDS[now].split(':')[0]}")
+    (old, old_name), (new, new_name) = GAIN
+    f, p, df = gain(old, old_name, new, new_name)
+    lines.append(f"gain in repeatability, {new} over {old}: variance ratio {f:.1f} on ({df[0]}, {df[1]}) df, p {p:.2g}")
     return "\n".join(lines) + "\n"
+
+
+def gain(old: str, old_name: str, new: str, new_name: str):
+    """(variance ratio old / new, its one-sided F p, (df old, df new)) of two records' confirming runs, one response."""
+    from scipy import stats
+
+    a, b = check(old, old_name)[1], check(new, new_name)[1]
+    if a.shape[1] != 1 or b.shape[1] != 1:
+        raise SystemExit(f"{old}, {new}: one response each expected")
+    f = float(a[:, 0].var(ddof=1) / b[:, 0].var(ddof=1))
+    df = (a.shape[0] - 1, b.shape[0] - 1)
+    return f, float(stats.f.sf(f, *df)), df
 
 
 def main(argv=None) -> int:
