@@ -57,6 +57,7 @@ COUNTS = {
     "wetfeed_verify_standard_scaled_step": 5,
     "wetfeed_verify_large_standard_scaled": 5,
     "wetfeed_verify_large_standard_scaled_step": 5,
+    "wetfeed_verify_large_standard_scaled_friction": 5,
 }
 
 
@@ -206,7 +207,9 @@ def test_seed_001_verification_points_come_from_their_records(studies, tables):
     X1 and X2 and moves X3 by (54.25 - the verification's mean) over the fitted surface's slope in X3 there (its
     record's actual coefficients), the step its header states: 0.0941 + 1.86 / 166.9 = 0.1052 J/m^2.
     wetfeed_verify_large_standard_scaled pours the seed's 25,000 grains at that step's point, and
-    wetfeed_verify_large_standard_scaled_step steps again from its mean: 0.1052 - 2.36 / 165.5 = 0.0909 J/m^2."""
+    wetfeed_verify_large_standard_scaled_step steps again from its mean: 0.1052 - 2.36 / 165.5 = 0.0909 J/m^2.
+    wetfeed_verify_large_standard_scaled_friction steps from that record's mean in X1 instead, along the surface's
+    slope in X1 there: 0.2752 - 1.81 / 64.0 = 0.2470."""
     import json
 
     names = ("X1", "X2", "X3")
@@ -251,6 +254,19 @@ def test_seed_001_verification_points_come_from_their_records(studies, tables):
     t = tables["wetfeed_verify_large_standard_scaled_step"]
     assert {tuple(r) for r in t[[f"{n}_actual" for n in names]].to_numpy()} == {
         (round(x1, 4), round(x2, 4), round(x3 + (v["target"] - mean) / slope, 4))
+    }
+    assert list(t["world_seed"]) == [0, 1, 2, 3, 4]
+
+    # wetfeed_verify_large_standard_scaled_friction: from that step's mean, along the slope in X1 there, X2, X3 held
+    friction = studies["wetfeed_verify_large_standard_scaled_friction"]
+    assert dict(friction.fixed) == dict(again.fixed) and friction.factors == again.factors
+    x1, x2, x3 = round(x1, 4), round(x2, 4), round(x3 + (v["target"] - mean) / slope, 4)
+    slope_x1 = b["X1"] + b["X1*X2"] * x2 + b["X1*X3"] * x3 + 2.0 * b["X1^2"] * x1
+    assert slope_x1 == pytest.approx(64.0, abs=0.05)
+    mean = pd.read_csv(RECORDS_001 / "verify_large_standard_scaled_step" / "results.csv")["aor_deg"].mean()
+    t = tables["wetfeed_verify_large_standard_scaled_friction"]
+    assert {tuple(r) for r in t[[f"{n}_actual" for n in names]].to_numpy()} == {
+        (round(x1 + (v["target"] - mean) / slope_x1, 4), x2, x3)
     }
     assert list(t["world_seed"]) == [0, 1, 2, 3, 4]
 
