@@ -103,3 +103,20 @@ def test_x3_slopes_agree_with_statsmodels(recal):
         assert p == pytest.approx(cm.ttest_ind(usevar="unequal")[1], rel=1e-9)
     optimum = recal.settings(recal.VERIFICATIONS[3][1])
     assert recal.composite_slope(optimum) == pytest.approx(166.9, abs=0.05)
+
+
+def test_pile_heights_belong_to_the_piles_read(recal):
+    """Each slope verification's heap heights come one per pile, from the same runs as its angles (a results.csv
+    row's run record has that row's angle), and the seed's 25,000 grains stand taller than 6,000."""
+    import json
+
+    for rel in {rel for _, *pair in recal.SLOPES for rel in pair}:
+        h = recal.pile_heights(rel)
+        assert h.shape == recal.verification_values(rel).shape and np.all((h > 0.02) & (h < 0.5))
+        if rel.endswith(".csv"):
+            t = pd.read_csv(HERE / rel)
+            for pid, angle in zip(t.point_id, t.aor_deg):
+                kept = json.loads((HERE / rel).parent.joinpath("runs", f"{pid}.json").read_text())
+                assert kept["responses"]["aor_deg"] == pytest.approx(angle, rel=1e-12)
+    (_, small, _), (_, large, _) = recal.SIZE_PAIRS[1], recal.SLOPES[1]
+    assert recal.pile_heights(large).mean() > 1.3 * recal.pile_heights(small).mean()

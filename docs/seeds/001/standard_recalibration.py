@@ -22,7 +22,8 @@ the seed's response, it prints:
   means (Welch's t test) and the ratio of the variances (F test, one-sided: does the smaller pile scatter more);
 - for each pair of verifications that differ in the surface energy X3 alone (:data:`SLOPES`), the pile's slope in
   X3 measured between them with its 95 % interval (Welch's for the difference of the means, over the step), beside
-  the scaled composite's slope at the midpoint.
+  the scaled composite's slope at the midpoint, and the two sizes' mean heap heights (a cohesive share of the angle
+  going as the cohesive stress over the heap's weight, gamma / (R rho g H), makes the slope go as 1 / H).
 
 Output of this script: ``standard_recalibration.txt`` beside it (README, "Seed 001 recalibrated", issue 23's
 sixteenth to eighteenth stages).
@@ -169,6 +170,18 @@ def settings(rel: str) -> dict:
     return out
 
 
+def pile_heights(rel: str) -> np.ndarray:
+    """The heap heights [m] of one verification's piles, in the order of :func:`verification_values` (a
+    verification.json's ``metrics``, or each results.csv row's run record under ``runs/``)."""
+    path = HERE / rel
+    if path.suffix == ".json":
+        return np.asarray(json.loads(path.read_text())["metrics"]["pile_height_m"], float)
+    runs = path.parent / "runs"
+    return np.array(
+        [json.loads((runs / f"{pid}.json").read_text())["metrics"]["pile_height_m"] for pid in _read(path).point_id]
+    )
+
+
 def composite_slope(x: dict) -> float:
     """The scaled composite's d(angle)/d(X3) [deg per J/m^2] at the point ``x`` (its record's actual
     coefficients)."""
@@ -286,6 +299,14 @@ def report() -> str:
         xa, xb = settings(first)["X3"], settings(second)["X3"]
         put(f"{label} (X3 {xa:.4f} to {xb:.4f} J/m^2): {slope:.1f} ({lo:.1f} to {hi:.1f}), p {pw:.2g}")
         put(f"  the composite's: {model:.1f}; measured / composite {slope / model:.2f}")
+    # cohesion's share of the angle goes as the bulk cohesive stress (gamma / R) over the heap's weight stress
+    # (rho g H): the same grains in a taller heap should feel X3 as 1 / H
+    h_small = np.concatenate([pile_heights(rel) for rel in SLOPES[0][1:]]).mean()
+    h_large = np.concatenate([pile_heights(rel) for rel in SLOPES[1][1:]]).mean()
+    put(
+        f"heap height: {1e3 * h_small:.1f} mm at 6,000 grains, {1e3 * h_large:.1f} mm at 25,000; a slope going as "
+        f"1 / H would fall to {h_small / h_large:.2f} of the 6,000-grain one at the larger size"
+    )
     return "\n".join(lines) + "\n"
 
 
