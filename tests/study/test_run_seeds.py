@@ -36,3 +36,20 @@ def test_an_unknown_step_is_refused_by_name(run_seeds, tmp_path, lane):
     assert repr(lane) in str(e.value)
     if lane.endswith("pellets_bdd"):
         assert "not found: pellets_bdd" in str(e.value)
+
+
+def test_the_scaled_presses_carry_the_recalibrated_set(run_seeds, tmp_path):
+    """Both presses of seed 001's recalibrated model set the sixteenth stage's X1, X2, X3 and the standard rolling
+    model on the feed's pairs; the fuller one adds only the fill height, and the words stay words."""
+    ((_, base),) = run_seeds.parse_lane("cuda:0=die_press_standard_scaled", tmp_path)
+    ((_, full),) = run_seeds.parse_lane("cuda:0=die_press_standard_scaled_80", tmp_path)
+    sets = [base[i + 1] for i, a in enumerate(base) if a == "--set"]
+    assert sets == [
+        "die_press.interaction.feed.feed.rolling_friction=0.2752",
+        "die_press.interaction.feed.feed.static_friction=0.5904",
+        "die_press.interaction.feed.feed.surface_energy=0.1052",
+        "die_press.interaction.feed.feed.rolling_model=standard",
+        "die_press.interaction.feed.steel.rolling_model=standard",
+    ]
+    assert [full[i + 1] for i, a in enumerate(full) if a == "--set"] == sets + ["die_press.fill_height=0.0835"]
+    assert full[full.index("--out") + 1] == str(tmp_path / "die_press_standard_scaled_80")
