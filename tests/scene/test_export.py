@@ -6,7 +6,14 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from warpdem.scene.export import ResultWriter, ShapeGeometry, WallGeometry, expand_clumps, side_view_png
+from warpdem.scene.export import (
+    ResultWriter,
+    ShapeGeometry,
+    WallGeometry,
+    expand_clumps,
+    save_figure,
+    side_view_png,
+)
 
 # usd-core may be missing: skip the module rather than fail at import
 Sdf = pytest.importorskip("pxr.Sdf")
@@ -283,6 +290,39 @@ def test_side_view_png_writes_file(tmp_path):
     )
     data = open(path, "rb").read()
     assert len(data) > 1000 and data[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_figure_is_saved_as_a_palette_png_that_looks_the_same(tmp_path):
+    """save_figure writes a .png as a 256-colour palette image, smaller than matplotlib's own RGBA file, whose
+    pixels are matplotlib's up to the quantizer's rounding where a plot's colours are few; another suffix is
+    matplotlib's own format (a PDF stays a PDF)."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    fig, ax = plt.subplots(figsize=(4, 3))
+    ax.plot([0, 1, 2], [0, 1, 4], color="tab:red")
+    ax.axhline(2.0, color="0.5", ls="--")
+    try:
+        plain = io.BytesIO()
+        fig.savefig(plain, format="png", dpi=80)
+        got = save_figure(fig, tmp_path / "plot.png", dpi=80)
+        save_figure(fig, tmp_path / "plot.pdf")
+    finally:
+        plt.close(fig)
+    assert got == str(tmp_path / "plot.png")
+    data = (tmp_path / "plot.png").read_bytes()
+    assert len(data) < len(plain.getvalue())
+    with Image.open(tmp_path / "plot.png") as out, Image.open(io.BytesIO(plain.getvalue())) as ref:
+        assert out.mode == "P" and out.size == ref.size
+        a, b = np.asarray(out.convert("RGBA"), int), np.asarray(ref.convert("RGBA"), int)
+    # antialiased edges blend many shades; a palette of 256 keeps nearly every pixel within a few levels
+    assert np.mean(np.abs(a - b).max(axis=2) <= 8) > 0.99
+    assert (tmp_path / "plot.pdf").read_bytes()[:5] == b"%PDF-"
 
 
 def test_side_view_true_size_and_near_covers_far(tmp_path):

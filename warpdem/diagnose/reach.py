@@ -40,6 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
+from warpdem.scene.export import save_figure
+
 from . import candidates as cands
 from . import inference as inf
 
@@ -332,7 +334,7 @@ def _plot(out: Path, prob, results: dict) -> list[str]:
         ax.legend(fontsize=8, loc="lower right")
         fig.tight_layout()
         f = out / f"reach_{o['response']}_{i}.png"
-        fig.savefig(f, dpi=110)
+        save_figure(fig, f, dpi=110)
         plt.close(fig)
         files.append(f.name)
     return files

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from warpdem.scene.export import save_figure
 from warpdem.scene.runner import _json_default
 
 from . import candidates as cands
@@ -110,7 +111,7 @@ def _plots(out: Path, prob, evals: dict, named: str | None) -> list[str]:
         ax.legend(fontsize=8)
         fig.tight_layout()
         f = out / f"measured_vs_simulated_{r}.png"
-        fig.savefig(f, dpi=110)
+        save_figure(fig, f, dpi=110)
         plt.close(fig)
         files.append(f.name)
     train = prob.train
@@ -130,7 +131,7 @@ def _plots(out: Path, prob, evals: dict, named: str | None) -> list[str]:
         ax.legend(fontsize=8)
         fig.tight_layout()
         f = out / f"residuals_vs_{c.replace('.', '_')}.png"
-        fig.savefig(f, dpi=110)
+        save_figure(fig, f, dpi=110)
         plt.close(fig)
         files.append(f.name)
     if prob.experiments.curves:
@@ -149,7 +150,7 @@ def _plots(out: Path, prob, evals: dict, named: str | None) -> list[str]:
         ax.set_title("Press curves: measured (black), base (C0) and extended (C1)")
         fig.tight_layout()
         f = out / "press_curves.png"
-        fig.savefig(f, dpi=110)
+        save_figure(fig, f, dpi=110)
         plt.close(fig)
         files.append(f.name)
     return files

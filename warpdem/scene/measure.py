@@ -36,6 +36,8 @@ import numpy as np
 from warpdem.engine.checks import fail, finite_number
 from warpdem.errors import InputError
 
+from .export import save_figure
+
 __all__ = [
     "SettleMonitor",
     "angle_cone",
@@ -1816,7 +1818,7 @@ def plot_press(curve: dict, path, unload: dict | None = None, force_limit: float
     ax.set_ylabel("piston force [N]")
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
     return str(path)
 
@@ -1838,7 +1840,7 @@ def plot_angles(result: dict, path) -> str:
     ax.set_ylabel("angle of repose [deg]")
     ax.legend(loc="lower right")
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
     return str(path)
 
@@ -1898,7 +1900,7 @@ def plot_impacts(walls, path, title: str | None = None) -> str:
         fig.colorbar(sm, ax=fig.axes, shrink=0.7, label="impact energy per area [J/m²]")
     if title:
         fig.suptitle(title)
-    fig.savefig(str(path))
+    save_figure(fig, path)
     plt.close(fig)
     return str(path)
 
@@ -1956,6 +1958,6 @@ def plot_drum(s, h, r, surface: dict, path, drum_radius: float, title: str | Non
     if title:
         ax.set_title(title, fontsize=9)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
     return str(path)

@@ -30,6 +30,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from warpdem.scene.export import save_figure
+
 from .analysis import (
     ModelFit,
     Term,
@@ -356,7 +358,7 @@ def _plot_pareto(path: Path, eff: pd.DataFrame, alpha: float, df_res: int, title
     ax.set_xlabel("term (rank order)")
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
 
 
 def _grid(fit: ModelFit, a: str, b: str, region: Mapping[str, tuple[float, float]], n: int = 61):
@@ -419,7 +421,7 @@ def _plot_contour(
     held = ", ".join(others)
     ax.set_title(f"{resp['name']}" + (f" ({held} at centre)" if held else ""), fontsize=9)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
 
 
 def _plot_surface(
@@ -446,7 +448,7 @@ def _plot_surface(
     ax.set_title(resp["name"] + (f" ({', '.join(others)} at centre)" if others else ""), fontsize=9)
     ax.zaxis.labelpad = 6
     # the z label sits outside the axes box: a tight box keeps it
-    fig.savefig(path, bbox_inches="tight", pad_inches=0.3)
+    save_figure(fig, path, bbox_inches="tight", pad_inches=0.3)
 
 
 def _plot_model_graphs(path: Path, fit: ModelFit, eff: pd.DataFrame, two_level: bool, top: list[str], resp) -> list:
@@ -516,7 +518,7 @@ def _plot_model_graphs(path: Path, fit: ModelFit, eff: pd.DataFrame, two_level: 
             ax.set_ylim(-1.5, 1.8)
     fig.suptitle(f"Model graphs: {resp['name']}", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     return panels
 
 
@@ -909,7 +911,7 @@ def _plot_diagnostics(out: Path, tag: str, fit: ModelFit, diag: dict, runs, used
     ax.set(xlabel="lambda", ylabel="ln(residual SS)", title="Box-Cox plot for power transforms")
     fig.suptitle(f"Diagnostics: {name}")
     fig.tight_layout()
-    fig.savefig(out / f"diagnostics_{tag}.png", dpi=90)
+    save_figure(fig, out / f"diagnostics_{tag}.png", dpi=90)
     k = len(fnames)
     fig = Figure(figsize=(4.5 * k, 4))
     axes = fig.subplots(1, k, squeeze=False)
@@ -920,7 +922,7 @@ def _plot_diagnostics(out: Path, tag: str, fit: ModelFit, diag: dict, runs, used
         ax.axhline(0, color="k", lw=0.5)
         ax.set(xlabel=f"{f} (coded)", ylabel="externally studentized residual", title=f"Residuals vs {f}")
     fig.tight_layout()
-    fig.savefig(out / f"residuals_vs_factors_{tag}.png", dpi=90)
+    save_figure(fig, out / f"residuals_vs_factors_{tag}.png", dpi=90)
     return [f"diagnostics_{tag}.png", f"residuals_vs_factors_{tag}.png"]
 
 
@@ -949,7 +951,7 @@ def settling_section(out: Path, runs: Sequence[tuple[int, dict]]) -> list[str]:
     if len(runs) <= 20:
         ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    fig.savefig(Path(out) / "settling.png", dpi=90)
+    save_figure(fig, Path(out) / "settling.png", dpi=90)
     lines = ["", "## Settling", ""]
     if thresholds:
         lines.append(
