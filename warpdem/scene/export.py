@@ -914,8 +914,11 @@ def palette_png(data: bytes) -> bytes:
         im.load()
         if im.mode == "P":
             return data
+        rgba = im.convert("RGBA")
+        # an opaque picture (matplotlib's, on its white page) needs no transparency in its palette
+        src = rgba.convert("RGB") if rgba.getchannel("A").getextrema() == (255, 255) else rgba
         buf = io.BytesIO()
-        im.convert("RGBA").quantize(PNG_COLOURS, method=Image.Quantize.FASTOCTREE).save(buf, "PNG", optimize=True)
+        src.quantize(PNG_COLOURS, method=Image.Quantize.FASTOCTREE).save(buf, "PNG", optimize=True)
     return buf.getvalue() if buf.tell() < len(data) else data
 
 
