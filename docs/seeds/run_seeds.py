@@ -22,9 +22,9 @@ studies/diagnose/seed00N_*.toml``); seed 001's press and reach diagnosis with th
 recalibrated (die_press_standard_scaled, with a fuller die die_press_standard_scaled_80, seed001_reach_standard_scaled).
 A lane runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
 side by side and may share a device, but two processes on one GPU time-slice it: on one H200 (2026-12-01) a
-25,000-grain study beside a one-world press took 1,076 s where it had taken 516 s alone, and the press about 1,110 s
-against about 700 s. Give each lane its own devices. The default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the
-other three.
+25,000-grain study beside a one-world press took 1,076 s where it had taken 516 s alone, and the press about 1,113 s
+against about 700 s (together 1,113 s against 1,214 s one after the other). Give each lane its own devices where
+its wall time is to be reported. The default, for 4 GPUs: seed 001 on cuda:0, seed 002 on the other three.
 
 Every step is a ``warpdem`` command that resumes where it stopped: each gets ``--stop-after`` the time left of
 ``--budget`` less :data:`STOP_MARGIN` and exits 3 when it stops, which ends its lane for this call. Run the same
