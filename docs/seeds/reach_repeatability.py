@@ -71,9 +71,10 @@ def check(folder: str, name: str) -> tuple[dict, np.ndarray, dict]:
 def report() -> str:
     from warpdem.diagnose import reach
 
-    lines = []
+    lines, kept = [], {}
     for folder, name in RECORDS:
         scatter, values, diag = check(folder, name)
+        kept[folder] = values
         lines.append(f"{folder} ({name}): recorded verdict {diag['verdict']}, base reaches: {diag['base']['reaches']}")
         for j, (r, s) in enumerate(scatter.items()):
             df = "stated" if s["measured_df"] is None else f"{s['measured_df']} df"
@@ -84,22 +85,23 @@ def report() -> str:
             )
         now = reach.reached_verdict(scatter) if diag["base"]["reaches"] else diag["verdict"]
         lines.append(f"  verdict now: {reach.WORDS[now].split(':')[0]}")
-    (old, old_name), (new, new_name) = GAIN
-    f, p, df = gain(old, old_name, new, new_name)
+    (old, _), (new, _) = GAIN
+    f, p, df = gain(kept[old], kept[new])
     lines.append(f"gain in repeatability, {new} over {old}: variance ratio {f:.1f} on ({df[0]}, {df[1]}) df, p {p:.2g}")
     return "\n".join(lines) + "\n"
 
 
-def gain(old: str, old_name: str, new: str, new_name: str):
-    """(variance ratio old / new, its one-sided F p, (df old, df new)) of two records' confirming runs, one response."""
-    from scipy import stats
+def gain(old: np.ndarray, new: np.ndarray):
+    """(variance ratio old / new, its one-sided F p, (df old, df new)) of two models' confirming runs, shape (runs,
+    1) each: the repeatability check's own test (:func:`warpdem.diagnose.inference.scatter_excess`) with the new
+    model's runs in the measurement's place."""
+    from warpdem.diagnose import inference as inf
 
-    a, b = check(old, old_name)[1], check(new, new_name)[1]
-    if a.shape[1] != 1 or b.shape[1] != 1:
-        raise SystemExit(f"{old}, {new}: one response each expected")
-    f = float(a[:, 0].var(ddof=1) / b[:, 0].var(ddof=1))
-    df = (a.shape[0] - 1, b.shape[0] - 1)
-    return f, float(stats.f.sf(f, *df)), df
+    if old.shape[1] != 1 or new.shape[1] != 1:
+        raise SystemExit(f"gain: one response each expected, got shapes {old.shape} and {new.shape}")
+    df = (old.shape[0] - 1, new.shape[0] - 1)
+    f, p = inf.scatter_excess(float(old[:, 0].var(ddof=1)), df[0], float(new[:, 0].var(ddof=1)), df[1])
+    return f, p, df
 
 
 def main(argv=None) -> int:

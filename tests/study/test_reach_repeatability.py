@@ -51,8 +51,9 @@ def test_the_gain_in_repeatability_is_an_f_test_on_two_by_two_df(rr):
     """Three confirming runs each: the variance ratio's upper tail on (2, 2) df is 1 / (1 + F) in closed form, and
     F(2, 2) at 0.05 is 19.0 (published tables)."""
     (old, old_name), (new, new_name) = rr.GAIN
-    f, p, df = rr.gain(old, old_name, new, new_name)
-    a, b = rr.check(old, old_name)[1][:, 0], rr.check(new, new_name)[1][:, 0]
+    a, b = rr.check(old, old_name)[1], rr.check(new, new_name)[1]
+    f, p, df = rr.gain(a, b)
+    a, b = a[:, 0], b[:, 0]
     assert df == (2, 2) and f == pytest.approx(a.var(ddof=1) / b.var(ddof=1), rel=1e-12)
     assert p == pytest.approx(1.0 / (1.0 + f), rel=1e-9)
     assert (f > 19.0) == (p < 0.05)
