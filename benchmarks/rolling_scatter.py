@@ -8,7 +8,9 @@ restitution 0.5). ``--bond B`` makes the grain pair JKR with the surface energy 
 (R* = R/2) is B times a grain's weight (0: Hertz-Mindlin). The law is set on the grain pair and against the steel.
 It asks whether a scene this small can test a diagnosis that judges a rolling law by the repeatability of its
 piles (README, Diagnose): on seed 001's 6,000-grain cohesive piles EPSD scattered 3.4 deg and EDEM's standard
-law 1.1 deg. A pile too sparse to measure prints nan.
+law 1.1 deg. A pile too sparse to measure prints nan. The seeds of a law run as one launch, which steps at the dt
+its stiffest world needs (README, Physics and numerics), so a seed's pile depends on ``--seeds``: compare laws at
+one count (the README's figures: the default 6).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ LAWS = ("constant_torque", "epsd", "standard")
 
 def main(argv=None) -> int:
     from warpdem.diagnose import synthetic as syn
+    from warpdem.diagnose.candidates import bond_surface_energy
     from warpdem.scene import rigs
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -34,10 +37,9 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     radius = syn.LIFT_RADII[0]
     geo = syn.lift_geometry(radius)
-    weight = rigs.ORE.density * 9.81 * 4.0 / 3.0 * math.pi * radius**3
     cohesion = {}
     if a.bond > 0:
-        gamma = a.bond * weight / (1.5 * math.pi * radius / 2.0)
+        gamma = bond_surface_energy(a.bond, radius, rigs.ORE.density)
         cohesion = {"interaction.ore.ore.law": "JKR", "interaction.ore.ore.surface_energy": gamma}
     seeds = range(601, 601 + a.seeds)
     print(f"smoke lifting cylinder, 5 mm grains, rolling friction {a.rolling_friction}, Bond number {a.bond}")

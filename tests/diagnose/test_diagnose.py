@@ -18,6 +18,7 @@ pytest.importorskip("sklearn")
 pytest.importorskip("emcee")
 
 from warpdem.diagnose import synthetic as syn  # noqa: E402
+from warpdem.diagnose.candidates import bond_surface_energy  # noqa: E402
 from warpdem.diagnose.pipeline import diagnose  # noqa: E402
 from warpdem.scene import rigs  # noqa: E402
 
@@ -128,10 +129,9 @@ _cylinder = syn.lift_geometry
 
 
 def _bond_gamma(bond: float, radius: float, density: float = rigs.ORE.density) -> float:
-    """The surface energy [J/m^2] whose JKR pull-off force 1.5 pi gamma R* (R* = R/2) is ``bond`` times a grain's
-    weight: the Bond number of candidates.BOND_MAX's definition."""
-    weight = density * 9.81 * 4.0 / 3.0 * np.pi * radius**3
-    return bond * weight / (1.5 * np.pi * radius / 2.0)
+    """The surface energy [J/m^2] of Bond number ``bond`` for the ore's grains of ``radius`` [m]
+    (candidates.bond_surface_energy)."""
+    return bond_surface_energy(bond, radius, density)
 
 
 NOISE = {"angle_cone_deg": 0.5, "bulk_density_kg_m3": 10.0}

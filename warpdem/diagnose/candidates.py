@@ -69,6 +69,15 @@ CAUSES = {
 BOND_MAX = 5.0
 """Largest granular Bond number (JKR pull-off force / a mean grain's weight) of the cohesion candidate's range."""
 
+
+def bond_surface_energy(bond: float, radius: float, density: float) -> float:
+    """The surface energy gamma [J/m^2] whose JKR pull-off force 1.5 pi gamma R* between two equal grains (R* = R/2)
+    is ``bond`` times one grain's weight: the granular Bond number of :data:`BOND_MAX`. ``radius`` [m] > 0,
+    ``density`` [kg/m^3]."""
+    weight = density * 9.81 * 4.0 / 3.0 * math.pi * radius**3
+    return bond * weight / (1.5 * math.pi * radius / 2.0)
+
+
 COARSE_EXPONENT = "coarse_graining.exponent"
 """The coarse_graining candidate's parameter: the exponent k of gamma s^k (not an override key)."""
 
@@ -187,8 +196,7 @@ def library(
 
     pp = f"interaction.{grain}.{grain}"
     if gg.law == ContactLaw.HERTZ_MINDLIN and radius > 0:
-        weight = density * 9.81 * 4.0 / 3.0 * math.pi * radius**3
-        gamma_max = BOND_MAX * weight / (1.5 * math.pi * radius / 2.0)
+        gamma_max = bond_surface_energy(BOND_MAX, radius, density)
         add("cohesion", f"{pp}.surface_energy", 0.0, 0.0, gamma_max, "J/m^2", {f"{pp}.law": "JKR"})
         add(
             "plasticity",
