@@ -205,8 +205,7 @@ def x3_slope(first: str, second: str):
     lo, hi = w.confidence_interval(0.95)
     dx = xb["X3"] - xa["X3"]
     mid = xa | {"X3": 0.5 * (xa["X3"] + xb["X3"])}
-    ends = sorted((lo / dx, hi / dx))
-    return (b.mean() - a.mean()) / dx, (ends[0], ends[1]), float(w.pvalue), composite_slope(mid)
+    return (b.mean() - a.mean()) / dx, tuple(sorted((lo / dx, hi / dx))), float(w.pvalue), composite_slope(mid)
 
 
 def one_sample(values):
