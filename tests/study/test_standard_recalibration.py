@@ -86,23 +86,52 @@ def test_size_pairs_pour_one_setting_and_agree_with_statsmodels(recal):
     assert small[cols].equals(large[cols])
 
 
-def test_x3_slopes_agree_with_statsmodels(recal):
-    """Each slope pair holds X1 and X2 and steps X3 alone; the slope is the difference of the means over the step
-    and its interval statsmodels' Welch interval of that difference over the same step. The composite's slope at
-    the scaled optimum is the 166.9 deg per J/m^2 that wetfeed_verify_standard_scaled_step.toml stepped along."""
+def test_step_slopes_agree_with_statsmodels(recal):
+    """Each slope pair steps one factor alone; the slope is the difference of the means over the step and its
+    interval statsmodels' Welch interval of that difference over the same step. The composite's slopes are the
+    ones the step studies followed: 166.9 deg per J/m^2 in X3 at the scaled optimum
+    (wetfeed_verify_standard_scaled_step.toml) and 64.0 deg per unit in X1 at the last X3 step's point
+    (wetfeed_verify_large_standard_scaled_friction.toml)."""
     from statsmodels.stats.weightstats import CompareMeans, DescrStatsW
 
+    moved = []
     for _, first, second in recal.SLOPES:
         a, b = recal.verification_values(first), recal.verification_values(second)
-        dx = recal.settings(second)["X3"] - recal.settings(first)["X3"]
-        slope, (lo, hi), p, _ = recal.x3_slope(first, second)
+        factor, slope, (lo, hi), p, _ = recal.step_slope(first, second)
+        xa, xb = recal.settings(first), recal.settings(second)
+        # the studies write a chosen point to 4 decimals
+        assert [n for n in recal.CCD if abs(xa[n] - xb[n]) > 5e-5] == [factor]
+        dx = xb[factor] - xa[factor]
         cm = CompareMeans(DescrStatsW(b), DescrStatsW(a))
         d_lo, d_hi = cm.tconfint_diff(usevar="unequal")
         assert slope == pytest.approx((b.mean() - a.mean()) / dx, rel=1e-12)
         assert (lo, hi) == pytest.approx(tuple(sorted((d_lo / dx, d_hi / dx))), rel=1e-9)
         assert p == pytest.approx(cm.ttest_ind(usevar="unequal")[1], rel=1e-9)
+        moved.append(factor)
+    assert moved == ["X3", "X3", "X1"]
     optimum = recal.settings(recal.VERIFICATIONS[3][1])
     assert recal.composite_slope(optimum) == pytest.approx(166.9, abs=0.05)
+    last = recal.settings(recal.VERIFICATIONS[6][1])
+    assert recal.composite_slope(last, "X1") == pytest.approx(64.0, abs=0.05)
+
+
+def test_composite_slope_is_the_quadratics_derivative(recal):
+    """The analytic slope equals a central difference of the composite's own prediction (its actual
+    coefficients), in each factor."""
+    import pandas as pd
+
+    b = pd.read_csv(HERE / recal.COMPOSITE_FOR_SLOPE / "analysis" / "coefficients_aor_deg.csv").set_index("Term")
+    b = b["Actual Coefficient"]
+
+    def angle(x):
+        y = b["Intercept"] + sum(b[n] * x[n] + b[f"{n}^2"] * x[n] ** 2 for n in recal.CCD)
+        return y + b["X1*X2"] * x["X1"] * x["X2"] + b["X1*X3"] * x["X1"] * x["X3"] + b["X2*X3"] * x["X2"] * x["X3"]
+
+    x = recal.settings(recal.VERIFICATIONS[6][1])
+    for n in recal.CCD:
+        h = 1e-4
+        fd = (angle(x | {n: x[n] + h}) - angle(x | {n: x[n] - h})) / (2 * h)
+        assert recal.composite_slope(x, n) == pytest.approx(fd, rel=1e-6), n
 
 
 def test_pile_heights_belong_to_the_piles_read(recal):

@@ -20,13 +20,13 @@ the seed's response, it prints:
   the paper's five verification angles;
 - for each setting poured with 6,000 and with the seed's 25,000 grains (:data:`SIZE_PAIRS`), the difference of the
   means (Welch's t test) and the ratio of the variances (F test, one-sided: does the smaller pile scatter more);
-- for each pair of verifications that differ in the surface energy X3 alone (:data:`SLOPES`), the pile's slope in
-  X3 measured between them with its 95 % interval (Welch's for the difference of the means, over the step), beside
-  the scaled composite's slope at the midpoint, and the two sizes' mean heap heights (a cohesive share of the angle
+- for each pair of verifications that differ in one factor alone (:data:`SLOPES`: the surface energy X3, then the
+  rolling friction X1), the pile's slope in that factor measured between them with its 95 % interval (Welch's for
+  the difference of the means, over the step), beside the scaled composite's slope at the midpoint, and the two sizes' mean heap heights (a cohesive share of the angle
   going as the cohesive stress over the heap's weight, gamma / (R rho g H), makes the slope go as 1 / H).
 
 Output of this script: ``standard_recalibration.txt`` beside it (README, "Seed 001 recalibrated", issue 23's
-sixteenth to eighteenth stages).
+sixteenth to nineteenth stages).
 """
 
 from __future__ import annotations
@@ -68,6 +68,7 @@ VERIFICATIONS = (
     ("one step in X3 past it, 6,000 grains", "verify_standard_scaled_step/results.csv"),
     ("the same point, 25,000 grains", "verify_large_standard_scaled/results.csv"),
     ("one more step in X3, 25,000 grains", "verify_large_standard_scaled_step/results.csv"),
+    ("a step in X1 from there, 25,000 grains", "verify_large_standard_scaled_friction/results.csv"),
 )
 """(label, file under this folder): a verification.json's ``values`` or a results.csv's ``aor_deg``."""
 SIZE_PAIRS = (
@@ -82,9 +83,10 @@ SIZE_PAIRS = (
 SLOPES = (
     ("6,000 grains, the scaled optimum to the step past it", VERIFICATIONS[3][1], VERIFICATIONS[4][1]),
     ("25,000 grains, the step's point to one more step", VERIFICATIONS[5][1], VERIFICATIONS[6][1]),
+    ("25,000 grains, that step's point to a step in X1", VERIFICATIONS[6][1], VERIFICATIONS[7][1]),
 )
-"""(label, piles at one surface energy, piles at another, X1 and X2 the same): the pile's slope in X3 measured
-between two verifications, beside the scaled composite's (fitted on 6,000-grain piles)."""
+"""(label, piles at one setting, piles at a setting that differs in one factor alone): the pile's slope in that
+factor measured between two verifications, beside the scaled composite's (fitted on 6,000-grain piles)."""
 COMPOSITE_FOR_SLOPE = "ccd_standard_scaled"
 
 
@@ -182,30 +184,42 @@ def pile_heights(rel: str) -> np.ndarray:
     )
 
 
-def composite_slope(x: dict) -> float:
-    """The scaled composite's d(angle)/d(X3) [deg per J/m^2] at the point ``x`` (its record's actual
-    coefficients)."""
+UNITS = {"X1": "unit", "X2": "unit", "X3": "J/m^2"}
+"""Each composite factor's unit, for the slopes' "deg per ..." (X1 and X2 are friction coefficients)."""
+
+
+def composite_slope(x: dict, factor: str = "X3") -> float:
+    """The scaled composite's d(angle)/d(factor) [deg per unit of the factor] at the point ``x`` (its record's
+    actual coefficients)."""
     b = _read(HERE / COMPOSITE_FOR_SLOPE / "analysis" / "coefficients_aor_deg.csv").set_index("Term")
     b = b["Actual Coefficient"]
-    return float(b["X3"] + b["X1*X3"] * x["X1"] + b["X2*X3"] * x["X2"] + 2.0 * b["X3^2"] * x["X3"])
+    slope = b[factor] + 2.0 * b[f"{factor}^2"] * x[factor]
+    for other in CCD:
+        if other != factor:
+            term = "*".join(sorted((factor, other)))
+            slope += b[term] * x[other]
+    return float(slope)
 
 
-def x3_slope(first: str, second: str):
-    """(measured slope [deg per J/m^2], its 95 % interval, Welch's two-sided p, the composite's slope at the
-    midpoint) between two verifications that differ only in X3; the interval is Welch's for the difference of
-    the means over the step in X3."""
+def step_slope(first: str, second: str):
+    """(the factor stepped, measured slope [deg per unit of it], its 95 % interval, Welch's two-sided p, the
+    composite's slope at the midpoint) between two verifications that differ in one factor alone; the interval is
+    Welch's for the difference of the means over the step."""
     from scipy import stats
 
     xa, xb = settings(first), settings(second)
     # the studies write a chosen point to 4 decimals
-    if any(round(xa[n], 4) != round(xb[n], 4) for n in ("X1", "X2")) or round(xa["X3"], 4) == round(xb["X3"], 4):
-        raise SystemExit(f"{first}, {second}: not one step in X3 alone ({xa}, {xb})")
+    moved = [n for n in CCD if round(xa[n], 4) != round(xb[n], 4)]
+    if len(moved) != 1:
+        raise SystemExit(f"{first}, {second}: not one step in one factor alone ({xa}, {xb})")
+    (factor,) = moved
     a, b = verification_values(first), verification_values(second)
     w = stats.ttest_ind(b, a, equal_var=False)
     lo, hi = w.confidence_interval(0.95)
-    dx = xb["X3"] - xa["X3"]
-    mid = xa | {"X3": 0.5 * (xa["X3"] + xb["X3"])}
-    return (b.mean() - a.mean()) / dx, tuple(sorted((lo / dx, hi / dx))), float(w.pvalue), composite_slope(mid)
+    dx = xb[factor] - xa[factor]
+    mid = xa | {factor: 0.5 * (xa[factor] + xb[factor])}
+    slope = (b.mean() - a.mean()) / dx
+    return factor, slope, tuple(sorted((lo / dx, hi / dx))), float(w.pvalue), composite_slope(mid, factor)
 
 
 def one_sample(values):
@@ -291,12 +305,13 @@ def report() -> str:
         put(f"{label}: {d:+.2f} deg, t {t:.2f}, p {pt:.2g}; variance ratio {f:.1f}, p {pf:.2g} (one-sided)")
 
     put("")
-    put("== The pile's slope in X3 between two verifications [deg per J/m^2] (95 % interval, Welch), beside the")
-    put(f"   scaled composite's at the midpoint ({COMPOSITE_FOR_SLOPE}, fitted on 6,000-grain piles)")
+    put("== The pile's slope in one factor between two verifications [deg per unit] (95 % interval, Welch), beside")
+    put(f"   the scaled composite's at the midpoint ({COMPOSITE_FOR_SLOPE}, fitted on 6,000-grain piles)")
     for label, first, second in SLOPES:
-        slope, (lo, hi), pw, model = x3_slope(first, second)
-        xa, xb = settings(first)["X3"], settings(second)["X3"]
-        put(f"{label} (X3 {xa:.4f} to {xb:.4f} J/m^2): {slope:.1f} ({lo:.1f} to {hi:.1f}), p {pw:.2g}")
+        factor, slope, (lo, hi), pw, model = step_slope(first, second)
+        xa, xb = settings(first)[factor], settings(second)[factor]
+        span = f"{factor} {xa:.4f} to {xb:.4f} {UNITS[factor]}"
+        put(f"{label} ({span}): {slope:.1f} deg per {UNITS[factor]} ({lo:.1f} to {hi:.1f}), p {pw:.2g}")
         put(f"  the composite's: {model:.1f}; measured / composite {slope / model:.2f}")
     # cohesion's share of the angle goes as the bulk cohesive stress (gamma / R) over the heap's weight stress
     # (rho g H): the same grains in a taller heap should feel X3 as 1 / H
