@@ -19,7 +19,8 @@ three verifications of our own with it: at that screening's chosen point, one st
 secant between them (pellets_verify_standard, pellets_verify_standard_step, pellets_verify_standard_secant); the reach
 diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach: ``warpdem diagnose
 studies/diagnose/seed00N_*.toml``); seed 001's press and reach diagnosis with the model the sixteenth stage
-recalibrated (die_press_standard_scaled, with a fuller die die_press_standard_scaled_80, seed001_reach_standard_scaled).
+recalibrated (die_press_standard_scaled, with a fuller die die_press_standard_scaled_80, seed001_reach_standard_scaled),
+and the press, with the fuller die, at the set that landed with the seed's 25,000 grains (die_press_seed_size_80).
 A lane runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
 side by side and may share a device, but two processes on one GPU time-slice it: on one H200 (2026-12-01) a
 25,000-grain study beside a one-world press took 1,076 s where it had taken 516 s alone, and the press about 1,113 s
@@ -133,6 +134,23 @@ FULLER_FILL = ("fill_height", 0.0835)
 """The press's fill height [m] that settles the less cohesive bed near the seed's 80 mm: at 0.08 m it settled at
 76.6 mm (the rig sizes its grain count for the packing of 0.42 measured at 0.65 J/m^2), so 0.08 x 80 / 76.6."""
 
+SEED_SIZE_STUDY = "wetfeed_verify_large_standard_scaled_friction"
+"""The study whose point landed within 1 deg of seed 001's angle with the seed's 25,000 grains (nineteenth stage):
+the press's calibrated set is read from its design, so that the two cannot drift apart."""
+
+
+def seed_size_set() -> tuple:
+    """Seed 001's set calibrated at the seed's size (:data:`SEED_SIZE_STUDY`'s one design point) with EDEM's
+    standard rolling friction, as the die press's overrides."""
+    import tomllib
+
+    path = Path(__file__).resolve().parents[2] / "studies" / f"{SEED_SIZE_STUDY}.toml"
+    points = {tuple(sorted(p.items())) for p in tomllib.loads(path.read_text())["design"]["points"]}
+    if len(points) != 1:
+        raise SystemExit(f"{path}: [design] points hold {len(points)} settings; one point (its replicates) expected")
+    (point,) = points
+    return tuple((PRESS_KEYS[f], float(v)) for f, v in point) + SCALED_SET[3:]
+
 
 STEPS = {
     # the wet feed's surface energy doubled from 0.5 to 8 J/m^2, beyond the paper's range (no verification)
@@ -148,6 +166,10 @@ STEPS = {
     ),
     "die_press_standard_scaled_80": lambda dev, root: rig(
         "die_press", dev.split(",")[-1], root / "die_press_standard_scaled_80", (*SCALED_SET, FULLER_FILL)
+    ),
+    # the press at the set that landed within 1 deg with the seed's 25,000 grains, the die filled for an 80 mm bed
+    "die_press_seed_size_80": lambda dev, root: rig(
+        "die_press", dev.split(",")[-1], root / "die_press_seed_size_80", (*seed_size_set(), FULLER_FILL)
     ),
     "truck_tipper": lambda dev, root: rig("truck_tipper", dev.split(",")[-1], root),
     # the same tipper with the bucket turning over 6 s instead of 1.5 s: the first contacts' speed falls towards

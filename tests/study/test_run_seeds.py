@@ -1,9 +1,13 @@
 """docs/seeds/run_seeds.py's step names: a study file is a step without an entry of its own, a misspelt one is
 refused by name."""
 
+from pathlib import Path
+
 import pytest
 
 from tests.conftest import load_seed_script
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -53,3 +57,22 @@ def test_the_scaled_presses_carry_the_recalibrated_set(run_seeds, tmp_path):
     ]
     assert [full[i + 1] for i, a in enumerate(full) if a == "--set"] == sets + ["die_press.fill_height=0.0835"]
     assert full[full.index("--out") + 1] == str(tmp_path / "die_press_standard_scaled_80")
+
+
+def test_the_seed_size_press_reads_the_landed_point(run_seeds, tmp_path):
+    """The press at the seed's size sets the X1, X2, X3 of the study that landed at 25,000 grains (read from its
+    design, not written again), the standard rolling model and the fuller die's fill height."""
+    import tomllib
+
+    study = tomllib.loads((ROOT / "studies" / f"{run_seeds.SEED_SIZE_STUDY}.toml").read_text())
+    point = study["design"]["points"][0]
+    ((_, cmd),) = run_seeds.parse_lane("cuda:0=die_press_seed_size_80", tmp_path)
+    sets = dict(cmd[i + 1].removeprefix("die_press.").split("=") for i, a in enumerate(cmd) if a == "--set")
+    for f, key in run_seeds.PRESS_KEYS.items():
+        assert float(sets.pop(key)) == pytest.approx(point[f], rel=1e-6), f
+    assert sets == {
+        "interaction.feed.feed.rolling_model": "standard",
+        "interaction.feed.steel.rolling_model": "standard",
+        "fill_height": "0.0835",
+    }
+    assert cmd[cmd.index("--out") + 1] == str(tmp_path / "die_press_seed_size_80")
