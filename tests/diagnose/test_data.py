@@ -597,3 +597,33 @@ def test_cli_prints_a_reach_verdict(monkeypatch, capsys):
     assert out.startswith("NOT IDENTIFIABLE: out of reach of the base model; cohesion, plasticity")
     assert "base -> base + cohesion: 10.4 -> 1.4 SD" in out and "measure bulk_density_kg_m3" in out
     assert "held-out" not in out
+
+
+def test_cli_prints_the_rolling_models_tried(monkeypatch, capsys):
+    """An OVERDISPERSED reach diagnosis prints, per rolling model tried, its runs' SD, the base's variance over its
+    own and whether it repeats."""
+    from warpdem.cli import main
+    from warpdem.diagnose import pipeline
+
+    law = {
+        "model": "standard",
+        "reaches": True,
+        "repeats": True,
+        "scatter": {"aor_deg": {"simulated_sd": 0.99}},
+        "gain": {"aor_deg": {"F": 28.9, "p_holm": 0.033}},
+    }
+    res = {
+        "mode": "reach",
+        "verdict": "overdispersed",
+        "verdict_words": "OVERDISPERSED: ...; the rolling model standard reaches the data and repeats (...)",
+        "rolling_models": {"tried": {"rolling_model=standard": law}},
+        "stopped": None,
+        "worlds": 46,
+        "launches": 4,
+        "wall_s": 12.0,
+        "out": "o",
+    }
+    monkeypatch.setattr(pipeline, "diagnose", lambda *a, **k: res)
+    assert main(["diagnose", "any.toml", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "rolling model standard: aor_deg SD 0.99, base / its variance 28.9 (p 0.033); repeats" in out

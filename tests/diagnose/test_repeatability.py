@@ -98,6 +98,104 @@ def test_the_verdict_turns_only_when_the_base_reaches(monkeypatch):
         monkeypatch.setattr(reach, "fit", lambda ev, model: {"requests": []})
         monkeypatch.setattr(reach, "finish", lambda ev, f, res=res, ok=reaches: {**res, "reaches": ok})
         monkeypatch.setattr(pipeline, "_library", lambda spec, ex, conds: ([], {}))
+        monkeypatch.setattr(pipeline, "_laws", lambda spec, ex, conds: ([], "no rolling friction here"))
         results, decision = reach.run(ev, SimpleNamespace(name="base"), ev.spec, ex, log=lambda *a: None)
         assert decision["verdict"] == verdict
         assert decision["scatter"]["angle"]["exceeds"] == (simulated[0] == 28.0)
+        assert decision["law"] is None and decision["cause"] is None
+
+
+BASE_RUNS = [28.0, 31.0, 33.0]
+"""The base model's confirming runs at its closest point: SD 2.52 on 2 df, against replicates 30.0, 30.1, 29.9."""
+
+
+def _law_case(monkeypatch, law_runs: dict, law_reaches: dict | None = None):
+    """An OVERDISPERSED base (:data:`BASE_RUNS`) and two rolling models whose confirming runs are ``law_runs``
+    ({model: runs}) and which reach the data as ``law_reaches`` says (default: both). Returns the decision."""
+    from warpdem.diagnose import candidates as cands
+    from warpdem.diagnose import pipeline
+
+    ev, ex, base_res = _case(False, [30.0, 30.1, 29.9], BASE_RUNS)
+    reaches = {m: True for m in law_runs} | (law_reaches or {})
+    switches = [cands.LawSwitch(m, {"interaction.grain.grain.rolling_model": m}) for m in law_runs]
+    ev.sims = SimpleNamespace(run=lambda *a: [])
+    ev.design_requests = lambda models: []
+
+    def finish(ev, f):
+        m = f["model"]
+        if m.law is None:
+            return {**base_res, "reaches": True}
+        runs = np.asarray(law_runs[m.law.model], float)[:, None]
+        return {"confirm": {0: {"values": runs}}, "reaches": reaches[m.law.model], "theta": {}}
+
+    monkeypatch.setattr(reach, "fit", lambda ev, model: {"requests": [], "model": model})
+    monkeypatch.setattr(reach, "finish", finish)
+    monkeypatch.setattr(pipeline, "_laws", lambda spec, ex, conds: (switches, None))
+    results, decision = reach.run(ev, pipeline.Model("base", []), ev.spec, ex, log=lambda *a: None)
+    assert decision["verdict"] == "overdispersed" and set(results) == {"base", *(s.name for s in switches)}
+    return decision
+
+
+def test_a_rolling_model_that_repeats_is_named(monkeypatch):
+    """The hidden effect: one rolling model's runs repeat (SD 0.025 against the replicates' 0.1), the other's
+    scatter as the base's. The base's variance over the first's is F = 6.33 / 0.00063 on (2, 2) df, whose
+    one-sided p is 1 / (1 + F); Holm over the two tests doubles the smaller. The first is named, the verdict stays
+    OVERDISPERSED (the base model is what was tested)."""
+    d = _law_case(monkeypatch, {"standard": [29.98, 30.0, 30.03], "constant_torque": [27.0, 30.0, 34.0]})
+    good, bad = d["laws"]["rolling_model=standard"], d["laws"]["rolling_model=constant_torque"]
+    g = good["gain"]["angle"]
+    assert g["F"] == pytest.approx(np.var(BASE_RUNS, ddof=1) / np.var([29.98, 30.0, 30.03], ddof=1), rel=1e-9)
+    assert g["p"] == pytest.approx(1.0 / (1.0 + g["F"]), rel=1e-9)
+    assert g["p_holm"] == pytest.approx(2.0 * g["p"], rel=1e-9) and g["significant"]
+    assert good["repeats"] and not good["scatter"]["angle"]["exceeds"]
+    assert not bad["repeats"] and bad["scatter"]["angle"]["exceeds"] and not bad["gain"]["angle"]["significant"]
+    assert d["repeating"] == ["rolling_model=standard"] and d["law"] == "standard" and d["cause"] == "rolling_model"
+    words = reach.law_words(d)
+    assert words.startswith("the rolling model standard reaches the data and repeats (angle: variance ratio")
+    assert reach._cause_words(d) == "rolling-resistance model (type A, C or EDEM standard): standard"
+    rm = {"tried": d["laws"], "not_tried": None}
+    rows = [line for line in reach._laws_markdown(rm, {}) if line.startswith("| standard")]
+    assert len(rows) == 1 and rows[0].endswith("| yes |")
+
+
+def test_no_rolling_model_that_repeats_names_none(monkeypatch):
+    """No effect: both rolling models scatter as the base does (SD 2.5-3.5 against 0.1): none is named, and the
+    verdict line says so."""
+    d = _law_case(monkeypatch, {"standard": [27.5, 31.0, 32.5], "constant_torque": [27.0, 30.0, 34.0]})
+    assert not d["repeating"] and d["law"] is None and d["cause"] is None
+    assert all(law["scatter"]["angle"]["exceeds"] for law in d["laws"].values())
+    assert reach.law_words(d) == (
+        "none of the rolling models tried (standard, constant_torque) reaches the data and repeats"
+    )
+
+
+def test_a_rolling_model_must_reach_the_data_to_be_named(monkeypatch):
+    """Runs that repeat far from the data's mean do not explain the scatter: a model that repeats but does not
+    reach is not named; two that reach and repeat are both listed and neither is named."""
+    tight = [29.98, 30.0, 30.03]
+    d = _law_case(monkeypatch, {"standard": tight, "epsd": tight}, {"standard": False})
+    assert d["repeating"] == ["rolling_model=epsd"] and d["law"] == "epsd"
+    d = _law_case(monkeypatch, {"standard": tight, "epsd": tight})
+    assert d["repeating"] == ["rolling_model=standard", "rolling_model=epsd"] and d["law"] is None
+    assert "cannot tell them apart" in reach.law_words(d)
+
+
+def test_rolling_alternatives_of_a_rig_scene():
+    """The smoke funnel's spheres roll with EPSD: the alternatives are type A (constant torque) and EDEM's
+    standard model, each set on the grain-grain pair and the grain's pairs with rolling friction (not the walls'
+    own pairs). A key the data file decides, or no rolling friction, leaves none."""
+    from warpdem.diagnose import candidates as cands
+    from warpdem.scene import rigs
+    from warpdem.scene.stage import apply_overrides
+
+    scene = rigs.spec("funnel", dict(rigs.SMOKE["funnel"]), True)
+    laws, why = cands.rolling_alternatives(scene, set())
+    assert why is None and [law.model for law in laws] == ["constant_torque", "standard"]
+    keys = set(laws[0].shared)
+    assert "interaction.grain.grain.rolling_model" in keys and all(".grain." in k for k in keys)
+    assert all(set(law.shared.values()) == {law.model} and law.name == f"rolling_model={law.model}" for law in laws)
+    laws, why = cands.rolling_alternatives(scene, {"interaction.grain.grain.rolling_model"})
+    assert not laws and "decided by the data file" in why
+    scene = apply_overrides(scene, {"interaction.grain.grain.rolling_friction": 0.0})
+    laws, why = cands.rolling_alternatives(scene, set())
+    assert not laws and "rolling friction is 0" in why

@@ -15,7 +15,9 @@ Each candidate adds ONE parameter to the base model and reduces to the base mode
 - ``rolling_friction``: the grain-grain rolling friction mu_r [-] (the base's rolling model). Off: the base value;
   range [0, max(0.5, 2 off)].
 - ``rolling_model``: not a one-parameter extension (type A, type C and EDEM's standard model are three models,
-  not one with an off value), so it is named here but never applies; a diagnosis reports it as not tried.
+  not one with an off value), so it never joins the library. The reach diagnosis tries it where the mean cannot
+  judge it: when the base model reaches the data but scatters more than the measurement (OVERDISPERSED), each
+  other rolling model is a :class:`LawSwitch` (:func:`rolling_alternatives`), judged by its runs' scatter.
 - ``wall_friction``: the static friction of the grain against the wall the measurement rests on (the funnel's
   and lifting cylinder's base plate, the press's die, the drum's shell), separate from grain-grain friction.
   Off: the base value; range [0.1, 1].
@@ -226,7 +228,8 @@ def library(
     mu_r = float(gg.rolling_friction)
     add("rolling_friction", f"{pp}.rolling_friction", mu_r, 0.0, max(0.5, 2.0 * mu_r))
     skipped["rolling_model"] = (
-        "type A, type C and EDEM's standard model are three models, not one parameter with an off value"
+        "type A, type C and EDEM's standard model are three models, not one parameter with an off value: the reach "
+        "diagnosis tries them by their scatter when the base model is OVERDISPERSED"
     )
     rest = [w for w in scene.walls if w.name in _REST_WALL.get(scene.measure.kind, ())]
     if rest:
@@ -256,6 +259,44 @@ def library(
         shared = dict(zip(_COARSE_SHARED, (radius / float(grain_radius), gamma, gamma_key)))
         add("coarse_graining", COARSE_EXPONENT, 0.0, 0.0, 2.0, "", shared)
     return out, skipped
+
+
+@dataclass(frozen=True)
+class LawSwitch:
+    """A discrete change of the base model: the grain's rolling-resistance model set to ``model`` (a
+    :class:`RollingModel` name, lower case) on every pair of the grain that has rolling friction, through the
+    override keys of ``shared``. No parameter is added; the base model's parameters stay free."""
+
+    model: str
+    shared: Mapping = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        """The extended model's name in results and reports: ``rolling_model=<model>``."""
+        return f"rolling_model={self.model}"
+
+
+def rolling_alternatives(scene, taken: set[str]) -> tuple[list[LawSwitch], str | None]:
+    """The rolling models the grain of ``scene`` (a SceneSpec built with the base model's overrides) could have
+    instead of its own, as :class:`LawSwitch` es over the grain-grain pair and each other pair of the grain with
+    rolling friction, and None; or ([], why none applies): the grain-grain pair has no rolling friction (no model
+    acts), or the data file decides one of the keys (``taken``: free parameters, conditions, ``[fixed]`` keys)."""
+    from warpdem.engine.types import RollingModel
+
+    grain = _grain(scene)[0]
+    gg = _pair(scene, grain, grain)
+    if float(gg.rolling_friction) == 0.0:
+        return [], "the grain-grain rolling friction is 0: no rolling model acts"
+    pairs = [(grain, grain)] + [
+        (a, b) for a, b, ia in scene.pairs if grain in (a, b) and a != b and float(ia.rolling_friction) > 0.0
+    ]
+    keys = [f"interaction.{a}.{b}.rolling_model" for a, b in pairs]
+    decided = [k for k in keys if k in taken]
+    if decided:
+        return [], f"{', '.join(decided)} is decided by the data file (a free parameter, condition or [fixed] key)"
+    base = RollingModel(int(gg.rolling_model))
+    models = [m for m in RollingModel if m not in (RollingModel.NONE, base)]
+    return [LawSwitch(m.name.lower(), {k: m.name.lower() for k in keys}) for m in models], None
 
 
 def with_range(c: Candidate, low: float, high: float) -> Candidate:

@@ -221,12 +221,18 @@ class Dim:
 
 @dataclass
 class Model:
-    """The base model (``candidate`` None) or the base plus one candidate (its parameter the last dimension)."""
+    """The base model (``candidate`` and ``law`` None), the base plus one candidate (its parameter the last
+    dimension), or the base with its rolling model switched (``law``; the same parameters)."""
 
     name: str
     dims: list[Dim]
     shared: dict = field(default_factory=dict)
     candidate: cands.Candidate | None = None
+    law: cands.LawSwitch | None = None
+
+    @property
+    def is_base(self) -> bool:
+        return self.candidate is None and self.law is None
 
     @classmethod
     def extended(cls, base: Model, cand: cands.Candidate) -> Model:
@@ -234,6 +240,11 @@ class Model:
         return cls(
             cand.name, [*base.dims, Dim(cand.name, cand.key, cand.low, cand.high, cand.unit)], dict(cand.shared), cand
         )
+
+    @classmethod
+    def switched(cls, base: Model, law: cands.LawSwitch) -> Model:
+        """``base`` with the rolling model of ``law``: the same free parameters, the switch's overrides added."""
+        return cls(law.name, list(base.dims), {**base.shared, **law.shared}, None, law)
 
     def overrides(self, u) -> dict:
         """The overrides of the model at unit-cube point ``u`` (d,)."""
@@ -501,7 +512,7 @@ class Evaluator:
         ``extra``: simulations that join the design (:meth:`surrogates`)."""
         prob = self.prob
         gps, acc = self.surrogates(model, f"{model.name}: design", extra)
-        if model.candidate is None and not extra:
+        if model.is_base and not extra:
             self.roughness(gps)
         cal = self.calibrate(model, gps, prob.train, "all")
         u_map = np.asarray(cal["map"], dtype=float)
@@ -1054,21 +1065,20 @@ def _reach(ev: Evaluator, base: Model, spec: DiagnosisSpec, ex: Experiments, out
     return reach.write(out, ev.prob, results, decision, checks=step_checks(out / "runs"))
 
 
-def _library(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tuple[list, dict]:
-    """The candidates that apply (the data file's ``use`` list, ranges replaced as it says). A range that
-    depends on the scene (cohesion's, through the grain's weight) is the narrowest over the conditions: its
-    bound then holds for every grain of the data (the widest gave the smallest grains of a size series Bond
-    numbers of 25, piles that stand as columns and cannot be measured)."""
+def _taken(spec: DiagnosisSpec, ex: Experiments) -> set[str]:
+    """The override keys the data file decides: its free parameters, conditions and ``[fixed]`` keys."""
+    return {p.parameter for p in spec.parameters} | set(ex.conditions) | set(spec.fixed)
+
+
+def _condition_scenes(spec: DiagnosisSpec, conditions: list[dict]):
+    """Per condition (override dicts), the base model's scene (a SceneSpec with every value the condition's runs
+    have, per-world keys included: a launch's shared scene lacks those) and its rig parameters (None for a stage
+    without a rig)."""
     from warpdem.scene import rigs
     from warpdem.scene.stage import apply_overrides
 
-    taken = {p.parameter for p in spec.parameters} | set(ex.conditions) | set(spec.fixed)
-    merged: dict[str, cands.Candidate] = {}
-    skipped: dict[str, str] = {}
-    differs: dict[str, str] = {}
     for cond in conditions:
         ov = {**spec.fixed, **cond}
-        # every value the condition's runs have, per-world keys included (a launch's shared scene lacks those)
         rig_cond = {k: v for k, v in cond.items() if sp.is_rig_key(k)}
         scene = apply_overrides(sp.fixed_scene(spec, rig_cond), {k: v for k, v in cond.items() if k not in rig_cond})
         rig_params = None
@@ -1077,6 +1087,36 @@ def _library(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tu
             base.update({k: v for k, v in ov.items() if sp.is_rig_key(k)})
             p = rigs.params(spec.rig, base)
             rig_params = {f: getattr(p, f) for f in p.__dataclass_fields__}
+        yield scene, rig_params
+
+
+def _laws(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tuple[list, str | None]:
+    """The rolling models the reach diagnosis tries when the base is OVERDISPERSED
+    (:func:`candidates.rolling_alternatives`, the same for every condition), and None; or ([], why not)."""
+    if spec.candidates is not None and "rolling_model" not in spec.candidates:
+        return [], "not in the data file's [candidates] use list"
+    taken = _taken(spec, ex)
+    found = None
+    for scene, _ in _condition_scenes(spec, conditions):
+        laws, why = cands.rolling_alternatives(scene, taken)
+        if why:
+            return [], why
+        if found is not None and laws != found:
+            return [], "the grain's rolling model or its pairs differ between the experiments"
+        found = laws
+    return found or [], None
+
+
+def _library(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tuple[list, dict]:
+    """The candidates that apply (the data file's ``use`` list, ranges replaced as it says). A range that
+    depends on the scene (cohesion's, through the grain's weight) is the narrowest over the conditions: its
+    bound then holds for every grain of the data (the widest gave the smallest grains of a size series Bond
+    numbers of 25, piles that stand as columns and cannot be measured)."""
+    taken = _taken(spec, ex)
+    merged: dict[str, cands.Candidate] = {}
+    skipped: dict[str, str] = {}
+    differs: dict[str, str] = {}
+    for scene, rig_params in _condition_scenes(spec, conditions):
         lib, skipped = cands.library(scene, rig_params, taken, spec.grain_radius)
         for c in lib:
             m = merged.get(c.name)

@@ -20,10 +20,15 @@ one number can still test is reach. Stages (the simulations stored and reused as
    this is the one model error a single mean can still show.
 4. **The verdict** (:data:`VERDICTS`). The base reaches the data and repeats no worse than the measurement: NOT
    TESTABLE (no evidence of a model error, and none could show in the mean). It reaches the data but scatters
-   more: OVERDISPERSED (a model error; the candidates, judged by the mean, are not tried). It does not reach:
-   every candidate of the library is taken through stage 2 with its parameter added. One reaches: it is the only
-   one (named by reach alone, never by held-out data, which one value cannot give); several: NOT IDENTIFIABLE,
-   with the measurement that best separates them (:func:`pipeline.separating_measurement`); none: UNEXPLAINED.
+   more: OVERDISPERSED (a model error; the candidates, judged by the mean, are not tried). Then each other rolling
+   model of the grain (:func:`candidates.rolling_alternatives`: a discrete switch, the same free parameters) is
+   taken through stage 2 and judged by its scatter (:func:`try_laws`): one that reaches the data, repeats no worse
+   than the measurement and scatters significantly less than the base (one-sided F, Holm over the laws and
+   responses) is named the cause; the verdict stays OVERDISPERSED, since the base model is what was tested. It
+   does not reach: every candidate of the library is taken through stage 2 with its parameter added. One
+   reaches: it is the only one (named by reach alone, never by held-out data, which one value cannot give);
+   several: NOT IDENTIFIABLE, with the measurement that best separates them
+   (:func:`pipeline.separating_measurement`); none: UNEXPLAINED.
    Each model that reaches the data gives its predictions of the measurements the data lack
    (:func:`predictions`): the held-out test to make next.
 
@@ -56,7 +61,7 @@ WORDS = {
     "measured values than free parameters none could show",
     "overdispersed": "OVERDISPERSED: the base model reaches the data's mean, but its runs there scatter more than the "
     "measurement repeats ({scatter}): a model error one mean cannot show; the candidates, judged by the mean, are "
-    "not tried",
+    "not tried; {laws}",
     "only_one_reaches": "OUT OF REACH of the base model; only {names} reaches the data (named by reach alone: one "
     "value per free parameter leaves no held-out test)",
     "not_identifiable": "NOT IDENTIFIABLE: out of reach of the base model; {names} each reach the data, and these "
@@ -64,7 +69,8 @@ WORDS = {
     "unexplained": "UNEXPLAINED: out of reach of the base model and of every candidate tried",
 }
 """One line per verdict (``{names}``: the candidates that reach the data; ``{scatter}``: the responses that scatter
-more, :func:`scatter_words`), for the report and the CLI."""
+more, :func:`scatter_words`; ``{laws}``: what the rolling models tried by their scatter showed, :func:`law_words`),
+for the report and the CLI."""
 
 
 def fit(ev, model) -> dict:
@@ -77,7 +83,7 @@ def fit(ev, model) -> dict:
 
     prob, mask = ev.prob, ev.prob.train
     gps, _ = ev.surrogates(model, f"{model.name}: design")
-    if model.candidate is None:
+    if model.is_base:
         ev.roughness(gps)
     y = prob.obs.loc[mask, "mean"].to_numpy(dtype=float)
     var = prob.budget(np.inf)[mask]
@@ -185,6 +191,100 @@ def scatter_words(scatter: dict) -> str:
     )
 
 
+NO_LAWS = {"laws": {}, "laws_skipped": None, "repeating": [], "law": None}
+"""A decision's rolling-model entries before (or without) :func:`try_laws`."""
+
+
+def scatter_gain(base: dict, law: dict) -> dict:
+    """Per response the base scatters more on (its :func:`repeatability` ``exceeds``): the base's confirming runs'
+    variance over the law's, one-sided (:func:`inference.scatter_excess`: does the base scatter more than the
+    law), {response: {"F", "p"}}; a response the law's runs could not measure is left out."""
+    out = {}
+    for r, b in base.items():
+        if b["exceeds"] and r in law:
+            s = law[r]
+            f, p = inf.scatter_excess(
+                b["simulated_sd"] ** 2, b["simulated_df"], s["simulated_sd"] ** 2, s["simulated_df"]
+            )
+            out[r] = {"F": f, "p": p}
+    return out
+
+
+def try_laws(ev, base_model, spec, ex, results: dict, scatter: dict, log) -> dict:
+    """Stage 4 of an OVERDISPERSED base: each other rolling model (:func:`pipeline._laws`) through stage 2 at its
+    own closest point (its results join ``results`` under its name), then judged by its scatter. Returns the
+    decision's rolling-model entries: "laws" {name: {"model", "reaches", "scatter" (its :func:`repeatability`),
+    "gain" (:func:`scatter_gain`, with "p_holm" over every law and response), "repeats"}}, "laws_skipped" (why
+    none was tried, or None), "repeating" (the names that repeat), "law" (the one model that does, else None) and
+    "cause" ("rolling_model" when one does, else None)."""
+    from .data import DiagnoseError
+    from .pipeline import Model, _laws
+
+    switches, why = _laws(spec, ex, ev.prob.conditions)
+    if why:
+        return {**NO_LAWS, "laws_skipped": why}
+    models = [Model.switched(base_model, sw) for sw in switches]
+    ev.sims.run(ev.design_requests(models), "rolling models: design")
+    fitted, laws = [], {}
+    for m in models:
+        try:
+            fitted.append(fit(ev, m))
+        except DiagnoseError as e:  # a law whose piles cannot be measured over the box
+            laws[m.name] = {"model": m.law.model, "reaches": False, "scatter": {}, "gain": {}, "repeats": False}
+            log(f"{spec.name}: rolling model {m.law.model} left out: {e}")
+    ev.sims.run([q for f in fitted for q in f["requests"]], "rolling models: confirm")
+    for f in fitted:
+        m = f["model"]
+        res = results[m.name] = finish(ev, f)
+        rep = repeatability(ev, ex, res)
+        laws[m.name] = {
+            "model": m.law.model,
+            "reaches": res["reaches"],
+            "scatter": rep,
+            "gain": scatter_gain(scatter, rep),
+        }
+    tests = [g for law in laws.values() for g in law["gain"].values()]
+    for g, q in zip(tests, inf.holm([g["p"] for g in tests]) if tests else []):
+        g["p_holm"] = float(q)
+        g["significant"] = bool(q < spec.alpha)
+    exceeded = [r for r, s in scatter.items() if s["exceeds"]]
+    for law in laws.values():
+        law["repeats"] = bool(
+            law["reaches"]
+            and not any(s["exceeds"] for s in law["scatter"].values())
+            and all(law["gain"].get(r, {}).get("significant", False) for r in exceeded)
+        )
+    repeating = [n for n, law in laws.items() if law["repeats"]]
+    one = len(repeating) == 1
+    return {
+        "laws": laws,
+        "laws_skipped": None,
+        "repeating": repeating,
+        "law": laws[repeating[0]]["model"] if one else None,
+        "cause": "rolling_model" if one else None,
+    }
+
+
+def law_words(decision: dict) -> str:
+    """What the rolling models tried by their scatter showed, for the OVERDISPERSED verdict line."""
+    laws = decision.get("laws") or {}
+    if not laws:
+        return f"no rolling model was tried ({decision.get('laws_skipped') or 'none applies'})"
+    rep = decision.get("repeating") or []
+    if not rep:
+        tried = ", ".join(law["model"] for law in laws.values())
+        return f"none of the rolling models tried ({tried}) reaches the data and repeats"
+
+    def gain(n):
+        g = laws[n]["gain"]
+        return ", ".join(f"{r}: variance ratio {_num(x['F'], 3)}, p {_num(x['p_holm'], 2)}" for r, x in g.items())
+
+    if len(rep) == 1:
+        return f"the rolling model {laws[rep[0]]['model']} reaches the data and repeats ({gain(rep[0])})"
+    both = ", ".join(laws[n]["model"] for n in rep)
+    return f"the rolling models {both} each reach the data and repeat; these data cannot tell them apart"
+
+
 def _z_rms(res: dict) -> float:
     z2 = res["residual"] ** 2 / res["variance"]
     return float(math.sqrt(np.nanmean(z2)))
@@ -225,9 +325,12 @@ def run(ev, base_model, spec, ex, log) -> tuple[dict, dict]:
         "separating": [],
         "predictions": {},
         "gains": {},
+        **NO_LAWS,
     }
     if results["base"]["reaches"]:
         decision["verdict"] = reached_verdict(scatter)
+        if decision["verdict"] == "overdispersed":
+            decision.update(try_laws(ev, base_model, spec, ex, results, scatter, log))
         return results, decision
     lib, skipped = _library(spec, ex, ev.prob.conditions)
     models = [Model.extended(base_model, c) for c in lib]
@@ -340,6 +443,11 @@ def _plot(out: Path, prob, results: dict) -> list[str]:
     return files
 
 
+def _cause_words(decision: dict) -> str | None:
+    words = cands.CAUSES.get(decision["cause"] or "", None)
+    return f"{words}: {decision['law']}" if words and decision.get("law") else words
+
+
 def write(out: Path, prob, results: dict, decision: dict, checks=None) -> dict:
     """Write report.md, diagnosis.json and the reach pictures into ``out``; return diagnosis.json's content."""
     from warpdem.scene.runner import _json_default
@@ -351,9 +459,11 @@ def write(out: Path, prob, results: dict, decision: dict, checks=None) -> dict:
         "name": spec.name,
         "mode": "reach",
         "verdict": decision["verdict"],
-        "verdict_words": WORDS[decision["verdict"]].format(names=names, scatter=scatter_words(decision["scatter"])),
+        "verdict_words": WORDS[decision["verdict"]].format(
+            names=names, scatter=scatter_words(decision["scatter"]), laws=law_words(decision)
+        ),
         "cause": decision["cause"],
-        "cause_words": cands.CAUSES.get(decision["cause"] or "", None),
+        "cause_words": _cause_words(decision),
         "reaching": decision["reaching"],
         "tied": decision["reaching"] if decision["verdict"] == "not_identifiable" else [],
         "separating_measurement": decision["separating"][0]["measurement"] if decision["separating"] else None,
@@ -368,6 +478,12 @@ def write(out: Path, prob, results: dict, decision: dict, checks=None) -> dict:
         "scatter": decision["scatter"],
         "base": _model_json(results["base"]),
         "extended": {n: _model_json(r) for n, r in results.items() if n != "base"},
+        "rolling_models": {
+            "tried": decision.get("laws", {}),
+            "not_tried": decision.get("laws_skipped"),
+            "repeating": decision.get("repeating", []),
+            "law": decision.get("law"),
+        },
         "not_applicable": decision["skipped"],
         "gain": decision["gains"],
         "pictures": _plot(out, prob, results),
@@ -377,6 +493,37 @@ def write(out: Path, prob, results: dict, decision: dict, checks=None) -> dict:
         json.dump(diag, fh, indent=1, default=_json_default)
     (out / "report.md").write_text(_markdown(prob, results, diag))
     return diag
+
+
+def _laws_markdown(rm: dict, results: dict) -> list[str]:
+    """The report's section on the rolling models tried by their scatter."""
+    lines = ["", "## Rolling models, judged by their scatter", ""]
+    if not rm["tried"]:
+        return lines + [f"None was tried: {rm['not_tried'] or 'none applies'}."]
+    lines += [
+        "Each other rolling model of the grain, with the base model's parameters free, taken to its own closest "
+        "point; it is named when it reaches the data, its runs repeat no worse than the measurement, and the base's "
+        "runs scatter more than its own (one-sided F on the two models' confirming runs, Holm over the models and "
+        "responses).",
+        "",
+        "| rolling model | reaches | closest point | response | its SD (df) | against the measurement, p | "
+        "base / its variance, p (Holm) | repeats |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name, law in rm["tried"].items():
+        res = results.get(name)
+        point = ", ".join(f"{k} {_num(v)}" for k, v in res["theta"].items()) if res else "–"
+        rows = law["scatter"] or {"–": None}
+        for r, s in rows.items():
+            g = law["gain"].get(r)
+            sd = f"{_num(s['simulated_sd'], 3)} ({s['simulated_df']})" if s else "–"
+            against = _num(s["p_holm"], 2) if s else "–"
+            ratio = f"{_num(g['F'], 3)}, {_num(g['p_holm'], 2)}" if g else "–"
+            lines.append(
+                f"| {law['model']} | {'yes' if law['reaches'] else 'no'} | {point} | {r} | {sd} | {against} | "
+                f"{ratio} | {'yes' if law['repeats'] else 'no'} |"
+            )
+    return lines
 
 
 def _markdown(prob, results: dict, diag: dict) -> str:
@@ -495,8 +642,10 @@ def _markdown(prob, results: dict, diag: dict) -> str:
             "that spread, where the material repeats more closely. The candidates are judged by whether they reach "
             "the mean, which the base already does, so none is tried. What to look for is what makes the runs "
             "repeat: how the grains lock (the rolling-friction law, the cohesion's strength at the grains' size) "
-            "and the pile's size in grains. Test a change by the same check: its runs' SD against the measurement's.",
+            "and the pile's size in grains. The rolling law is tried here (below); test any other change by the "
+            "same check: its runs' SD against the measurement's.",
         ]
+        lines += _laws_markdown(diag["rolling_models"], results)
     if diag["not_applicable"]:
         lines += ["", "## Candidates not tried", ""]
         lines += [f"- {n}: {why}" for n, why in diag["not_applicable"].items()]
