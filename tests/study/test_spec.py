@@ -53,6 +53,7 @@ COUNTS = {
     "phosphate_ffd_standard": 16,
     "wetfeed_verify_large_standard": 5,
     "wetfeed_pb_standard_scaled": 12,
+    "wetfeed_pb_type_a_scaled": 12,
     "wetfeed_ccd_standard_scaled": 23,
     "wetfeed_verify_standard_scaled_step": 5,
     "wetfeed_verify_large_standard_scaled": 5,
@@ -199,6 +200,17 @@ def test_seed_001_scaled_studies_differ_from_their_standard_twins_only_in_the_su
     coded = [c for c in t.columns if c != "point_id" and not c.endswith("_actual")]
     assert t[coded].equals(t_twin[coded])
     np.testing.assert_allclose(t[f"{factor}_actual"], 0.2 * t_twin[f"{factor}_actual"], rtol=1e-12)
+
+
+def test_seed_001_type_a_screening_differs_from_its_twin_only_in_the_rolling_model(studies, tables):
+    """wetfeed_pb_type_a_scaled runs wetfeed_pb_standard_scaled's 12 points with type A (constant torque) in place
+    of EDEM's standard rolling friction on the grain's pairs, and differs from it in nothing else."""
+    twin, spec = studies["wetfeed_pb_standard_scaled"], studies["wetfeed_pb_type_a_scaled"]
+    model = {f"interaction.grain.{b}.rolling_model": "constant_torque" for b in ("grain", "steel")}
+    assert dict(spec.fixed) == dict(twin.fixed) | model
+    assert spec.factors == twin.factors and spec.responses == twin.responses and spec.analysis == twin.analysis
+    cols = [c for c in tables["wetfeed_pb_standard_scaled"].columns if c != "point_id"]
+    assert tables["wetfeed_pb_type_a_scaled"][cols].equals(tables["wetfeed_pb_standard_scaled"][cols])
 
 
 def test_seed_001_verification_points_come_from_their_records(studies, tables):
