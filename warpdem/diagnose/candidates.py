@@ -293,7 +293,8 @@ def rolling_alternatives(scene, taken: set[str]) -> tuple[list[LawSwitch], str |
     keys = [f"interaction.{a}.{b}.rolling_model" for a, b in pairs]
     decided = [k for k in keys if k in taken]
     if decided:
-        return [], f"{', '.join(decided)} is decided by the data file (a free parameter, condition or [fixed] key)"
+        verb = "is" if len(decided) == 1 else "are"
+        return [], f"{', '.join(decided)} {verb} decided by the data file (free parameters, conditions or [fixed] keys)"
     base = RollingModel(int(gg.rolling_model))
     models = [m for m in RollingModel if m not in (RollingModel.NONE, base)]
     return [LawSwitch(m.name.lower(), {k: m.name.lower() for k in keys}) for m in models], None
