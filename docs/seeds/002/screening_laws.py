@@ -57,12 +57,13 @@ def _read(path: Path):
 
 def paper():
     """The paper's Fig. 14 runs: coded A..E (by its published ranges) and the angle as ``y`` [deg]."""
+    from warpdem.study.designs import Factor
+
     ranges = published()["phosphate"]["ffd_ranges"]
     t = _read(REF / "phosphate_ffd_runs.csv")
     out = t[[]].copy()
     for f, col in PAPER_COLUMNS.items():
-        lo, hi = ranges[col]
-        out[f] = (2.0 * t[col].astype(float) - (lo + hi)) / (hi - lo)
+        out[f] = Factor(f, *ranges[col]).to_coded(t[col].astype(float))
     out["y"] = t.aor_deg.astype(float)
     return out
 
