@@ -121,12 +121,17 @@ def rig(name: str, device: str, root: Path, sets=()) -> list:
     return cmd
 
 
+STANDARD_ROLLING = (
+    ("interaction.feed.feed.rolling_model", "standard"),
+    ("interaction.feed.steel.rolling_model", "standard"),
+)
+"""EDEM's standard rolling friction on the die press's feed pairs, as overrides (the model seed 001 was
+recalibrated with)."""
 SCALED_SET = (
     ("interaction.feed.feed.rolling_friction", 0.2752),
     ("interaction.feed.feed.static_friction", 0.5904),
     ("interaction.feed.feed.surface_energy", 0.1052),
-    ("interaction.feed.feed.rolling_model", "standard"),
-    ("interaction.feed.steel.rolling_model", "standard"),
+    *STANDARD_ROLLING,
 )
 """Seed 001's set from the sixteenth stage (its step in X3 past the scaled composite's optimum, within 1 deg at
 6,000 grains) with EDEM's standard rolling friction, as the die press's overrides."""
@@ -149,7 +154,7 @@ def seed_size_set() -> tuple:
     if len(points) != 1:
         raise SystemExit(f"{path}: [design] points hold {len(points)} settings; one point (its replicates) expected")
     (point,) = points
-    return tuple((PRESS_KEYS[f], float(v)) for f, v in point) + SCALED_SET[3:]
+    return tuple((PRESS_KEYS[f], float(v)) for f, v in point) + STANDARD_ROLLING
 
 
 STEPS = {
