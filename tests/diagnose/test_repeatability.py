@@ -102,7 +102,7 @@ def test_the_verdict_turns_only_when_the_base_reaches(monkeypatch):
         results, decision = reach.run(ev, SimpleNamespace(name="base"), ev.spec, ex, log=lambda *a: None)
         assert decision["verdict"] == verdict
         assert decision["scatter"]["angle"]["exceeds"] == (simulated[0] == 28.0)
-        assert decision["law"] is None and decision["cause"] is None
+        assert decision["rolling_models"]["law"] is None and decision["cause"] is None
 
 
 BASE_RUNS = [28.0, 31.0, 33.0]
@@ -142,18 +142,18 @@ def test_a_rolling_model_that_repeats_is_named(monkeypatch):
     one-sided p is 1 / (1 + F); Holm over the two tests doubles the smaller. The first is named, the verdict stays
     OVERDISPERSED (the base model is what was tested)."""
     d = _law_case(monkeypatch, {"standard": [29.98, 30.0, 30.03], "constant_torque": [27.0, 30.0, 34.0]})
-    good, bad = d["laws"]["rolling_model=standard"], d["laws"]["rolling_model=constant_torque"]
+    rm = d["rolling_models"]
+    good, bad = rm["tried"]["rolling_model=standard"], rm["tried"]["rolling_model=constant_torque"]
     g = good["gain"]["angle"]
     assert g["F"] == pytest.approx(np.var(BASE_RUNS, ddof=1) / np.var([29.98, 30.0, 30.03], ddof=1), rel=1e-9)
     assert g["p"] == pytest.approx(1.0 / (1.0 + g["F"]), rel=1e-9)
     assert g["p_holm"] == pytest.approx(2.0 * g["p"], rel=1e-9) and g["significant"]
     assert good["repeats"] and not good["scatter"]["angle"]["exceeds"]
     assert not bad["repeats"] and bad["scatter"]["angle"]["exceeds"] and not bad["gain"]["angle"]["significant"]
-    assert d["repeating"] == ["rolling_model=standard"] and d["law"] == "standard" and d["cause"] == "rolling_model"
+    assert rm["repeating"] == ["rolling_model=standard"] and rm["law"] == "standard" and d["cause"] == "rolling_model"
     words = reach.law_words(d)
     assert words.startswith("the rolling model standard reaches the data and repeats (angle: variance ratio")
     assert reach._cause_words(d) == "rolling-resistance model (type A, C or EDEM standard): standard"
-    rm = {"tried": d["laws"], "not_tried": None}
     rows = [line for line in reach._laws_markdown(rm, {}) if line.startswith("| standard")]
     assert len(rows) == 1 and rows[0].endswith("| yes |")
 
@@ -162,8 +162,9 @@ def test_no_rolling_model_that_repeats_names_none(monkeypatch):
     """No effect: both rolling models scatter as the base does (SD 2.5-3.5 against 0.1): none is named, and the
     verdict line says so."""
     d = _law_case(monkeypatch, {"standard": [27.5, 31.0, 32.5], "constant_torque": [27.0, 30.0, 34.0]})
-    assert not d["repeating"] and d["law"] is None and d["cause"] is None
-    assert all(law["scatter"]["angle"]["exceeds"] for law in d["laws"].values())
+    rm = d["rolling_models"]
+    assert not rm["repeating"] and rm["law"] is None and d["cause"] is None
+    assert all(law["scatter"]["angle"]["exceeds"] for law in rm["tried"].values())
     assert reach.law_words(d) == (
         "none of the rolling models tried (standard, constant_torque) reaches the data and repeats"
     )
@@ -174,9 +175,10 @@ def test_a_rolling_model_must_reach_the_data_to_be_named(monkeypatch):
     reach is not named; two that reach and repeat are both listed and neither is named."""
     tight = [29.98, 30.0, 30.03]
     d = _law_case(monkeypatch, {"standard": tight, "epsd": tight}, {"standard": False})
-    assert d["repeating"] == ["rolling_model=epsd"] and d["law"] == "epsd"
+    assert d["rolling_models"]["repeating"] == ["rolling_model=epsd"] and d["rolling_models"]["law"] == "epsd"
     d = _law_case(monkeypatch, {"standard": tight, "epsd": tight})
-    assert d["repeating"] == ["rolling_model=standard", "rolling_model=epsd"] and d["law"] is None
+    rm = d["rolling_models"]
+    assert rm["repeating"] == ["rolling_model=standard", "rolling_model=epsd"] and rm["law"] is None
     assert "cannot tell them apart" in reach.law_words(d)
 
 

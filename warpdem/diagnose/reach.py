@@ -191,8 +191,9 @@ def scatter_words(scatter: dict) -> str:
     )
 
 
-NO_LAWS = {"laws": {}, "laws_skipped": None, "repeating": [], "law": None}
-"""A decision's rolling-model entries before (or without) :func:`try_laws`."""
+def no_laws(why: str | None = None) -> dict:
+    """A decision's ``rolling_models`` when none was tried (``why``: the reason, None when none was due)."""
+    return {"tried": {}, "not_tried": why, "repeating": [], "law": None}
 
 
 def scatter_gain(base: dict, law: dict) -> dict:
@@ -213,16 +214,16 @@ def scatter_gain(base: dict, law: dict) -> dict:
 def try_laws(ev, base_model, spec, ex, results: dict, scatter: dict, log) -> dict:
     """Stage 4 of an OVERDISPERSED base: each other rolling model (:func:`pipeline._laws`) through stage 2 at its
     own closest point (its results join ``results`` under its name), then judged by its scatter. Returns the
-    decision's rolling-model entries: "laws" {name: {"model", "reaches", "scatter" (its :func:`repeatability`),
-    "gain" (:func:`scatter_gain`, with "p_holm" over every law and response), "repeats"}}, "laws_skipped" (why
-    none was tried, or None), "repeating" (the names that repeat), "law" (the one model that does, else None) and
-    "cause" ("rolling_model" when one does, else None)."""
+    decision's entries: "rolling_models" {"tried": {name: {"model", "reaches", "scatter" (its
+    :func:`repeatability`), "gain" (:func:`scatter_gain`, with "p_holm" over every law and response), "repeats"}},
+    "not_tried" (why none was tried, or None), "repeating" (the names that repeat), "law" (the one model that
+    does, else None)} and "cause" ("rolling_model" when one does, else None)."""
     from .data import DiagnoseError
     from .pipeline import Model, _laws
 
     switches, why = _laws(spec, ex, ev.prob.conditions)
     if why:
-        return {**NO_LAWS, "laws_skipped": why}
+        return {"rolling_models": no_laws(why)}
     models = [Model.switched(base_model, sw) for sw in switches]
     ev.sims.run(ev.design_requests(models), "rolling models: design")
     fitted, laws = [], {}
@@ -256,21 +257,19 @@ def try_laws(ev, base_model, spec, ex, results: dict, scatter: dict, log) -> dic
         )
     repeating = [n for n, law in laws.items() if law["repeats"]]
     one = len(repeating) == 1
+    law = laws[repeating[0]]["model"] if one else None
     return {
-        "laws": laws,
-        "laws_skipped": None,
-        "repeating": repeating,
-        "law": laws[repeating[0]]["model"] if one else None,
+        "rolling_models": {"tried": laws, "not_tried": None, "repeating": repeating, "law": law},
         "cause": "rolling_model" if one else None,
     }
 
 
 def law_words(decision: dict) -> str:
     """What the rolling models tried by their scatter showed, for the OVERDISPERSED verdict line."""
-    laws = decision.get("laws") or {}
+    rm = decision["rolling_models"]
+    laws, rep = rm["tried"], rm["repeating"]
     if not laws:
-        return f"no rolling model was tried ({decision.get('laws_skipped') or 'none applies'})"
-    rep = decision.get("repeating") or []
+        return f"no rolling model was tried ({rm['not_tried'] or 'none applies'})"
     if not rep:
         tried = ", ".join(law["model"] for law in laws.values())
         return f"none of the rolling models tried ({tried}) reaches the data and repeats"
@@ -325,7 +324,7 @@ def run(ev, base_model, spec, ex, log) -> tuple[dict, dict]:
         "separating": [],
         "predictions": {},
         "gains": {},
-        **NO_LAWS,
+        "rolling_models": no_laws(),
     }
     if results["base"]["reaches"]:
         decision["verdict"] = reached_verdict(scatter)
@@ -445,7 +444,8 @@ def _plot(out: Path, prob, results: dict) -> list[str]:
 
 def _cause_words(decision: dict) -> str | None:
     words = cands.CAUSES.get(decision["cause"] or "", None)
-    return f"{words}: {decision['law']}" if words and decision.get("law") else words
+    law = decision["rolling_models"]["law"]
+    return f"{words}: {law}" if words and law else words
 
 
 def write(out: Path, prob, results: dict, decision: dict, checks=None) -> dict:
@@ -478,12 +478,7 @@ def write(out: Path, prob, results: dict, decision: dict, checks=None) -> dict:
         "scatter": decision["scatter"],
         "base": _model_json(results["base"]),
         "extended": {n: _model_json(r) for n, r in results.items() if n != "base"},
-        "rolling_models": {
-            "tried": decision.get("laws", {}),
-            "not_tried": decision.get("laws_skipped"),
-            "repeating": decision.get("repeating", []),
-            "law": decision.get("law"),
-        },
+        "rolling_models": decision["rolling_models"],
         "not_applicable": decision["skipped"],
         "gain": decision["gains"],
         "pictures": _plot(out, prob, results),
