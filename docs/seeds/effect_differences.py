@@ -46,6 +46,7 @@ SCREENINGS = (
             ("our spheres' EPSD", "001/pb"),
             ("EDEM's standard", "001/pb_standard"),
             ("EDEM's standard, surface energy x 0.2", "001/pb_standard_scaled"),
+            ("type A, surface energy x 0.2", "001/pb_type_a_scaled"),
         ),
     ),
     (
