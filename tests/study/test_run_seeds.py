@@ -76,3 +76,22 @@ def test_the_seed_size_press_reads_the_landed_point(run_seeds, tmp_path):
         "fill_height": "0.0835",
     }
     assert cmd[cmd.index("--out") + 1] == str(tmp_path / "die_press_seed_size_80")
+
+
+def test_the_press_replicates_press_the_seed_size_set_with_new_fills(run_seeds):
+    """wetfeed_press_seed_size presses the set of the seed-size press step (run_seeds.seed_size_set, the fuller
+    die's fill height) in every run, each with its own fill seed, none of them the rig run's."""
+    from warpdem.scene.rigs import DiePress
+    from warpdem.study.spec import design_table, load_study, run_overrides
+
+    spec = load_study(ROOT / "studies" / "wetfeed_press_seed_size.toml")
+    rows = [run_overrides(spec, row) for _, row in design_table(spec).iterrows()]
+    expected = dict(run_seeds.seed_size_set()) | dict([run_seeds.FULLER_FILL])
+    seeds = []
+    for ov in rows:
+        seeds.append(ov.pop("seed"))
+        assert ov.keys() == expected.keys()
+        for key, value in expected.items():
+            assert ov[key] == (pytest.approx(value, rel=1e-12) if isinstance(value, float) else value), key
+    assert sorted(seeds) == [2, 3, 4, 5, 6] and all(isinstance(s, int) for s in seeds)
+    assert DiePress.seed not in seeds
