@@ -759,3 +759,56 @@ def test_base_case_is_valid(tmp_path):
         p = tmp_path / "ok.toml"
         p.write_text(text)
         assert len(design_table(load_study(p))) > 0
+
+
+PRESS_STUDY = """
+[study]
+name = "press_repeats"
+rig = "die_press"
+smoke = true
+
+[[factors]]
+name = "mu"
+parameter = "interaction.feed.feed.static_friction"
+low = 0.4
+high = 0.6
+{extra}
+[design]
+kind = "explicit"
+points = [{points}]
+
+[[responses]]
+name = "ratio"
+measure = "compression_ratio"
+
+[verification]
+replicates = {replicates}
+"""
+
+
+@pytest.mark.parametrize(
+    "points, extra, replicates, needle",
+    [
+        ("{ mu = 0.5 }, { mu = 0.5 }", "", 0, "[design]: run 2 repeats an earlier point with world seed 1"),
+        ("{ mu = 0.5 }, { mu = 0.6 }", "", 2, "[verification]: replicates = 2 repeat one point"),
+    ],
+)
+def test_repeats_of_a_static_fill_are_refused(tmp_path, points, extra, replicates, needle):
+    """The die press's bed is a static fill, which a world seed does not move (world seeds place dynamic
+    factories' particles only): repeated points or verification replicates would be identical runs, so the study
+    is refused, naming the file, the run and the fill; repeats through the rig's own seed load."""
+    from warpdem.scene import rigs
+    from warpdem.scene.stage import world_seeds_move
+
+    assert not world_seeds_move(rigs.spec("die_press", {}, smoke=True))
+    assert world_seeds_move(rigs.spec("funnel", {}, smoke=True))
+    p = tmp_path / "press.toml"
+    p.write_text(PRESS_STUDY.format(points=points, extra=extra, replicates=replicates))
+    with pytest.raises(StudyError) as err:
+        load_study(p)
+    msg = str(err.value)
+    assert msg.startswith(f"{p}: {needle}") and "static fills only (factories: 'fill')" in msg, msg
+    seeded = '\n[[factors]]\nname = "S"\nparameter = "seed"\nlow = 1\nhigh = 2\n'
+    p.write_text(PRESS_STUDY.format(points="{ mu = 0.5, S = 1 }, { mu = 0.5, S = 2 }", extra=seeded, replicates=1))
+    spec = load_study(p)
+    assert [run_overrides(spec, r)["seed"] for _, r in design_table(spec).iterrows()] == [1, 2]

@@ -1251,6 +1251,13 @@ def _follow_variations(spec: SceneSpec, variations: dict) -> dict:
     return out
 
 
+def world_seeds_move(spec: SceneSpec) -> bool:
+    """True when a world seed changes the scene's run: it places the particles of the dynamic factories only (see
+    :meth:`warpdem.ModelBuilder.seed_worlds`), so a scene whose particles all come from static fills (the die
+    press's bed) runs the same whatever the seed."""
+    return any(fac.mode == "dynamic" for fac in spec.factories)
+
+
 def build(spec: SceneSpec, world_count: int = 1, variations: dict | None = None, world_seeds=None):
     """A :class:`warpdem.ModelBuilder` holding the scene (call ``finalize(device)`` on it).
 

@@ -1104,11 +1104,27 @@ def check_override(spec, base, key: str, value, where: str = "--set") -> None:
 
 def check_scene_overrides(spec: StudySpec) -> None:
     """Build the study's scene and apply ``[fixed]`` and every factor's lowest and highest design value
-    to it; raise :class:`StudyError` naming the key and value the scene or the contact law refuses."""
-    from warpdem.scene.stage import StageError
+    to it; raise :class:`StudyError` naming the key and value the scene or the contact law refuses, or the run
+    that repeats a point of a scene a world seed does not move (:func:`warpdem.scene.stage.world_seeds_move`)."""
+    from warpdem.scene.stage import StageError, world_seeds_move
 
     base = fixed_scene(spec)
     table = design_table(spec)
+    if not world_seeds_move(base):
+        repeats = table[table["world_seed"] > 0]
+        if len(repeats) or spec.verification.replicates > 1:
+            what = (
+                f"[design]: run {int(repeats['run'].iloc[0])} repeats an earlier point with world seed "
+                f"{int(repeats['world_seed'].iloc[0])}"
+                if len(repeats)
+                else f"[verification]: replicates = {spec.verification.replicates} repeat one point with world seeds"
+            )
+            fills = ", ".join(repr(f.name) for f in base.factories) or "none"
+            raise StudyError(
+                f"{what}, but the scene's particles come from static fills only (factories: {fills}), which a world "
+                "seed does not move: the repeats would be identical runs. Make them differ through the rig's own "
+                "seed (a factor on parameter 'seed' with explicit points) or drop them"
+            )
     for f in spec.factors:
         col = table[f"{f.name}_actual"]
         for which, v in (("lowest", float(col.min())), ("highest", float(col.max()))):
