@@ -171,3 +171,49 @@ def test_step_checks_count_the_worlds_past_the_stable_step(tmp_path):
         (runs / f"w{k}.json").write_text(json.dumps({"metrics": {}, "info": info}))
     assert step_checks(runs) == {"worlds": 4, "over_stable_step": 2, "worst_step_margin": 1.35}
     assert step_checks(tmp_path / "none") == {"worlds": 0, "over_stable_step": 0, "worst_step_margin": None}
+
+
+class _Linear:
+    """A surrogate linear in both unit-cube coordinates, its prediction scaled by ``1 + noise``: floating-point
+    noise of the size another machine's linear algebra leaves in a fit."""
+
+    def __init__(self, at_centre: float, slopes, noise: float = 0.0):
+        self.at_centre, self.slopes, self.noise = at_centre, np.asarray(slopes, dtype=float), noise
+
+    def predict(self, U):
+        U = np.atleast_2d(U)
+        return (self.at_centre + (U - 0.5) @ self.slopes) * (1.0 + self.noise), np.full(len(U), 0.1)
+
+
+def test_a_calibrated_point_is_the_same_under_floating_point_noise():
+    """The closest point, from which the confirming runs take their identities (parameters hashed to 12 digits),
+    lies on the 1e-6 grid of the unit cube: surrogates that differ by 1e-13 of their value move the optimiser's
+    point in its last digits, not the rounded point, so a diagnosis resumed on another machine finds its runs."""
+    from warpdem.diagnose import inference as inf
+    from warpdem.diagnose.pipeline import MAP_DECIMALS, _seed
+
+    prob = _problem()
+    prob.spec.seed = 1
+    ev = Evaluator(prob, sims=None, log=print)
+    model = SimpleNamespace(name="base", dims=[None, None])
+    mask = np.ones(4, dtype=bool)
+    # two responses, two conditions, four observations: one exact solution inside the cube
+    slopes = {
+        (0, "angle"): (8.0, 3.0),
+        (0, "density"): (40.0, -90.0),
+        (1, "angle"): (5.0, 2.0),
+        (1, "density"): (30.0, -70.0),
+    }
+    centre = {(0, "angle"): 28.7, (0, "density"): 809.3, (1, "angle"): 24.1, (1, "density"): 826.9}
+    maps, raws = [], []
+    for noise in (0.0, 1e-13, -1e-13):
+        gps = {k: _Linear(centre[k], slopes[k], noise) for k in slopes}
+        maps.append(ev.calibrate(model, gps, mask, "reach", sample=False)["map"])
+        y, var = prob.obs["mean"].to_numpy(float), prob.budget(np.inf)
+        raw = inf.calibrate(ev.predictor(gps, mask), y, var, 2, seed=_seed(prob.spec, "mcmc:base:reach"), steps=0)
+        raws.append(raw["map"])
+    assert not np.array_equal(raws[0], raws[1]) or not np.array_equal(raws[0], raws[2])  # the noise shows unrounded
+    for m in maps:
+        np.testing.assert_array_equal(m, maps[0])
+        np.testing.assert_array_equal(m, np.round(m, MAP_DECIMALS))
+    assert np.all((maps[0] > 0.0) & (maps[0] < 1.0))
