@@ -89,12 +89,6 @@ CENTRE_SEEDS = 1
 CONFIRM_SEEDS = 101
 """First world seed of the confirming simulations (then +1, +2, ...); the screen reuses them."""
 
-MAP_DECIMALS = 6
-"""Decimals of a calibrated point in the unit cube (1e-6 of each parameter's range). The optimiser's last digits
-differ between machines (its linear algebra), and a simulation's identity hashes its parameters to 12 digits: seed
-001's reach diagnosis, resumed on this project's CPU from the GPU machine's runs, put its closest point 8e-9 away
-in X1 and would have run its confirming simulations again."""
-
 SEPARATING = (
     "bulk_density_kg_m3",
     "angle_fit_deg",
@@ -449,11 +443,9 @@ class Evaluator:
         return predict
 
     def calibrate(self, model: Model, gps: dict, mask: np.ndarray, tag: str, sample: bool = True) -> dict:
-        """:func:`inference.calibrate` on the surrogates over the observations of ``mask``, its ``map`` rounded to
-        :data:`MAP_DECIMALS` (so that the confirming runs there keep their identities on any machine)."""
         obs = self.prob.obs[mask]
         var = self.prob.budget(np.inf)[mask]
-        cal = inf.calibrate(
+        return inf.calibrate(
             self.predictor(gps, mask),
             obs["mean"].to_numpy(dtype=float),
             var,
@@ -461,8 +453,6 @@ class Evaluator:
             seed=_seed(self.spec, f"mcmc:{model.name}:{tag}"),
             steps=self.spec.mcmc_steps if sample else 0,  # a fold uses its maximum only
         )
-        cal["map"] = np.round(np.asarray(cal["map"], dtype=float), MAP_DECIMALS)
-        return cal
 
     def confirm_requests(self, model: Model, u, conds) -> list[tuple[dict, int]]:
         """The simulations of :meth:`confirm`: ``model`` at ``u`` at each of ``conds`` over the confirming seeds
