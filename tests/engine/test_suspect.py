@@ -26,6 +26,34 @@ def test_overlaps_are_the_geometry():
     assert same_body["deepest"][0] == 0.0 and same_body["pairs"][0] == 0
 
 
+def test_overlaps_mean_is_over_the_touching_pairs():
+    """Pairs overlapping by 0.1 and 0.3 of a radius average 0.2; a pair apart adds nothing to the mean, and a
+    world without contacts reads 0."""
+    x = np.array([[0, 0, 0], [1.9, 0, 0], [10, 0, 0], [11.7, 0, 0], [20, 0, 0], [22.5, 0, 0]], dtype=float)
+    got = suspect.overlaps(x, np.ones(6), np.zeros(6, dtype=int), np.arange(6), 2)
+    assert got["mean"][0] == pytest.approx(0.2) and got["deepest"][0] == pytest.approx(0.3)
+    assert got["mean"][1] == 0.0
+
+
+def test_the_soft_check_reads_the_heaviest_load_where_it_is_deeper():
+    """A press's bed at its force limit overlaps deeper than the unloaded bed at the end: the warning gives the
+    peak's deepest and mean contact; a peak shallower than the end leaves the end's words."""
+    start = {"deepest": 0.0, "pairs": 0, "coincident": 0}
+    deep = suspect.world_warnings(0, 100, 0.1, (1e-5, 1e-5), start, 0.05, {"deepest": 1.14, "mean": 0.18})
+    assert [w["check"] for w in deep] == ["soft"]
+    assert "114 % of the smaller radius at the heaviest load (the mean contact by 18 %)" in deep[0]["detail"]
+    shallow = suspect.world_warnings(0, 100, 0.1, (1e-5, 1e-5), start, 0.5, {"deepest": 0.2, "mean": 0.01})
+    assert "50 % of the smaller radius at the end" in shallow[0]["detail"]
+    assert suspect.world_warnings(0, 100, 0.1, (1e-5, 1e-5), start, 0.05, {"deepest": 0.1, "mean": 0.01}) == []
+
+
+def test_escape_threshold():
+    """No sphere past the bar: no warning; two: the count and the clearance in mm."""
+    assert suspect.escape_warning(0, 1e-4) is None
+    hit = suspect.escape_warning(2, 1e-4)
+    assert hit["check"] == "escaped" and hit["detail"].startswith("2 spheres") and "0.1 mm" in hit["detail"]
+
+
 def test_thresholds():
     """A world loses up to LOST_FRACTION_MAX of its bodies quietly; a body may move STEP_TRAVEL_MAX radii per
     step; the end overlap may reach OVERLAP_MAX: just past each, one warning of its kind."""

@@ -13,7 +13,7 @@ import pytest
 from tests.conftest import RunKilled, kill_past
 from warpdem.engine import geometry
 from warpdem.scene import measure, rigs, runner
-from warpdem.scene.stage import StageError, apply_overrides, read_stage, write_stage
+from warpdem.scene.stage import StageError, apply_overrides, build, read_stage, write_stage
 
 # usd-core may be missing: skip the module rather than fail at import
 Sdf = pytest.importorskip("pxr.Sdf")
@@ -353,6 +353,30 @@ def test_die_press_compaction(rig_run):
     # within one output interval of the maximum displacement
     assert 0.0 <= m["displacement_m"][0] <= p.gap / 8 + 1e-9
     assert abs(m["displacement_m"][-1] - m["max_displacement_m"]) <= p.gap / 8 + 1e-9
+    # at 10 N (0.35 MPa) no sphere is squeezed through the quarter-radius clearance, and the bed's contacts
+    # at the limit are deeper than none and on average shallower than the deepest
+    assert m["escaped"] == 0 and not any(w["check"] == "escaped" for w in m["warnings"])
+    assert 0.0 < m["peak_overlap_mean"] < m["peak_overlap_max"]
+
+
+def test_die_press_counts_the_spheres_past_its_bar():
+    """Spheres above the bar's face at the force limit, and those removed, count as squeezed past it; the bar's
+    clearance is the quarter radius the rig sets."""
+    small = rigs.spec("die_press", smoke=True)
+    model = build(small, 1, None, None).finalize("cpu", warn_overlaps=False)
+    state, h = model.state(), runner._host(model)
+    piston = list(model.wall_names).index("Piston")
+    # the bar pressing on the fill: its face just above the highest sphere centre
+    x, pose = state.sphere_x.numpy(), state.wall_pose.numpy()
+    pose[piston, 2] = x[:, 2].max() + 1e-6
+    state.wall_pose.assign(pose)
+    assert runner._escaped(model, state, h, piston).tolist() == [0]
+    x[:3, 2] = pose[piston, 2] + 1e-4
+    state.sphere_x.assign(x)
+    state.world_removed.assign(np.array([2], dtype=state.world_removed.dtype))
+    assert runner._escaped(model, state, h, piston).tolist() == [5]
+    smoke = rigs.params("die_press", rigs.SMOKE["die_press"])
+    assert runner._piston_clearance(model, "Piston") == pytest.approx(0.25 * smoke.particle_radius, rel=1e-5)
 
 
 def test_die_press_tells_plastic_from_elastic_contacts():

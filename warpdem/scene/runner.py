@@ -91,6 +91,15 @@ def _overlaps(model, state, h) -> dict:
     return {k: v.tolist() for k, v in found.items()}
 
 
+def _escaped(model, state, h, piston: int) -> np.ndarray:
+    """Particle spheres above the bar's face, or removed from the domain, in each world, shape (world_count,):
+    at the force limit the whole bed lies below the bar, so these were squeezed past its rim."""
+    act = host(state.sphere_active).astype(bool) & (h["glued"] < 0)
+    face = float(host(state.wall_pose)[piston, 2])
+    above = act & (host(state.sphere_x)[:, 2] > face)
+    return np.bincount(h["world"][above], minlength=model.world_count) + host(state.world_removed)
+
+
 def _bodies(model, state, h) -> np.ndarray:
     """Active bodies (free spheres and clumps) in each world, shape (world_count,)."""
     act = host(state.sphere_active).astype(bool)
@@ -366,6 +375,9 @@ MEASURE_METRICS = {
         "max_force_n",
         "final_height_m",
         "fill_height_m",
+        "peak_overlap_max",
+        "peak_overlap_mean",
+        "escaped",
         "inertial_number_max",
     ),
     "impacts": (),
@@ -705,6 +717,9 @@ def run_scene_iter(
             )
         loading = piston is not None and "unload_start_s" not in series
         if loading and m.force_limit > 0 and series["piston_force"][-1] >= m.force_limit:
+            # the bed at its heaviest load: the end's overlaps are those of the bed unloaded
+            series["peak_overlap"] = _overlaps(model, state, h)
+            series["escaped"] = _escaped(model, state, h, piston).tolist()
             if m.unload_speed <= 0:
                 stop_reason = "force_limit"
                 break
@@ -764,6 +779,7 @@ def run_scene_iter(
     bodies = _bodies(model, state, h) + removed
     travel = np.asarray(series["step_travel"], dtype=np.float64).reshape(-1, W).max(axis=0, initial=0.0)
     start = series.get("start_overlap")
+    peak = series.get("peak_overlap")
     for w in range(W):
         # removed: bodies that left the scene's domain (e.g. rolled off the plate's edge)
         mw = {"world": w, "time_s": state.time, "stop": stop_reason, "removed": int(removed[w])}
@@ -774,6 +790,7 @@ def run_scene_iter(
             dt_range,
             None if start is None else {k: v[w] for k, v in start.items()},
             float(end_overlap["deepest"][w]),
+            None if peak is None else {k: v[w] for k, v in peak.items()},
         )
         if np.isfinite(settled_s[w]):
             # held since it settled: its state is that instant's, whatever its launch-mates did after
@@ -804,6 +821,9 @@ def run_scene_iter(
             z = np.asarray(series["piston_z"])
             f = np.asarray(series["piston_force"])
             mw.update(_press_metrics(spec, model, state, h, w, z, f, series))
+            found = suspect.escape_warning(mw["escaped"], _piston_clearance(model, m.piston))
+            if found is not None:
+                mw["warnings"].append(found)
         elif m.kind == "impacts":
             mw["phases"] = _impact_metrics(model, names, m, phase_snap, w)
             if first_window > 0:
@@ -1101,7 +1121,8 @@ def _start_unloading(spec, model, solver, piston: int, t_stop: float) -> float:
 
 
 def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
-    """Force-displacement of the bar, fill height and compression ratio, and the inertial number."""
+    """Force-displacement of the bar, fill height and compression ratio, the bed's overlaps and the spheres
+    squeezed past the bar at the force limit, and the inertial number."""
     m = spec.measure
     z_all, f_all = z, f
     stop = series.get("unload_index")
@@ -1128,8 +1149,14 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
     pressing = p > 0.01 * p.max()
     inertial = speed[pressing] / height[pressing] * d / np.sqrt(p[pressing] / mat.density)
     out = {k: (float(v) if np.isscalar(v) else v) for k, v in summ.items()}
+    # the bed at the force limit (a run that never reached it: at its end)
+    peak = series.get("peak_overlap") or _overlaps(model, state, h)
+    escaped = series.get("escaped") or _escaped(model, state, h, list(model.wall_names).index(m.piston)).tolist()
     out.update(
         fill_height_m=fill,
+        peak_overlap_max=float(peak["deepest"][w]),
+        peak_overlap_mean=float(peak["mean"][w]),
+        escaped=int(escaped[w]),
         inertial_number_max=float(inertial.max()) if inertial.size else None,
         displacement_m=list(map(float, curve["displacement_m"])),
         force_n=list(map(float, curve["force_n"])),
@@ -1157,6 +1184,17 @@ def _piston_radius(model, name) -> float:
     k = list(model.wall_names).index(name)
     v = host(model.wall_meshes[k].points)
     return float(np.hypot(v[:, 0], v[:, 1]).max())
+
+
+def _piston_clearance(model, name) -> float:
+    """The gap [m] between the bar's rim and the die: the radius of the nearest point of another wall beyond the
+    rim, less the rim's (a faceted die's vertices; its flats lie a little closer)."""
+    k = list(model.wall_names).index(name)
+    r_bar = _piston_radius(model, name)
+    others = [host(mesh.points) for j, mesh in enumerate(model.wall_meshes) if j != k]
+    radii = np.concatenate([np.hypot(v[:, 0], v[:, 1]) for v in others]) if others else np.zeros(0)
+    outside = radii[radii >= r_bar]
+    return float(outside.min() - r_bar) if outside.size else math.inf
 
 
 def _impact_metrics(model, names, m, snaps, w) -> dict:

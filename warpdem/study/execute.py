@@ -800,6 +800,7 @@ CHECK_WORDS = {
     "outlet": "pile reached the funnel",
     "off_axis": "pile off its axis",
     "pile_apart": "bed not in the pile",
+    "escaped": "spheres squeezed past the bar",
 }
 """How the report and the console name each of :func:`run_checks`' checks."""
 
