@@ -359,6 +359,22 @@ def test_die_press_compaction(rig_run):
     assert 0.0 < m["peak_overlap_mean"] < m["peak_overlap_max"]
 
 
+def test_die_press_domain_holds_the_press():
+    """The full-size press's domain holds the die, its inlet and the bar at every keyframe with a radius to
+    spare, so a sphere that stays in the press is never removed; one thrown above the parked bar, or out of the
+    inlet's box, is."""
+    p = rigs.params("die_press", {})
+    spec = rigs.spec("die_press")
+    lo, hi = (np.asarray(b) for b in spec.domain)
+    for wall in spec.walls:
+        offsets = wall.translations if wall.translations is not None else np.zeros((1, 3))
+        for t in offsets:
+            v = np.asarray(wall.vertices) + t
+            assert np.all(v >= lo + p.particle_radius) and np.all(v <= hi - p.particle_radius), wall.name
+    park = max(t[2] for t in spec.walls[-1].translations)
+    assert hi[2] <= park + 5 * p.particle_radius and hi[0] <= p.inlet_diameter / 2 + 3 * p.particle_radius
+
+
 def test_die_press_counts_the_spheres_past_its_bar():
     """Spheres above the bar's face at the force limit, and those removed, count as squeezed past it; the bar's
     clearance is the quarter radius the rig sets."""
