@@ -158,9 +158,9 @@ def escape_warning(escaped: int, clearance: float) -> dict | None:
             clearance: the gap [m] between the bar's rim and the die.
 
     A sphere pressed into the rim of the bar overlaps both it and the die, and once its centre passes the rim
-    the stored elastic energy throws it out: seed 001's press at 300 N threw two of 6,575 out at 16-25 m/s
-    (twenty-first stage). It no longer carries load, and each flying sphere that stays in the scene rebuilds the
-    neighbour lists every few steps."""
+    the stored elastic energy throws it out: seed 001's press at 300 N had thrown two of 6,575 out at 16-25 m/s
+    by 0.97 s, and 129 by the end of another fill's stroke (twenty-first stage). It no longer carries load, and
+    each flying sphere that stays in the scene rebuilds the neighbour lists every few steps."""
     if escaped <= 0:
         return None
     return {
