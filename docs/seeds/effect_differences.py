@@ -99,9 +99,11 @@ def effects(df, factors: str):
     """(effects [deg], their standard errors [deg], residual df) of the main-effects model in coded units."""
     import statsmodels.formula.api as smf
 
+    from warpdem.study.report import settle
+
     fit = smf.ols("y ~ " + " + ".join(factors), df).fit()
     return (
-        {f: 2.0 * float(fit.params[f]) for f in factors},
+        {f: settle(2.0 * float(fit.params[f])) for f in factors},
         {f: 2.0 * float(fit.bse[f]) for f in factors},
         float(fit.df_resid),
     )

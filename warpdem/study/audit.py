@@ -54,6 +54,7 @@ from warpdem.engine.materials import elastic_moduli
 
 from .analysis import ModelFit, backward_eliminate, effects_table, fit_model, parse_term, solve_target, term_label
 from .designs import Factor, alias_structure, box_behnken, ccd_alpha, central_composite, plackett_burman
+from .report import settle
 from .spec import tomllib  # the standard library's, or the tomli backport on Python 3.10
 
 __all__ = [
@@ -637,7 +638,7 @@ def _pellets(a: _Audit, ref: Path, pub: dict):
         "value) has the sign of the screening's: "
         + "; ".join(f"{k}: " + ", ".join(f"{f} {eff[f]:+.2f} deg" for f in fac3) for k, eff in codings.items())
         + "; screening (Table 7's runs): "
-        + ", ".join(f"{f} {2 * fit.coef(f):+.2f} deg" for f in fac3)
+        + ", ".join(f"{f} {settle(2 * fit.coef(f)):+.2f} deg" for f in fac3)
         + ". Read as printed, the angle falls with both frictions, against the screening and the steepest ascent",
         "seed 000 Tables 7, 9, 10 and text",
         "consistency",

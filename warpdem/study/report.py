@@ -84,6 +84,13 @@ def format_p(p) -> str:
     return "< 0.0001" if p < 1e-4 else f"{p:.4f}"
 
 
+def settle(v: float, places: int = 9) -> float:
+    """``v`` rounded to ``places`` decimals: a least-squares solve leaves noise of ~1e-15 that differs between BLAS
+    builds, and an effect that is a decimal half-way value (6.635 deg from two-decimal data) would then print as 6.63
+    on one machine and 6.64 on another."""
+    return round(float(v), places)
+
+
 def _fmt(v, blank: str = "") -> str:
     """A number for reading: two decimals from 1 upwards, four significant digits below."""
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
