@@ -981,3 +981,23 @@ def test_a_replicate_summary_with_too_few_values_says_so_by_nan():
     ref = DescrStatsW(np.array([56.21, 41.67, 59.10]))
     assert three["ci"] == pytest.approx(list(ref.tconfint_mean(0.1)), rel=1e-10) and math.isnan(three["t"])
     assert (three["min"], three["max"]) == (41.67, 59.10)
+
+
+def test_one_device_needs_no_dask():
+    """A study on one device runs in this process (``InProcess``); on a machine without ``distributed`` (the GPU
+    machines here) ``warpdem study --device cuda:0`` stopped at import with "the package 'distributed' is not
+    installed". In a fresh process where importing ``distributed`` fails, the executor module imports and one
+    device is an ``InProcess``."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "for name in ('distributed', 'distributed.diagnostics', 'distributed.diagnostics.plugin'):\n"
+        "    sys.modules[name] = None\n"
+        "from warpdem.study import executor\n"
+        "print(type(executor.executor_for(['cpu'])).__name__)\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "InProcess"

@@ -20,7 +20,10 @@ import os
 import time
 from pathlib import Path
 
-from distributed.diagnostics.plugin import WorkerPlugin
+try:
+    from distributed.diagnostics.plugin import WorkerPlugin
+except ImportError:  # one device in this process (InProcess) needs no Dask; DaskExecutor imports it and says so
+    WorkerPlugin = object
 
 from . import spec as sp
 
