@@ -51,6 +51,7 @@ COUNTS = {
     "wetfeed_pb_standard": 12,
     "wetfeed_ccd_standard": 23,
     "phosphate_ffd_standard": 16,
+    "phosphate_bbd_standard": 15,
     "wetfeed_verify_large_standard": 5,
     "wetfeed_pb_standard_scaled": 12,
     "wetfeed_pb_type_a_scaled": 12,
