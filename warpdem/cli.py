@@ -358,12 +358,14 @@ def cmd_diagnose(args) -> int:
             print(f"misfit on the data fitted, base -> base + {name}: {z['base']:.3g} -> {z['extended']:.3g} SD")
         if res.get("separating_measurement"):
             print(f"measure {res['separating_measurement']} to tell them apart")
+        from warpdem.diagnose.reach import law_label
+
         for law in ((res.get("rolling_models") or {}).get("tried") or {}).values():
             for r, s in law["scatter"].items():
                 g = law["gain"].get(r)
                 vs = f", base / its variance {g['F']:.3g} (p {g['p_holm']:.2g})" if g else ""
                 says = "repeats" if law["repeats"] else "does not repeat"
-                print(f"rolling model {law['model']}: {r} SD {s['simulated_sd']:.3g}{vs}; {says}")
+                print(f"rolling model {law_label(law)}: {r} SD {s['simulated_sd']:.3g}{vs}; {says}")
     else:
         for r, x in ((res.get("gain") or {}).get("rmse") or {}).items():
             print(

@@ -15,6 +15,7 @@ from warpdem.scene import rigs
 
 pytest.importorskip("sklearn")
 
+from warpdem.diagnose.data import DiagnoseError  # noqa: E402
 from warpdem.diagnose.pipeline import _library, _problem  # noqa: E402
 
 
@@ -39,8 +40,9 @@ def test_sphere_funnel_library():
     lib, skipped = cands.library(scene, params, set())
     by = {c.name: c for c in lib}
     assert list(by) == ["cohesion", "plasticity", "shape", "size_distribution", "rolling_friction", "wall_friction"]
-    assert set(skipped) == {"rolling_model", "coarse_graining"}
+    assert set(skipped) == {"rolling_model", "coarse_graining", "cohesion_strength"}
     assert "HERTZ_MINDLIN, neither JKR nor EEPA" in skipped["coarse_graining"]
+    assert "a second change only" in skipped["cohesion_strength"]
     assert by["cohesion"].off == 0.0 and by["cohesion"].high == pytest.approx(_bond_range(scene), rel=1e-12)
     assert by["cohesion"].shared == {"interaction.grain.grain.law": "JKR"}
     assert (by["shape"].key, by["shape"].off, by["shape"].high) == ("aspect_ratio", 1.0, 2.5)
@@ -209,6 +211,95 @@ def test_coarse_graining_needs_one_size_ratio(tmp_path):
     lib, skipped = _library(spec, ex, _problem(spec, ex).conditions)
     assert "coarse_graining" not in {c.name for c in lib}
     assert "coarse_graining.size_ratio differs between the experiments" in skipped["coarse_graining"]
+
+
+# --------------------------------------------------------------------------------------------------
+# cohesion_strength: the surface energy weakened, the second part of a two-change model
+# --------------------------------------------------------------------------------------------------
+
+
+def test_cohesion_strength_of_a_cohesive_scene():
+    """JKR grains: x of gamma 10^x, off 0 at the top of [-1, 0], carrying the base 10, the scene's surface energy and
+    the key it scales; a free surface energy carries 0 (the request's own value is scaled). Hertz-Mindlin grains, or
+    a surface energy of 0 that the data file does not set, have nothing to weaken."""
+    scene, _ = _cohesive_funnel(0.05)
+    c, why = cands.cohesion_strength(scene, set())
+    assert why is None
+    assert (c.name, c.key, c.off, c.low, c.high, c.off_at_edge) == (
+        "cohesion_strength",
+        cands.STRENGTH_EXPONENT,
+        0.0,
+        -1.0,
+        0.0,
+        True,
+    )
+    assert c.shared == {
+        "cohesion_strength.base": 10.0,
+        "cohesion_strength.surface_energy": pytest.approx(0.05),
+        "cohesion_strength.target": GAMMA,
+    }
+    assert cands.cohesion_strength(scene, {GAMMA})[0].shared["cohesion_strength.surface_energy"] == 0.0
+    c, why = cands.cohesion_strength(_cohesive_funnel(0.0)[0], set())
+    assert c is None and "is 0: no cohesion to scale" in why
+    assert cands.cohesion_strength(_cohesive_funnel(0.0)[0], {GAMMA})[0] is not None
+    c, why = cands.cohesion_strength(_funnel(particle="sphere")[0], set())
+    assert c is None and "HERTZ_MINDLIN, neither JKR nor EEPA" in why
+
+
+def test_resolve_weakens_the_surface_energy_by_hand():
+    """gamma 10^x: x = -1 a tenth, -0.5 one over root ten, 0 unchanged; after coarse-graining's s^k when both are
+    there (gamma s^k 10^x); the candidates' own keys gone."""
+    strength = {
+        "cohesion_strength.base": 10.0,
+        "cohesion_strength.surface_energy": 0.4,
+        "cohesion_strength.target": GAMMA,
+    }
+    for x, factor in ((-1.0, 0.1), (-0.5, 10**-0.5), (0.0, 1.0)):
+        assert cands.resolve({**strength, cands.STRENGTH_EXPONENT: x}) == {GAMMA: pytest.approx(0.4 * factor)}
+        out = cands.resolve({**strength, GAMMA: 0.8, cands.STRENGTH_EXPONENT: x})
+        assert out == {GAMMA: pytest.approx(0.8 * factor, rel=1e-12)}
+    coarse = {"coarse_graining.size_ratio": 4.0, "coarse_graining.surface_energy": 0.4, "coarse_graining.target": GAMMA}
+    out = cands.resolve({**coarse, **strength, cands.COARSE_EXPONENT: 0.5, cands.STRENGTH_EXPONENT: -1.0})
+    assert out == {GAMMA: pytest.approx(0.4 * 2.0 * 0.1, rel=1e-12)}
+    assert cands.varies_per_world(cands.STRENGTH_EXPONENT)
+
+
+def test_a_two_change_request_carries_the_rolling_model_and_the_weaker_surface_energy(tmp_path):
+    """Through the pipeline: the data file's free surface energy, a rolling model switched and the strength added
+    as the last dimension (named ``<switch>+cohesion_strength``); each request sets the law and the free
+    parameter's value times 10^x. A use list without the candidate, or a range the file sets, is honoured; a range
+    that leaves out the off value is refused naming the file and the key."""
+    from warpdem.diagnose.pipeline import Dim, Evaluator, Model, _strength
+
+    fixed = '"interaction.grain.grain.law" = "JKR"\nparticle_radius = 0.002'
+    (tmp_path / "experiments.csv").write_text("id,replicate,angle_fit_deg\na,1,24.0\na,2,25.0\n")
+    toml = TOML.replace("{fixed}", fixed).replace("interaction.grain.grain.static_friction", GAMMA)
+    path = tmp_path / "data.toml"
+    path.write_text(toml)
+    spec, ex = load_diagnosis(path)
+    prob = _problem(spec, ex)
+    cand, why = _strength(spec, ex, prob.conditions)
+    assert why is None and (cand.low, cand.high) == (-1.0, 0.0)
+    base = Model("base", [Dim(p.name, p.parameter, p.low, p.high) for p in spec.parameters])
+    law = cands.LawSwitch("standard", {"interaction.grain.grain.rolling_model": "standard"})
+    pair = Model.extended(Model.switched(base, law), cand)
+    assert pair.name == "rolling_model=standard+cohesion_strength" and pair.law == law and pair.candidate == cand
+    assert not pair.is_base and [d.name for d in pair.dims] == [*(d.name for d in base.dims), "cohesion_strength"]
+    ov, _ = Evaluator(prob, None, None)._request(pair, [0.5, 0.5], 0, 7)
+    gamma = 0.2 + 0.5 * (1.0 - 0.2)
+    assert ov[GAMMA] == pytest.approx(gamma * 10**-0.5, rel=1e-12)
+    assert ov["interaction.grain.grain.rolling_model"] == "standard"
+    assert not any(k.startswith("cohesion_strength.") for k in ov)
+    path.write_text(toml + '\n[candidates]\nuse = ["rolling_model"]\n')
+    spec, ex = load_diagnosis(path)
+    assert _strength(spec, ex, prob.conditions) == (None, "not in the data file's [candidates] use list")
+    path.write_text(toml + "\n[candidates]\nranges.cohesion_strength = [-2.0, 0.0]\n")
+    spec, ex = load_diagnosis(path)
+    assert (_strength(spec, ex, prob.conditions)[0].low) == -2.0
+    path.write_text(toml + "\n[candidates]\nranges.cohesion_strength = [-2.0, -1.0]\n")
+    spec, ex = load_diagnosis(path)
+    with pytest.raises(DiagnoseError, match=r"data.toml: \[candidates\] ranges.cohesion_strength = \[-2.0, -1.0\]"):
+        _strength(spec, ex, prob.conditions)
 
 
 @pytest.mark.parametrize("value", [0, -1e-4, "1 mm", True])

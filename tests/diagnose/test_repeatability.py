@@ -109,31 +109,59 @@ BASE_RUNS = [28.0, 31.0, 33.0]
 """The base model's confirming runs at its closest point: SD 2.52 on 2 df, against replicates 30.0, 30.1, 29.9."""
 
 
-def _law_case(monkeypatch, law_runs: dict, law_reaches: dict | None = None):
+STRENGTH = {"cohesion_strength.base": 10.0, "cohesion_strength.surface_energy": 0.5, "cohesion_strength.target": "g"}
+"""The shared overrides of the constructed cases' cohesion_strength candidate."""
+
+
+def _law_case(
+    monkeypatch,
+    law_runs: dict,
+    law_reaches: dict | None = None,
+    pair_runs: dict | None = None,
+    pair_reaches: dict | None = None,
+    pair_x: float = -0.7,
+):
     """An OVERDISPERSED base (:data:`BASE_RUNS`) and two rolling models whose confirming runs are ``law_runs``
-    ({model: runs}) and which reach the data as ``law_reaches`` says (default: both). Returns the decision."""
+    ({model: runs}) and which reach the data as ``law_reaches`` says (default: both). With ``pair_runs``, each
+    model with the cohesion weakened (closest point x = ``pair_x``) has those runs and reaches as ``pair_reaches``
+    says (default: all); without, the strength candidate does not apply. Returns the decision and the names of the
+    models that ran."""
     from warpdem.diagnose import candidates as cands
     from warpdem.diagnose import pipeline
 
     ev, ex, base_res = _case(False, [30.0, 30.1, 29.9], BASE_RUNS)
     reaches = {m: True for m in law_runs} | (law_reaches or {})
+    paired = {m: True for m in pair_runs or {}} | (pair_reaches or {})
     switches = [cands.LawSwitch(m, {"interaction.grain.grain.rolling_model": m}) for m in law_runs]
+    strength = cands.Candidate("cohesion_strength", cands.STRENGTH_EXPONENT, 0.0, -1.0, 0.0, "log10", STRENGTH)
     ev.sims = SimpleNamespace(run=lambda *a: [])
     ev.design_requests = lambda models: []
+    ran = []
 
     def finish(ev, f):
         m = f["model"]
+        ran.append(m.name)
         if m.law is None:
             return {**base_res, "reaches": True}
+        if m.candidate is not None:
+            runs = np.asarray(pair_runs[m.law.model], float)[:, None]
+            return {
+                "confirm": {0: {"values": runs}},
+                "reaches": paired[m.law.model],
+                "theta": {m.candidate.name: pair_x},
+            }
         runs = np.asarray(law_runs[m.law.model], float)[:, None]
         return {"confirm": {0: {"values": runs}}, "reaches": reaches[m.law.model], "theta": {}}
 
     monkeypatch.setattr(reach, "fit", lambda ev, model: {"requests": [], "model": model})
     monkeypatch.setattr(reach, "finish", finish)
     monkeypatch.setattr(pipeline, "_laws", lambda spec, ex, conds: (switches, None))
+    monkeypatch.setattr(
+        pipeline, "_strength", lambda spec, ex, conds: (strength, None) if pair_runs else (None, "no cohesion here")
+    )
     results, decision = reach.run(ev, pipeline.Model("base", []), ev.spec, ex, log=lambda *a: None)
-    assert decision["verdict"] == "overdispersed" and set(results) == {"base", *(s.name for s in switches)}
-    return decision
+    assert decision["verdict"] == "overdispersed" and set(results) == set(ran)
+    return decision, ran
 
 
 def test_a_rolling_model_that_repeats_is_named(monkeypatch):
@@ -141,7 +169,7 @@ def test_a_rolling_model_that_repeats_is_named(monkeypatch):
     scatter as the base's. The base's variance over the first's is F = 6.33 / 0.00063 on (2, 2) df, whose
     one-sided p is 1 / (1 + F); Holm over the two tests doubles the smaller. The first is named, the verdict stays
     OVERDISPERSED (the base model is what was tested)."""
-    d = _law_case(monkeypatch, {"standard": [29.98, 30.0, 30.03], "constant_torque": [27.0, 30.0, 34.0]})
+    d, ran = _law_case(monkeypatch, {"standard": [29.98, 30.0, 30.03], "constant_torque": [27.0, 30.0, 34.0]})
     rm = d["rolling_models"]
     good, bad = rm["tried"]["rolling_model=standard"], rm["tried"]["rolling_model=constant_torque"]
     g = good["gain"]["angle"]
@@ -156,12 +184,14 @@ def test_a_rolling_model_that_repeats_is_named(monkeypatch):
     assert reach._cause_words(d) == "rolling-resistance model (type A, C or EDEM standard): standard"
     rows = [line for line in reach._laws_markdown(rm, {}) if line.startswith("| standard")]
     assert len(rows) == 1 and rows[0].endswith("| yes |")
+    assert rm["with"] is None and rm["pairs_not_tried"] == "a rolling model alone repeats"
+    assert not any("+" in n for n in ran)  # no two-change model once one law alone repeats
 
 
 def test_no_rolling_model_that_repeats_names_none(monkeypatch):
     """No effect: both rolling models scatter as the base does (SD 2.5-3.5 against 0.1): none is named, and the
     verdict line says so."""
-    d = _law_case(monkeypatch, {"standard": [27.5, 31.0, 32.5], "constant_torque": [27.0, 30.0, 34.0]})
+    d, _ = _law_case(monkeypatch, {"standard": [27.5, 31.0, 32.5], "constant_torque": [27.0, 30.0, 34.0]})
     rm = d["rolling_models"]
     assert not rm["repeating"] and rm["law"] is None and d["cause"] is None
     assert all(law["scatter"]["angle"]["exceeds"] for law in rm["tried"].values())
@@ -174,12 +204,74 @@ def test_a_rolling_model_must_reach_the_data_to_be_named(monkeypatch):
     """Runs that repeat far from the data's mean do not explain the scatter: a model that repeats but does not
     reach is not named; two that reach and repeat are both listed and neither is named."""
     tight = [29.98, 30.0, 30.03]
-    d = _law_case(monkeypatch, {"standard": tight, "epsd": tight}, {"standard": False})
+    d, _ = _law_case(monkeypatch, {"standard": tight, "epsd": tight}, {"standard": False})
     assert d["rolling_models"]["repeating"] == ["rolling_model=epsd"] and d["rolling_models"]["law"] == "epsd"
-    d = _law_case(monkeypatch, {"standard": tight, "epsd": tight})
+    d, _ = _law_case(monkeypatch, {"standard": tight, "epsd": tight})
     rm = d["rolling_models"]
     assert rm["repeating"] == ["rolling_model=standard", "rolling_model=epsd"] and rm["law"] is None
     assert "cannot tell them apart" in reach.law_words(d)
+
+
+SCATTER = {"standard": [27.5, 31.0, 32.5], "constant_torque": [27.0, 30.0, 34.0]}
+"""Two rolling models whose runs scatter as the base's (SD 2.5-3.5 against the replicates' 0.1)."""
+
+
+def test_a_rolling_model_that_repeats_only_with_weaker_cohesion_is_named(monkeypatch):
+    """The hidden effect seed 001 showed: no rolling model alone repeats, but one does with the surface energy
+    weakened (its closest point at x = -0.7, a factor 10^-0.7 = 0.20). Both two-change models run, after the
+    single ones; Holm runs over the four tests (the best pair's p times four, the single laws' tests included); the
+    pair is named with its factor, and the words say both changes."""
+    tight = [29.98, 30.0, 30.03]
+    d, ran = _law_case(monkeypatch, SCATTER, pair_runs={"standard": tight, "constant_torque": [26.0, 30.5, 33.0]})
+    assert ran[:3] == ["base", "rolling_model=standard", "rolling_model=constant_torque"]
+    assert ran[3:] == ["rolling_model=standard+cohesion_strength", "rolling_model=constant_torque+cohesion_strength"]
+    rm = d["rolling_models"]
+    good = rm["tried"]["rolling_model=standard+cohesion_strength"]
+    g = good["gain"]["angle"]
+    assert g["p"] == pytest.approx(1.0 / (1.0 + np.var(BASE_RUNS, ddof=1) / np.var(tight, ddof=1)), rel=1e-9)
+    assert g["p_holm"] == pytest.approx(4.0 * g["p"], rel=1e-9) and good["repeats"]
+    assert good["with"]["name"] == "cohesion_strength" and good["with"]["factor"] == pytest.approx(10**-0.7)
+    assert rm["repeating"] == ["rolling_model=standard+cohesion_strength"] and d["cause"] == "rolling_model"
+    assert rm["law"] == "standard" and rm["with"] == good["with"]
+    assert not any(law["repeats"] for n, law in rm["tried"].items() if n != "rolling_model=standard+cohesion_strength")
+    assert reach.law_words(d).startswith(
+        "the rolling model standard with the surface energy times 0.2 (cohesion_strength) reaches the data and repeats"
+    )
+    words = reach._cause_words(d)
+    assert words.startswith("rolling-resistance model (type A, C or EDEM standard): standard with the surface energy")
+    assert words.endswith("; and cohesion too strong for the grains (the surface energy weakened)")
+    lines = reach._laws_markdown(rm, {})
+    assert any(line.startswith("No rolling model alone repeated") for line in lines)
+    rows = [line for line in lines if line.startswith("| standard with the surface energy times 0.2")]
+    assert len(rows) == 1 and rows[0].endswith("| yes |")
+
+
+def test_no_two_change_model_that_repeats_names_none(monkeypatch):
+    """No effect: the pairs scatter as the base does, or repeat without reaching the data: none is named, and the
+    verdict line says the laws were tried alone and with a weaker cohesion."""
+    d, ran = _law_case(monkeypatch, SCATTER, pair_runs=SCATTER)
+    rm = d["rolling_models"]
+    assert len(ran) == 5 and not rm["repeating"] and rm["law"] is None and rm["with"] is None and d["cause"] is None
+    assert reach.law_words(d) == (
+        "none of the rolling models tried (standard, constant_torque), alone or with a weaker cohesion, reaches the "
+        "data and repeats"
+    )
+    tight = [29.98, 30.0, 30.03]
+    d, _ = _law_case(
+        monkeypatch,
+        SCATTER,
+        pair_runs={"standard": tight, "constant_torque": tight},
+        pair_reaches={"standard": False, "constant_torque": False},
+    )
+    assert not d["rolling_models"]["repeating"] and d["cause"] is None
+
+
+def test_no_two_change_model_without_a_surface_energy(monkeypatch):
+    """Where the strength candidate does not apply, only the single laws run and the report says why no pair
+    was tried."""
+    d, ran = _law_case(monkeypatch, SCATTER)
+    assert len(ran) == 3 and d["rolling_models"]["pairs_not_tried"] == "no cohesion here"
+    assert "No two-change model was tried: no cohesion here." in reach._laws_markdown(d["rolling_models"], {})
 
 
 def test_rolling_alternatives_of_a_rig_scene():

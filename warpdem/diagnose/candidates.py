@@ -30,6 +30,14 @@ Each candidate adds ONE parameter to the base model and reduces to the base mode
   EEPA grain-grain pair whose surface energy is not 0, with the same s for every experiment. Its parameter is not an
   override key: :func:`resolve` turns it into the surface energy it implies, whatever gives the base value (a free
   parameter, a condition, ``[fixed]`` or the scene).
+- ``cohesion_strength``: the grain-grain surface energy (JKR's or EEPA's) weakened by a factor 10^x, x the
+  candidate's parameter (off 0; range [-1, 0], a factor 0.1-1), whatever gives the surface energy (as for
+  coarse-graining, :func:`resolve`). Not a one-change candidate of the library: a cohesion weaker than the data
+  file's box is what a free surface energy already covers up to its bound. It is the second part of a two-change
+  model the reach diagnosis tries when its base is OVERDISPERSED and no rolling model alone repeats
+  (:func:`cohesion_strength`): a pile of grains cohesive past a granular Bond number of a few stands as a tower
+  or falls, and scatters with the seed whatever its rolling law, so a law that repeats may need weaker cohesion
+  too (seed 001's fix: EDEM's standard rolling friction with the surface energy times 0.2).
 
 A candidate does not apply when its parameter is already a free parameter of the base model, a condition of
 the experiments or a ``[fixed]`` key (the user has decided it), or when the scene cannot carry it.
@@ -53,6 +61,7 @@ CANDIDATE_NAMES = (
     "rolling_model",
     "wall_friction",
     "coarse_graining",
+    "cohesion_strength",
 )
 """Names of the candidate extensions, in the order they are tried and reported."""
 
@@ -65,6 +74,7 @@ CAUSES = {
     "rolling_model": "rolling-resistance model (type A, C or EDEM standard)",
     "wall_friction": "particle-wall friction",
     "coarse_graining": "coarse-graining (the surface energy not scaled with the grain size)",
+    "cohesion_strength": "cohesion too strong for the grains (the surface energy weakened)",
 }
 """The cause each candidate stands for, in the report's words."""
 
@@ -89,17 +99,28 @@ grain radius over the measured grains'), the scene's own surface energy [J/m^2] 
 0 when the data file sets it, as a free parameter, condition or [fixed] key) and the surface energy's override
 key."""
 
+STRENGTH_EXPONENT = "cohesion_strength.log10_factor"
+"""The cohesion_strength candidate's parameter: x of gamma 10^x (not an override key)."""
+
+_STRENGTH_SHARED = ("cohesion_strength.base", "cohesion_strength.surface_energy", "cohesion_strength.target")
+"""As :data:`_COARSE_SHARED` for cohesion_strength, its base 10."""
+
+_SCALINGS = {COARSE_EXPONENT: _COARSE_SHARED, STRENGTH_EXPONENT: _STRENGTH_SHARED}
+"""The candidates whose parameter scales a surface energy, gamma -> gamma b^x: the parameter x's key and its shared
+keys (b, the scene's surface energy, the target override key). Applied in this order."""
+
 
 def resolve(overrides: Mapping) -> dict:
-    """``overrides`` with the coarse_graining candidate's keys (when present) replaced by the surface energy they
-    imply: gamma s^k, gamma the overrides' own value of the target key, else the scene's. Every other key is
-    returned as it is."""
+    """``overrides`` with the scaling candidates' keys (:data:`_SCALINGS`, when present) replaced by the surface
+    energy they imply: gamma b^x, gamma the overrides' own value of the target key, else the scene's. Every other
+    key is returned as it is."""
     out = dict(overrides)
-    if COARSE_EXPONENT not in out:
-        return out
-    k = float(out.pop(COARSE_EXPONENT))
-    s, gamma, target = (out.pop(key) for key in _COARSE_SHARED)
-    out[target] = float(out.get(target, gamma)) * float(s) ** k
+    for exponent, shared in _SCALINGS.items():
+        if exponent not in out:
+            continue
+        x = float(out.pop(exponent))
+        b, gamma, target = (out.pop(key) for key in shared)
+        out[target] = float(out.get(target, gamma)) * float(b) ** x
     return out
 
 
@@ -108,7 +129,7 @@ def varies_per_world(key: str) -> bool:
     that can (:func:`warpdem.study.spec.varies_per_world`) or the coarse-graining exponent (a surface energy)."""
     from warpdem.study.spec import varies_per_world as per_world
 
-    return key == COARSE_EXPONENT or per_world(key)
+    return key in _SCALINGS or per_world(key)
 
 
 _REST_WALL = {"angle_of_repose": ("Plate", "Base"), "press": ("Die",), "drum": ("Drum",)}
@@ -238,11 +259,9 @@ def library(
         add("wall_friction", f"interaction.{grain}.{mat}.static_friction", mu_w, min(0.1, mu_w), max(1.0, mu_w))
     else:
         skipped["wall_friction"] = f"no wall the {scene.measure.kind} measurement rests on"
-    gamma_key = f"{pp}.surface_energy"
-    if gg.law not in (ContactLaw.JKR, ContactLaw.EEPA):
-        skipped["coarse_graining"] = (
-            f"the grain-grain law is {gg.law.name}, neither JKR nor EEPA: no surface energy to scale"
-        )
+    gamma, no_gamma = _scalable_surface_energy(gg, f"{pp}.surface_energy", taken)
+    if no_gamma:
+        skipped["coarse_graining"] = no_gamma
     elif grain_radius is None:
         skipped["coarse_graining"] = (
             "the data file gives no [candidates] grain_radius (the measured grains' mean radius) to scale from"
@@ -251,14 +270,47 @@ def library(
         skipped["coarse_graining"] = "the scene's grains have no mean radius to compare with grain_radius"
     elif math.isclose(radius, grain_radius, rel_tol=1e-9):
         skipped["coarse_graining"] = f"the scene's grains are the measured size ({grain_radius:g} m): nothing to scale"
-    elif float(gg.surface_energy) == 0.0 and gamma_key not in taken:
-        skipped["coarse_graining"] = f"{gamma_key} is 0: no cohesion to scale"
     else:
-        # a surface energy the data file sets reaches every request (and may differ between experiments)
-        gamma = 0.0 if gamma_key in taken else float(gg.surface_energy)
-        shared = dict(zip(_COARSE_SHARED, (radius / float(grain_radius), gamma, gamma_key)))
+        shared = dict(zip(_COARSE_SHARED, (radius / float(grain_radius), gamma, f"{pp}.surface_energy")))
         add("coarse_graining", COARSE_EXPONENT, 0.0, 0.0, 2.0, "", shared)
+    skipped["cohesion_strength"] = (
+        "a second change only: the reach diagnosis pairs it with each rolling model when the base model is "
+        "OVERDISPERSED and no rolling model alone repeats"
+    )
     return out, skipped
+
+
+def _scalable_surface_energy(gg, key: str, taken: set[str]) -> tuple[float, str | None]:
+    """The grain-grain surface energy [J/m^2] a scaling candidate starts from, carried in its ``shared`` overrides
+    (0 when the data file sets ``key``: a free parameter, condition or [fixed] value then reaches every request, and
+    may differ between experiments), and None; or (0, why there is none to scale)."""
+    from warpdem.engine.types import ContactLaw
+
+    if gg.law not in (ContactLaw.JKR, ContactLaw.EEPA):
+        return 0.0, f"the grain-grain law is {gg.law.name}, neither JKR nor EEPA: no surface energy to scale"
+    if key in taken:
+        return 0.0, None
+    if float(gg.surface_energy) == 0.0:
+        return 0.0, f"{key} is 0: no cohesion to scale"
+    return float(gg.surface_energy), None
+
+
+STRENGTH_RANGE = (-1.0, 0.0)
+"""cohesion_strength's default range of x (the surface energy times 10^x): weaker by up to ten times."""
+
+
+def cohesion_strength(scene, taken: set[str]) -> tuple[Candidate | None, str | None]:
+    """The cohesion_strength candidate of ``scene`` (a SceneSpec built with the base model's overrides; ``taken``:
+    the override keys the data file decides) and None, or (None, why it does not apply): the grain-grain law has no
+    surface energy, or it is 0 and not the data file's."""
+    grain = _grain(scene)[0]
+    pp = f"interaction.{grain}.{grain}"
+    gamma, why = _scalable_surface_energy(_pair(scene, grain, grain), f"{pp}.surface_energy", taken)
+    if why:
+        return None, why
+    shared = dict(zip(_STRENGTH_SHARED, (10.0, gamma, f"{pp}.surface_energy")))
+    lo, hi = STRENGTH_RANGE
+    return Candidate("cohesion_strength", STRENGTH_EXPONENT, 0.0, lo, hi, "log10", shared), None
 
 
 @dataclass(frozen=True)

@@ -222,7 +222,7 @@ class Dim:
 @dataclass
 class Model:
     """The base model (``candidate`` and ``law`` None), the base plus one candidate (its parameter the last
-    dimension), or the base with its rolling model switched (``law``; the same parameters)."""
+    dimension), the base with its rolling model switched (``law``; the same parameters), or both changes."""
 
     name: str
     dims: list[Dim]
@@ -236,10 +236,11 @@ class Model:
 
     @classmethod
     def extended(cls, base: Model, cand: cands.Candidate) -> Model:
-        """``base`` plus the candidate ``cand``, whose parameter is the last dimension."""
-        return cls(
-            cand.name, [*base.dims, Dim(cand.name, cand.key, cand.low, cand.high, cand.unit)], dict(cand.shared), cand
-        )
+        """``base`` plus the candidate ``cand``, whose parameter is the last dimension; a ``base`` with a rolling
+        model switched keeps it (a two-change model, named ``<switch>+<candidate>``)."""
+        name = f"{base.law.name}+{cand.name}" if base.law else cand.name
+        dims = [*base.dims, Dim(cand.name, cand.key, cand.low, cand.high, cand.unit)]
+        return cls(name, dims, {**base.shared, **cand.shared}, cand, base.law)
 
     @classmethod
     def switched(cls, base: Model, law: cands.LawSwitch) -> Model:
@@ -1107,6 +1108,35 @@ def _laws(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tuple
     return found or [], None
 
 
+def _strength(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tuple:
+    """The cohesion_strength candidate the reach diagnosis pairs with each rolling model
+    (:func:`candidates.cohesion_strength`, the same for every condition; its range as the data file's ``[candidates]
+    ranges`` says), and None; or (None, why not)."""
+    if spec.candidates is not None and "cohesion_strength" not in spec.candidates:
+        return None, "not in the data file's [candidates] use list"
+    taken = _taken(spec, ex)
+    found = None
+    for scene, _ in _condition_scenes(spec, conditions):
+        cand, why = cands.cohesion_strength(scene, taken)
+        if why:
+            return None, why
+        if found is not None and cand != found:
+            return None, "the grain's surface energy differs between the experiments"
+        found = cand
+    return (_user_range(spec, found) if found is not None else None), None
+
+
+def _user_range(spec: DiagnosisSpec, c: cands.Candidate) -> cands.Candidate:
+    """``c`` over the data file's ``[candidates] ranges`` entry for it, when there is one."""
+    if c.name not in spec.candidate_ranges:
+        return c
+    lo, hi = spec.candidate_ranges[c.name]
+    try:
+        return cands.with_range(c, lo, hi)
+    except ValueError as e:
+        raise DiagnoseError(f"{spec.path}: [candidates] ranges.{c.name} = [{lo}, {hi}]: {e}") from None
+
+
 def _library(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tuple[list, dict]:
     """The candidates that apply (the data file's ``use`` list, ranges replaced as it says). A range that
     depends on the scene (cohesion's, through the grain's weight) is the narrowest over the conditions: its
@@ -1133,13 +1163,4 @@ def _library(spec: DiagnosisSpec, ex: Experiments, conditions: list[dict]) -> tu
             if c.name not in spec.candidates:
                 skipped[c.name] = "not in the data file's [candidates] use list"
         lib = [c for c in lib if c.name in spec.candidates]
-    out = []
-    for c in lib:
-        if c.name in spec.candidate_ranges:
-            lo, hi = spec.candidate_ranges[c.name]
-            try:
-                c = cands.with_range(c, lo, hi)
-            except ValueError as e:
-                raise DiagnoseError(f"{spec.path}: [candidates] ranges.{c.name} = [{lo}, {hi}]: {e}") from None
-        out.append(c)
-    return out, skipped
+    return [_user_range(spec, c) for c in lib], skipped

@@ -24,8 +24,9 @@ one number can still test is reach. Stages (the simulations stored and reused as
    model of the grain (:func:`candidates.rolling_alternatives`: a discrete switch, the same free parameters) is
    taken through stage 2 and judged by its scatter (:func:`try_laws`): one that reaches the data, repeats no worse
    than the measurement and scatters significantly less than the base (one-sided F, Holm over the laws and
-   responses) is named the cause; the verdict stays OVERDISPERSED, since the base model is what was tested. It
-   does not reach: every candidate of the library is taken through stage 2 with its parameter added. One
+   responses) is named the cause; the verdict stays OVERDISPERSED, since the base model is what was tested. When
+   none repeats alone, each is tried again with the cohesion weakened by a free factor
+   (:func:`candidates.cohesion_strength`), a two-change model judged by the same rule. It does not reach: every candidate of the library is taken through stage 2 with its parameter added. One
    reaches: it is the only one (named by reach alone, never by held-out data, which one value cannot give);
    several: NOT IDENTIFIABLE, with the measurement that best separates them
    (:func:`pipeline.separating_measurement`); none: UNEXPLAINED.
@@ -193,7 +194,7 @@ def scatter_words(scatter: dict) -> str:
 
 def no_laws(why: str | None = None) -> dict:
     """A decision's ``rolling_models`` when none was tried (``why``: the reason, None when none was due)."""
-    return {"tried": {}, "not_tried": why, "repeating": [], "law": None}
+    return {"tried": {}, "not_tried": why, "pairs_not_tried": why, "repeating": [], "law": None, "with": None}
 
 
 def scatter_gain(base: dict, law: dict) -> dict:
@@ -211,43 +212,58 @@ def scatter_gain(base: dict, law: dict) -> dict:
     return out
 
 
-def try_laws(ev, base_model, spec, ex, results: dict, scatter: dict, log) -> dict:
-    """Stage 4 of an OVERDISPERSED base: each other rolling model (:func:`pipeline._laws`) through stage 2 at its
-    own closest point (its results join ``results`` under its name), then judged by its scatter. Returns the
-    decision's entries: "rolling_models" {"tried": {name: {"model", "reaches", "scatter" (its
-    :func:`repeatability`), "gain" (:func:`scatter_gain`, with "p_holm" over every law and response), "repeats"}},
-    "not_tried" (why none was tried, or None), "repeating" (the names that repeat), "law" (the one model that
-    does, else None)} and "cause" ("rolling_model" when one does, else None)."""
+def _judge(ev, ex, models: list, results: dict, scatter: dict, stage: str, log) -> dict:
+    """Stage 2 for each of ``models`` (rolling models switched, alone or with a second change) at its own closest
+    point (its results join ``results`` under its name), and its scatter: {name: {"model" (the rolling model),
+    "with" (the second change, {"name", "factor"} at the closest point, or None), "reaches", "scatter" (its
+    :func:`repeatability`), "gain" (:func:`scatter_gain`)}}. ``repeats`` is set by :func:`_decide`."""
     from .data import DiagnoseError
-    from .pipeline import Model, _laws
 
-    switches, why = _laws(spec, ex, ev.prob.conditions)
-    if why:
-        return {"rolling_models": no_laws(why)}
-    models = [Model.switched(base_model, sw) for sw in switches]
-    ev.sims.run(ev.design_requests(models), "rolling models: design")
+    ev.sims.run(ev.design_requests(models), f"{stage}: design")
     fitted, laws = [], {}
+
+    def second(m, theta):
+        if m.candidate is None:
+            return None
+        x = theta.get(m.candidate.name) if theta else None
+        return {"name": m.candidate.name, "factor": None if x is None else 10.0 ** float(x)}
+
     for m in models:
         try:
             fitted.append(fit(ev, m))
         except DiagnoseError as e:  # a law whose piles cannot be measured over the box
-            laws[m.name] = {"model": m.law.model, "reaches": False, "scatter": {}, "gain": {}, "repeats": False}
-            log(f"{spec.name}: rolling model {m.law.model} left out: {e}")
-    ev.sims.run([q for f in fitted for q in f["requests"]], "rolling models: confirm")
+            laws[m.name] = {
+                "model": m.law.model,
+                "with": second(m, None),
+                "reaches": False,
+                "scatter": {},
+                "gain": {},
+                "repeats": False,
+            }
+            log(f"{ev.spec.name}: {m.name} left out: {e}")
+    ev.sims.run([q for f in fitted for q in f["requests"]], f"{stage}: confirm")
     for f in fitted:
         m = f["model"]
         res = results[m.name] = finish(ev, f)
         rep = repeatability(ev, ex, res)
         laws[m.name] = {
             "model": m.law.model,
+            "with": second(m, res.get("theta")),
             "reaches": res["reaches"],
             "scatter": rep,
             "gain": scatter_gain(scatter, rep),
         }
+    return laws
+
+
+def _decide(laws: dict, scatter: dict, alpha: float) -> list[str]:
+    """Holm over every law's and response's scatter gain in ``laws`` (:func:`_judge`), then each law's
+    ``repeats``: it reaches the data, no response scatters more than the measurement, and the base scatters
+    significantly more than it on every response the base exceeds. Returns the names that repeat."""
     tests = [g for law in laws.values() for g in law["gain"].values()]
     for g, q in zip(tests, inf.holm([g["p"] for g in tests]) if tests else []):
         g["p_holm"] = float(q)
-        g["significant"] = bool(q < spec.alpha)
+        g["significant"] = bool(q < alpha)
     exceeded = [r for r, s in scatter.items() if s["exceeds"]]
     for law in laws.values():
         law["repeats"] = bool(
@@ -255,13 +271,55 @@ def try_laws(ev, base_model, spec, ex, results: dict, scatter: dict, log) -> dic
             and not any(s["exceeds"] for s in law["scatter"].values())
             and all(law["gain"].get(r, {}).get("significant", False) for r in exceeded)
         )
-    repeating = [n for n, law in laws.items() if law["repeats"]]
-    one = len(repeating) == 1
-    law = laws[repeating[0]]["model"] if one else None
+    return [n for n, law in laws.items() if law["repeats"]]
+
+
+def try_laws(ev, base_model, spec, ex, results: dict, scatter: dict, log) -> dict:
+    """Stage 4 of an OVERDISPERSED base: each other rolling model (:func:`pipeline._laws`) through stage 2 at its
+    own closest point, judged by its scatter (:func:`_judge`, :func:`_decide`). When none repeats, each again with
+    the cohesion weakened (:func:`candidates.cohesion_strength`, its factor free; :func:`pipeline._strength`): a
+    two-change model, judged by the same rule, Holm over the single and the paired models together. Returns the
+    decision's entries: "rolling_models" {"tried": {name: :func:`_judge`'s entry with "repeats"}, "not_tried" (why
+    none was tried, or None), "pairs_not_tried" (why no two-change model was tried, or None), "repeating" (the
+    names that repeat), "law" (the one model that does, else None), "with" (its second change, else None)} and
+    "cause" ("rolling_model" when one does, else None)."""
+    from .pipeline import Model, _laws, _strength
+
+    conds = ev.prob.conditions
+    switches, why = _laws(spec, ex, conds)
+    if why:
+        return {"rolling_models": no_laws(why)}
+    models = [Model.switched(base_model, sw) for sw in switches]
+    laws = _judge(ev, ex, models, results, scatter, "rolling models", log)
+    repeating = _decide(laws, scatter, spec.alpha)
+    pairs_why = "a rolling model alone repeats"
+    if not repeating:
+        strength, pairs_why = _strength(spec, ex, conds)
+        if strength is not None:
+            pairs = [Model.extended(m, strength) for m in models]
+            laws.update(_judge(ev, ex, pairs, results, scatter, "rolling models with weaker cohesion", log))
+            repeating = _decide(laws, scatter, spec.alpha)
+    one = laws[repeating[0]] if len(repeating) == 1 else None
     return {
-        "rolling_models": {"tried": laws, "not_tried": None, "repeating": repeating, "law": law},
+        "rolling_models": {
+            "tried": laws,
+            "not_tried": None,
+            "pairs_not_tried": pairs_why,
+            "repeating": repeating,
+            "law": one["model"] if one else None,
+            "with": one["with"] if one else None,
+        },
         "cause": "rolling_model" if one else None,
     }
+
+
+def law_label(law: dict) -> str:
+    """A tried rolling model in the report's words: its name, and its second change where it has one."""
+    w = law.get("with")
+    if not w:
+        return law["model"]
+    factor = "" if w["factor"] is None else f" times {_num(w['factor'], 2)}"
+    return f"{law['model']} with the surface energy{factor} ({w['name']})"
 
 
 def law_words(decision: dict) -> str:
@@ -271,16 +329,18 @@ def law_words(decision: dict) -> str:
     if not laws:
         return f"no rolling model was tried ({rm['not_tried'] or 'none applies'})"
     if not rep:
-        tried = ", ".join(law["model"] for law in laws.values())
-        return f"none of the rolling models tried ({tried}) reaches the data and repeats"
+        tried = ", ".join(law["model"] for law in laws.values() if not law.get("with"))
+        paired = any(law.get("with") for law in laws.values())
+        alone = ", alone or with a weaker cohesion," if paired else ""
+        return f"none of the rolling models tried ({tried}){alone} reaches the data and repeats"
 
     def gain(n):
         g = laws[n]["gain"]
         return ", ".join(f"{r}: variance ratio {_num(x['F'], 3)}, p {_num(x['p_holm'], 2)}" for r, x in g.items())
 
     if len(rep) == 1:
-        return f"the rolling model {laws[rep[0]]['model']} reaches the data and repeats ({gain(rep[0])})"
-    both = ", ".join(laws[n]["model"] for n in rep)
+        return f"the rolling model {law_label(laws[rep[0]])} reaches the data and repeats ({gain(rep[0])})"
+    both = "; ".join(law_label(laws[n]) for n in rep)
     return f"the rolling models {both} each reach the data and repeat; these data cannot tell them apart"
 
 
@@ -444,8 +504,13 @@ def _plot(out: Path, prob, results: dict) -> list[str]:
 
 def _cause_words(decision: dict) -> str | None:
     words = cands.CAUSES.get(decision["cause"] or "", None)
-    law = decision["rolling_models"]["law"]
-    return f"{words}: {law}" if words and law else words
+    rm = decision["rolling_models"]
+    if not (words and rm["law"]):
+        return words
+    w = rm.get("with")
+    if not w:
+        return f"{words}: {rm['law']}"
+    return f"{words}: {law_label({'model': rm['law'], 'with': w})}; and {cands.CAUSES[w['name']]}"
 
 
 def write(out: Path, prob, results: dict, decision: dict, checks=None) -> dict:
@@ -500,6 +565,18 @@ def _laws_markdown(rm: dict, results: dict) -> list[str]:
         "point; it is named when it reaches the data, its runs repeat no worse than the measurement, and the base's "
         "runs scatter more than its own (one-sided F on the two models' confirming runs, Holm over the models and "
         "responses).",
+    ]
+    if any(law.get("with") for law in rm["tried"].values()):
+        lines += [
+            "",
+            "No rolling model alone repeated, so each was tried again with a second change: the grain-grain surface "
+            "energy times a free factor 10^x (x the parameter `cohesion_strength`, over its range; the base's free "
+            "parameters free too). Grains cohesive past a granular Bond number of a few stand as towers or fall, "
+            "whatever their rolling law; the Holm correction runs over every model tried, alone or paired.",
+        ]
+    elif rm.get("pairs_not_tried") and not rm["repeating"]:
+        lines += ["", f"No two-change model was tried: {rm['pairs_not_tried']}."]
+    lines += [
         "",
         "| rolling model | reaches | closest point | response | its SD (df) | against the measurement, p | "
         "base / its variance, p (Holm) | repeats |",
@@ -515,7 +592,7 @@ def _laws_markdown(rm: dict, results: dict) -> list[str]:
             against = _num(s["p_holm"], 2) if s else "–"
             ratio = f"{_num(g['F'], 3)}, {_num(g['p_holm'], 2)}" if g else "–"
             lines.append(
-                f"| {law['model']} | {'yes' if law['reaches'] else 'no'} | {point} | {r} | {sd} | {against} | "
+                f"| {law_label(law)} | {'yes' if law['reaches'] else 'no'} | {point} | {r} | {sd} | {against} | "
                 f"{ratio} | {'yes' if law['repeats'] else 'no'} |"
             )
     return lines
@@ -637,8 +714,9 @@ def _markdown(prob, results: dict, diag: dict) -> str:
             "that spread, where the material repeats more closely. The candidates are judged by whether they reach "
             "the mean, which the base already does, so none is tried. What to look for is what makes the runs "
             "repeat: how the grains lock (the rolling-friction law, the cohesion's strength at the grains' size) "
-            "and the pile's size in grains. The rolling law is tried here (below); test any other change by the "
-            "same check: its runs' SD against the measurement's.",
+            "and the pile's size in grains. The rolling law is tried here, alone and, when none repeats alone, with "
+            "the cohesion weakened (below); test any other change by the same check: its runs' SD against the "
+            "measurement's.",
         ]
         lines += _laws_markdown(diag["rolling_models"], results)
     if diag["not_applicable"]:
