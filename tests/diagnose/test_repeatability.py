@@ -266,6 +266,35 @@ def test_no_two_change_model_that_repeats_names_none(monkeypatch):
     assert not d["rolling_models"]["repeating"] and d["cause"] is None
 
 
+def test_a_model_too_few_runs_can_judge_is_pointed_out(monkeypatch):
+    """Seed 001's case on the GPU: a pair whose runs (SD 0.35 on 2 df) do not exceed the replicates' scatter (SD 0.1:
+    F 12.25 on (2, 2), p 0.075) but cannot show the base scatters more (F 6.33 / 0.1225 = 51.7, p 0.019, times four
+    by Holm 0.076): not named, and the verdict line says more confirming seeds would decide. A pair that does not
+    reach the data is not pointed out."""
+    loose = [29.65, 30.0, 30.35]
+    d, _ = _law_case(monkeypatch, SCATTER, pair_runs={"standard": loose, "constant_torque": SCATTER["standard"]})
+    rm = d["rolling_models"]
+    pair = rm["tried"]["rolling_model=standard+cohesion_strength"]
+    assert pair["gain"]["angle"]["p"] == pytest.approx(1.0 / (1.0 + np.var(BASE_RUNS, ddof=1) / 0.1225), rel=1e-9)
+    assert pair["gain"]["angle"]["p_holm"] == pytest.approx(4.0 * pair["gain"]["angle"]["p"], rel=1e-9)
+    assert pair["scatter"]["angle"]["p"] == pytest.approx(1.0 / (1.0 + 12.25), rel=1e-9)
+    assert not pair["gain"]["angle"]["significant"] and not pair["scatter"]["angle"]["exceeds"]
+    assert d["cause"] is None and reach.undecided(rm) == ["rolling_model=standard+cohesion_strength"]
+    words = reach.law_words(d)
+    assert words.endswith(
+        "; standard with the surface energy times 0.2 (cohesion_strength) reaches it within the measurement's "
+        "scatter, but too few confirming runs to show less scatter than the base: more confirming seeds "
+        "([calibration] confirm_seeds) would decide"
+    )
+    d, _ = _law_case(
+        monkeypatch,
+        SCATTER,
+        pair_runs={"standard": loose, "constant_torque": loose},
+        pair_reaches={"standard": False, "constant_torque": False},
+    )
+    assert reach.undecided(d["rolling_models"]) == [] and "would decide" not in reach.law_words(d)
+
+
 def test_no_two_change_model_without_a_surface_energy(monkeypatch):
     """Where the strength candidate does not apply, only the single laws run and the report says why no pair
     was tried."""

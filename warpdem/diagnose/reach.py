@@ -313,6 +313,19 @@ def try_laws(ev, base_model, spec, ex, results: dict, scatter: dict, log) -> dic
     }
 
 
+def undecided(rm: dict) -> list[str]:
+    """The tried rolling models (names) that reach the data and do not scatter more than the measurement, but whose
+    runs do not show the base scatters more than they do: what more confirming runs could still name."""
+    return [
+        n
+        for n, law in rm["tried"].items()
+        if law["reaches"]
+        and law["scatter"]
+        and not law["repeats"]
+        and not any(s["exceeds"] for s in law["scatter"].values())
+    ]
+
+
 def law_label(law: dict) -> str:
     """A tried rolling model in the report's words: its name, and its second change where it has one."""
     w = law.get("with")
@@ -332,7 +345,16 @@ def law_words(decision: dict) -> str:
         tried = ", ".join(law["model"] for law in laws.values() if not law.get("with"))
         paired = any(law.get("with") for law in laws.values())
         alone = ", alone or with a weaker cohesion," if paired else ""
-        return f"none of the rolling models tried ({tried}){alone} reaches the data and repeats"
+        words = f"none of the rolling models tried ({tried}){alone} reaches the data and repeats"
+        close = undecided(rm)
+        if close:
+            words += (
+                f"; {' and '.join(law_label(laws[n]) for n in close)} "
+                f"{'reaches' if len(close) == 1 else 'each reach'} it within the measurement's scatter, but too few "
+                "confirming runs to show less scatter than the base: more confirming seeds ([calibration] "
+                "confirm_seeds) would decide"
+            )
+        return words
 
     def gain(n):
         g = laws[n]["gain"]
