@@ -550,7 +550,7 @@ def test_cli_reports_a_bad_data_file_without_a_traceback(tmp_path, capsys):
 
 def test_repository_data_files():
     """The data files under studies/diagnose load as written: the worked example, and seeds 000's and 001's one
-    measured angle each (seed 001's at two sizes, and with its recalibrated model), no more values than free
+    measured angle each (seed 001's at two sizes, with six confirming seeds, and with its recalibrated model), no more values than free
     parameters, which the diagnosis takes as a reach question."""
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "press_plasticity.toml")
     assert spec.rig == "die_press" and list(ex.responses) == ["residual_set_ratio"]
@@ -565,6 +565,10 @@ def test_repository_data_files():
     assert dict(spec.fixed) == dict(base.fixed) | law | {"surface_energy": 0.1}
     assert [(p.low, p.high) for p in spec.parameters] == [(0.1, 0.5), (0.3, 0.9), (0.04, 0.16)]
     assert spec.experiments_path == base.experiments_path
+    spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed001_wetfeed_confirm6.toml")
+    # six confirming seeds instead of three, and nothing else changed: the same seed, so the same design and points
+    assert spec.confirm_seeds == 6 != base.confirm_seeds and spec.seed == base.seed
+    assert dict(spec.fixed) == dict(base.fixed) and spec.parameters == base.parameters
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed001_wetfeed_large.toml")
     assert training_values(ex) == 1 and spec.parameter_names == ["X1", "X2"]
     # the scatter seeds and the design share one launch, then the confirming seeds: 12 worlds of 25,000 grains
