@@ -52,6 +52,7 @@ COUNTS = {
     "wetfeed_ccd_standard": 23,
     "phosphate_ffd_standard": 16,
     "phosphate_bbd_standard": 15,
+    "phosphate_ffd_standard_gamma_s": 16,
     "wetfeed_verify_large_standard": 5,
     "wetfeed_pb_standard_scaled": 12,
     "wetfeed_pb_type_a_scaled": 12,
@@ -202,6 +203,26 @@ def test_seed_001_scaled_studies_differ_from_their_standard_twins_only_in_the_su
     coded = [c for c in t.columns if c != "point_id" and not c.endswith("_actual")]
     assert t[coded].equals(t_twin[coded])
     np.testing.assert_allclose(t[f"{factor}_actual"], 0.2 * t_twin[f"{factor}_actual"], rtol=1e-12)
+
+
+def test_seed_002_standard_scaled_screening_is_both_twins(studies, tables):
+    """phosphate_ffd_standard_gamma_s is phosphate_ffd_gamma_s (D's levels 0.3 and 1.5 J/m^2 times s = 25.6) with
+    the standard law fixed on the ore's pairs, and phosphate_ffd_standard with D's levels times s: the same 16 coded
+    points, world seeds and launches of 8 as both."""
+    model = {f"interaction.{p}.rolling_model": "standard" for p in ("ore.ore", "ore.steel")}
+    spec, scaled, std = (
+        studies[n] for n in ("phosphate_ffd_standard_gamma_s", "phosphate_ffd_gamma_s", "phosphate_ffd_standard")
+    )
+    assert dict(spec.fixed) == dict(scaled.fixed) | model == dict(std.fixed)
+    assert spec.factors == scaled.factors and spec.responses == std.responses and spec.analysis == std.analysis
+    d = {f.name: f for f in std.factors}["D"]
+    assert {f.name: f for f in spec.factors}["D"] == dataclasses.replace(d, low=7.68, high=38.4)
+    assert (7.68, 38.4) == (round(0.3 * 25.6, 9), round(1.5 * 25.6, 9)) and spec.batch == std.batch == 8
+    t = tables["phosphate_ffd_standard_gamma_s"]
+    cols = [c for c in t.columns if c != "point_id"]
+    assert t[cols].equals(tables["phosphate_ffd_gamma_s"][cols])
+    coded = [c for c in cols if not c.endswith("_actual")]
+    assert t[coded].equals(tables["phosphate_ffd_standard"][coded])
 
 
 def test_seed_001_type_a_screening_differs_from_its_twin_only_in_the_rolling_model(studies, tables):
