@@ -550,7 +550,7 @@ def test_cli_reports_a_bad_data_file_without_a_traceback(tmp_path, capsys):
 
 def test_repository_data_files():
     """The data files under studies/diagnose load as written: the worked example, and seeds 000's and 001's one
-    measured angle each (seed 001's at two sizes, with six confirming seeds, and with its recalibrated model), no more values than free
+    measured angle each (seed 001's at two sizes, each also with six confirming seeds, and with its recalibrated model), no more values than free
     parameters, which the diagnosis takes as a reach question."""
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "press_plasticity.toml")
     assert spec.rig == "die_press" and list(ex.responses) == ["residual_set_ratio"]
@@ -573,6 +573,10 @@ def test_repository_data_files():
     assert training_values(ex) == 1 and spec.parameter_names == ["X1", "X2"]
     # the scatter seeds and the design share one launch, then the confirming seeds: 12 worlds of 25,000 grains
     assert spec.sim_seeds + spec.calibration_points + spec.confirm_seeds == 12
+    large = spec
+    spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed001_wetfeed_large_confirm6.toml")
+    assert spec.confirm_seeds == 6 and spec.seed == large.seed and spec.calibration_points == large.calibration_points
+    assert dict(spec.fixed) == dict(large.fixed) and spec.parameters == large.parameters
 
 
 def test_cli_prints_a_reach_verdict(monkeypatch, capsys):
