@@ -20,7 +20,9 @@ secant between them (pellets_verify_standard, pellets_verify_standard_step, pell
 diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach: ``warpdem diagnose
 studies/diagnose/seed00N_*.toml``); seed 001's press and reach diagnosis with the model the sixteenth stage
 recalibrated (die_press_standard_scaled, with a fuller die die_press_standard_scaled_80, seed001_reach_standard_scaled),
-and the press, with the fuller die, at the set that landed with the seed's 25,000 grains (die_press_seed_size_80).
+and the press, with the fuller die, at the set that landed with the seed's 25,000 grains (die_press_seed_size_80), its
+further fills (die_press_seed_size_80_s2 to _s6) and with a stiffer feed (die_press_seed_size_80_stiff), and the
+rolling-model check at that size (seed001_reach_large_confirm6, docs/seeds/001/reach_large/ copied into its folder).
 A lane runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
 side by side and may share a device, but two processes on one GPU time-slice it: on one H200 (2026-12-01) a
 25,000-grain study beside a one-world press took 1,076 s where it had taken 516 s alone, and the press about 1,113 s
@@ -139,6 +141,13 @@ FULLER_FILL = ("fill_height", 0.0835)
 """The press's fill height [m] that settles the less cohesive bed near the seed's 80 mm: at 0.08 m it settled at
 76.6 mm (the rig sizes its grain count for the packing of 0.42 measured at 0.65 J/m^2), so 0.08 x 80 / 76.6."""
 
+FILL_SEEDS = (2, 3, 4, 5, 6)
+"""The rig seeds of the seed-size press's further fills (studies/wetfeed_press_seed_size.toml's S); 2 and 3 ran in
+the twenty-first and twenty-fifth stages through rigs_full.py with the same overrides."""
+STIFF_FEED = ("material.feed.shear_modulus", 1.0e8)
+"""The feed's shear modulus [Pa] for the stiff press: ten times the seed's 10 MPa, so that the contacts at 300 N
+stay within Hertz's small overlaps (the seed's modulus gives a mean of 31-33 % of a radius)."""
+
 SEED_SIZE_STUDY = "wetfeed_verify_large_standard_scaled_friction"
 """The study whose point landed within 1 deg of seed 001's angle with the seed's 25,000 grains (nineteenth stage):
 the press's calibrated set is read from its design, so that the two cannot drift apart."""
@@ -176,6 +185,25 @@ STEPS = {
     "die_press_seed_size_80": lambda dev, root: rig(
         "die_press", dev.split(",")[-1], root / "die_press_seed_size_80", (*seed_size_set(), FULLER_FILL)
     ),
+    # more fills of that press, the rig's own seed (fill 1 is die_press_seed_size_80): the press's scatter
+    **{
+        f"die_press_seed_size_80_s{n}": lambda dev, root, n=n: rig(
+            "die_press",
+            dev.split(",")[-1],
+            root / f"die_press_seed_size_80_s{n}",
+            (*seed_size_set(), FULLER_FILL, ("seed", n)),
+        )
+        for n in FILL_SEEDS
+    },
+    # the same press with the feed's shear modulus ten times the seed's: how much the soft contacts compress
+    "die_press_seed_size_80_stiff": lambda dev, root: rig(
+        "die_press",
+        dev.split(",")[-1],
+        root / "die_press_seed_size_80_stiff",
+        (*seed_size_set(), FULLER_FILL, STIFF_FEED),
+    ),
+    # the rolling-model check at the seed's 25,000 grains; copy docs/seeds/001/reach_large/ into its folder first
+    "seed001_reach_large_confirm6": lambda dev, root: diagnosis("seed001_wetfeed_large_confirm6", dev, root),
     "truck_tipper": lambda dev, root: rig("truck_tipper", dev.split(",")[-1], root),
     # the same tipper with the bucket turning over 6 s instead of 1.5 s: the first contacts' speed falls towards
     # the free fall from the lip as the turn slows (tipper_dump.py), which seed 002 does not give

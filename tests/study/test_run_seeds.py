@@ -95,3 +95,20 @@ def test_the_press_replicates_press_the_seed_size_set_with_new_fills(run_seeds):
             assert ov[key] == (pytest.approx(value, rel=1e-12) if isinstance(value, float) else value), key
     assert sorted(seeds) == [2, 3, 4, 5, 6] and all(isinstance(s, int) for s in seeds)
     assert DiePress.seed not in seeds
+
+
+def test_the_further_fills_and_the_stiff_press_add_one_override_each(run_seeds, tmp_path):
+    """Fills 2-6 are the seed-size press with the rig's seed set, the stiff press with the feed's shear modulus ten
+    times the seed's 10 MPa; every other override is die_press_seed_size_80's, so the presses compare like with
+    like. The large rolling-model check runs its own data file."""
+    ((_, base),) = run_seeds.parse_lane("cuda:0=die_press_seed_size_80", tmp_path)
+    sets = [base[i + 1] for i, a in enumerate(base) if a == "--set"]
+    for n in (2, 3, 4, 5, 6):
+        ((_, cmd),) = run_seeds.parse_lane(f"cuda:0=die_press_seed_size_80_s{n}", tmp_path)
+        assert [cmd[i + 1] for i, a in enumerate(cmd) if a == "--set"] == sets + [f"die_press.seed={n}"]
+        assert cmd[cmd.index("--out") + 1] == str(tmp_path / f"die_press_seed_size_80_s{n}")
+    ((_, stiff),) = run_seeds.parse_lane("cuda:0=die_press_seed_size_80_stiff", tmp_path)
+    extra = [stiff[i + 1] for i, a in enumerate(stiff) if a == "--set"][len(sets) :]
+    assert extra == ["die_press.material.feed.shear_modulus=1e+08"] and float(extra[0].split("=")[1]) == 10 * 1.0e7
+    ((_, diag),) = run_seeds.parse_lane("cuda:0=seed001_reach_large_confirm6", tmp_path)
+    assert diag[diag.index("diagnose") + 1] == "studies/diagnose/seed001_wetfeed_large_confirm6.toml"
