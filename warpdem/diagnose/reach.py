@@ -26,10 +26,10 @@ one number can still test is reach. Stages (the simulations stored and reused as
    than the measurement and scatters significantly less than the base (one-sided F, Holm over the laws and
    responses) is named the cause; the verdict stays OVERDISPERSED, since the base model is what was tested. When
    none repeats alone, each is tried again with the cohesion weakened by a free factor
-   (:func:`candidates.cohesion_strength`), a two-change model judged by the same rule. It does not reach: every candidate of the library is taken through stage 2 with its parameter added. One
-   reaches: it is the only one (named by reach alone, never by held-out data, which one value cannot give);
-   several: NOT IDENTIFIABLE, with the measurement that best separates them
-   (:func:`pipeline.separating_measurement`); none: UNEXPLAINED.
+   (:func:`candidates.cohesion_strength`), a two-change model judged by the same rule. It does not reach: every
+   candidate of the library is taken through stage 2 with its parameter added. One reaches: it is the only one
+   (named by reach alone, never by held-out data, which one value cannot give); several: NOT IDENTIFIABLE, with
+   the measurement that best separates them (:func:`pipeline.separating_measurement`); none: UNEXPLAINED.
    Each model that reaches the data gives its predictions of the measurements the data lack
    (:func:`predictions`): the held-out test to make next.
 
