@@ -322,3 +322,43 @@ def test_rolling_alternatives_of_a_rig_scene():
     scene = apply_overrides(scene, {"interaction.grain.grain.rolling_friction": 0.0})
     laws, why = cands.rolling_alternatives(scene, set())
     assert not laws and "rolling friction is 0" in why
+
+
+def test_the_reach_picture_keeps_every_label_and_marker_in_view(monkeypatch, tmp_path):
+    """Seed 001's five models (the two-change names run to 40 characters): every tick label, the title and the
+    legend lie inside the figure, and the legend covers no model's diamond (inside the axes it hid the base's)."""
+    ev, _, _ = _case(True, [54.0, 55.0, 54.5], [50.0, 51.0, 52.0])
+    names = [
+        "base",
+        "rolling_model=constant_torque",
+        "rolling_model=standard",
+        "rolling_model=constant_torque+cohesion_strength",
+        "rolling_model=standard+cohesion_strength",
+    ]
+    results = {
+        n: {"span": [(22.5 + k, 80.0 - k)], "simulated": [48.0 + 4 * k], "reaches": True} for k, n in enumerate(names)
+    }
+    figs = []
+
+    def keep(fig, path, **kw):
+        fig.canvas.draw()
+        figs.append(fig)
+
+    monkeypatch.setattr(reach, "save_figure", keep)
+    monkeypatch.setattr("matplotlib.pyplot.close", lambda fig: None)
+    assert reach._plot(tmp_path, ev.prob, results) == ["reach_angle_0.png"]
+    (fig,) = figs
+    r = fig.canvas.get_renderer()
+    box = fig.bbox
+    ax = fig.axes[0]
+    texts = [*ax.get_yticklabels(), ax.xaxis.label, fig._suptitle or ax.title]
+    (legend,) = fig.legends or [ax.get_legend()]  # the figure's or the axes', wherever it is drawn
+    for t in texts:
+        e = t.get_window_extent(r)
+        assert e.x0 >= box.x0 - 0.5 and e.x1 <= box.x1 + 0.5 and e.y0 >= box.y0 - 0.5 and e.y1 <= box.y1 + 0.5, t
+    assert [t.get_text() for t in ax.get_yticklabels()] == names
+    lb = legend.get_window_extent(r)
+    assert box.x0 <= lb.x0 and lb.x1 <= box.x1 and box.y0 <= lb.y0 and lb.y1 <= box.y1
+    for k in range(len(names)):
+        x, y = ax.transData.transform((48.0 + 4 * k, k))
+        assert not (lb.x0 <= x <= lb.x1 and lb.y0 <= y <= lb.y1), names[k]

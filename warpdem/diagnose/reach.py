@@ -499,8 +499,11 @@ def _plot(out: Path, prob, results: dict) -> list[str]:
     obs = prob.obs[prob.train].reset_index(drop=True)
     files = []
     names = list(results)
+    # a two-change model's name runs to 40 characters: widen the figure with the longest, so that the axes keep
+    # their width once the constrained layout has made room for the labels
+    width = max(6.0, 3.5 + 0.08 * max(len(n) for n in names))
     for i, o in obs.iterrows():
-        fig, ax = plt.subplots(figsize=(6, 0.6 * len(names) + 2.0))
+        fig, ax = plt.subplots(figsize=(width, 0.6 * len(names) + 2.4), layout="constrained")
         sd = math.sqrt(max(o["var_one"], prob.sim_var.get(o["response"], 0.0)) / o["n"])
         ax.axvspan(o["mean"] - 2 * sd, o["mean"] + 2 * sd, color="0.85", label="measured, 2 SE")
         ax.axvline(o["mean"], color="k")
@@ -510,13 +513,13 @@ def _plot(out: Path, prob, results: dict) -> list[str]:
             ax.plot(results[n]["simulated"][i], y, "kD")
         ax.set_yticks(range(len(names)), names)
         ax.set_xlabel(o["response"])
-        ax.set_title(
+        fig.suptitle(
             f"Reach of each model, experiment {o['id']}\nbar: its surrogate's span over the parameter box "
             "(blue: reaches);\ndiamond: simulated at its closest point",
             fontsize=9,
         )
-        ax.legend(fontsize=8, loc="lower right")
-        fig.tight_layout()
+        # below the axes: inside them it covered the lowest model's bar and diamond
+        fig.legend(fontsize=8, loc="outside lower center")
         f = out / f"reach_{o['response']}_{i}.png"
         save_figure(fig, f, dpi=110)
         plt.close(fig)
