@@ -66,3 +66,32 @@ def test_scatter_and_gain_recomputed_with_scipy(record):
     assert not any(e["repeats"] for e in tried.values()) and diag["verdict"] == "overdispersed"
     pair = next(e for e in tried.values() if e["model"] == "standard" and e["with"])
     assert pair["scatter"]["angle_image_deg"]["exceeds"] and not pair["gain"]["angle_image_deg"]["significant"]
+
+
+def test_the_record_picture_is_redrawn_from_what_the_record_keeps(tmp_path, monkeypatch):
+    """docs/seeds/redraw_reach.py draws the record's five models from diagnosis.json: each model's span and closest
+    point as the record holds them, and the band of the diagnosis (the seeds' scatter 5.77 deg, larger than the
+    stated 1 deg, twice over one measurement) around 54.25 deg."""
+    import shutil
+
+    from tests.conftest import load_seed_script
+    from warpdem.diagnose import reach
+
+    folder = tmp_path / "rec"
+    shutil.copytree(RECORDS / "reach_confirm6", folder, ignore=shutil.ignore_patterns("runs", "launches"))
+    seen = {}
+
+    def plot(out, prob, results):
+        seen.update(out=out, prob=prob, results=results)
+        return ["reach_angle_image_deg_0.png"]
+
+    monkeypatch.setattr(reach, "_plot", plot)
+    assert load_seed_script("redraw_reach.py").redraw(folder) == ["reach_angle_image_deg_0.png"]
+    diag = json.loads((folder / "diagnosis.json").read_text())
+    assert list(seen["results"]) == ["base", *diag["extended"]] and len(seen["results"]) == 5
+    assert seen["results"]["base"]["simulated"] == diag["base"]["simulated"]
+    (o,) = seen["prob"].obs.to_dict("records")
+    assert (o["mean"], o["var_one"], o["n"]) == (54.25, STATED_SD**2, 1)
+    band = max(o["var_one"], seen["prob"].sim_var["angle_image_deg"]) ** 0.5
+    assert band == pytest.approx(diag["noise"]["simulation_sd"]["angle_image_deg"], rel=1e-12)
+    assert band == pytest.approx(5.769, abs=1e-3)
