@@ -26,9 +26,9 @@ def redraw(folder: Path) -> list[str]:
     import pandas as pd
 
     diag = json.loads((folder / "diagnosis.json").read_text())
-    table = pd.read_csv(folder / "experiments.csv") if (folder / "experiments.csv").exists() else None
-    if table is None:
+    if not (folder / "experiments.csv").exists():
         raise SystemExit(f"{folder}: no experiments.csv (the record's measured data) to draw the band from")
+    table = pd.read_csv(folder / "experiments.csv")
     responses = [c for c in table.columns if c != "id" and not c.startswith("sd_")]
     rows = []
     for _, t in table.iterrows():

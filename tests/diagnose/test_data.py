@@ -550,8 +550,8 @@ def test_cli_reports_a_bad_data_file_without_a_traceback(tmp_path, capsys):
 
 def test_repository_data_files():
     """The data files under studies/diagnose load as written: the worked example, and seeds 000's and 001's one
-    measured angle each (seed 001's at two sizes, each also with six confirming seeds, and with its recalibrated model), no more values than free
-    parameters, which the diagnosis takes as a reach question."""
+    measured angle each (seed 001's at two sizes, each also with six confirming seeds, and with its recalibrated
+    model), no more values than free parameters, which the diagnosis takes as a reach question."""
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "press_plasticity.toml")
     assert spec.rig == "die_press" and list(ex.responses) == ["residual_set_ratio"]
     spec, ex = load_diagnosis(ROOT / "studies" / "diagnose" / "seed000_pellets.toml")

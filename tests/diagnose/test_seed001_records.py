@@ -40,7 +40,8 @@ def test_every_model_has_six_confirming_runs(record):
 
 def test_scatter_and_gain_recomputed_with_scipy(record):
     """Each model's SD against the stated 1 deg (chi-square, the SD taken as known), and the base's variance over
-    each model's (upper-tail F on (5, 5) df), Holm over the four models tried (statsmodels), as the diagnosis recorded them."""
+    each model's (upper-tail F on (5, 5) df), Holm over the four models tried (statsmodels), as the diagnosis
+    recorded them."""
     groups, diag = record
     (base,) = [v for (law, _), v in groups.items() if law is None]
     assert base.std(ddof=1) == pytest.approx(diag["scatter"]["angle_image_deg"]["simulated_sd"], rel=1e-9)
