@@ -368,9 +368,11 @@ def cmd_diagnose(args) -> int:
                 print(f"rolling model {law_label(law)}: {r} SD {s['simulated_sd']:.3g}{vs}; {says}")
     else:
         for r, x in ((res.get("gain") or {}).get("rmse") or {}).items():
+            p = x.get("noise_p")
+            noise = f"; chi-square p against the noise: base {p['base']:.2g}, extended {p['extended']:.2g}" if p else ""
             print(
                 f"held-out RMSE of {r}: base {x['base']:.4g}, extended {x['extended']:.4g} "
-                f"({100 * x['reduction']:.0f} % lower)"
+                f"({100 * x['reduction']:.0f} % lower{noise})"
             )
     print(
         f"{res['worlds']} simulated worlds ({res['launches']} launches now) in {res['wall_s']:.1f} s on {args.device}; "

@@ -635,3 +635,32 @@ def test_cli_prints_the_rolling_models_tried(monkeypatch, capsys):
     assert main(["diagnose", "any.toml", "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "rolling model standard: aor_deg SD 0.99, base / its variance 28.9 (p 0.033); repeats" in out
+
+
+def test_cli_prints_the_held_out_gain_against_the_noise(monkeypatch, capsys):
+    """A CAUSE prints each response's held-out RMSE, base and extended, its fall and both models' chi-square p
+    against the noise budget: the gain is confirmed by the base missing beyond the noise and the extended model
+    not."""
+    from warpdem.cli import main
+    from warpdem.diagnose import pipeline
+
+    x = {"base": 50.73, "extended": 22.80, "reduction": 0.5506, "noise_p": {"base": 1.1e-4, "extended": 0.239}}
+    res = {
+        "verdict": "cause",
+        "cause": "shape",
+        "cause_words": "particle shape (elongation)",
+        "gain": {"rmse": {"bulk_density_kg_m3": x}},
+        "stopped": None,
+        "worlds": 180,
+        "launches": 4,
+        "wall_s": 12.0,
+        "out": "o",
+    }
+    monkeypatch.setattr(pipeline, "diagnose", lambda *a, **k: res)
+    assert main(["diagnose", "any.toml", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("CAUSE: shape (particle shape (elongation))")
+    assert (
+        "held-out RMSE of bulk_density_kg_m3: base 50.73, extended 22.8 (55 % lower; chi-square p against the "
+        "noise: base 0.00011, extended 0.24)"
+    ) in out

@@ -97,3 +97,37 @@ def test_without_held_out_data_the_aic_decides():
     assert verdict(_base(held=None), res, 0.05, seed=0)["cause"] == "plasticity"
     res[1]["loglik"] = -3.0 - (EVIDENCE - 0.5)
     assert verdict(_base(held=None), res, 0.05, seed=0)["verdict"] == "ambiguous"
+
+
+def test_held_out_gain_tests_each_model_against_the_noise():
+    """``gain``'s ``noise_p``: the chi-square p of each model's held-out standardised errors on n degrees of freedom
+    (no held-out row was fitted), per response and over both. Sums of squares at the published 5 % points of
+    chi-square (7.815 on 3 df: NIST/SEMATECH's table) give p 0.05; a base that misses every held-out row by 3 SD
+    gives 27 on 3 df, p 5.89e-6 (scipy); over both responses the sums add on 6 df. A response's RMSE is in its
+    own units, its p in the noise budget's."""
+    from scipy import stats
+
+    from warpdem.diagnose.pipeline import gain
+
+    z_ext = np.sqrt(7.815 / 3.0)  # three rows whose squares sum to chi-square's 5 % point on 3 df
+    rows = [{"response": r, "variance": v, "base": 3.0, "ext": z_ext} for r, v in (("angle", 4.0), ("density", 100.0))]
+    t = pd.DataFrame(rows * 3)
+
+    def held(col):
+        r = t[col].to_numpy() * np.sqrt(t["variance"].to_numpy())
+        h = t[["response", "variance"]].copy()
+        h["residual"], h["sq"] = r, r**2 / t["variance"].to_numpy()
+        h["nll"] = inf.gaussian_nll(r, t["variance"].to_numpy())
+        return h
+
+    model = Model("base", [BASE_DIM])
+    base = {"model": model, "held_out": held("base"), "theta": {"mu_s": 0.5}, "interval": {"mu_s": (0.4, 0.6)}}
+    ext = {"model": model, "held_out": held("ext"), "theta": {"mu_s": 0.45}, "interval": {"mu_s": (0.3, 0.6)}}
+    g = gain(None, base, ext, seed=0)
+    for resp, sd in (("angle", 2.0), ("density", 10.0)):
+        x = g["rmse"][resp]
+        assert x["noise_p"]["extended"] == pytest.approx(0.05, abs=2e-4)
+        assert x["noise_p"]["base"] == pytest.approx(5.887e-6, rel=1e-3)
+        assert x["base"] == pytest.approx(3.0 * sd) and x["extended"] == pytest.approx(z_ext * sd)
+    assert g["z_rms"]["noise_p"]["extended"] == pytest.approx(stats.chi2.sf(2 * 7.815, 6))  # 0.0159, not 0.05
+    assert g["z_rms"]["noise_p"]["base"] == pytest.approx(stats.chi2.sf(54.0, 6))

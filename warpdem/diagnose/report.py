@@ -301,13 +301,23 @@ def _markdown(prob, evals, decision, diag, screens, skipped, separating, gains) 
     if gains:
         L += ["", "## Gain on held-out data", ""]
         if gains["rmse"]:
-            L += ["| response | RMSE base [95 %] | RMSE extended [95 %] | reduction |", "|---|---|---|---|"]
+            L += [
+                "| response | RMSE base [95 %] | RMSE extended [95 %] | reduction | chi-square p vs noise, base / extended |",
+                "|---|---|---|---|---|",
+            ]
             rows = [*gains["rmse"].items(), ("all (standardised: error / noise-budget SD)", gains["z_rms"])]
             for r, g in rows:
+                p = g.get("noise_p")
+                noise = f"{_f(p['base'], 3)} / {_f(p['extended'], 3)}" if p else "-"
                 L.append(
                     f"| {r} | {_f(g['base'])} {_interval(g['base_interval'])} | {_f(g['extended'])} "
-                    f"{_interval(g['extended_interval'])} | {100 * g['reduction']:.0f} % |"
+                    f"{_interval(g['extended_interval'])} | {100 * g['reduction']:.0f} % | {noise} |"
                 )
+            L += [
+                "",
+                "A gain is confirmed where the base's held-out errors exceed the noise budget (small p) and the "
+                "extended model's do not.",
+            ]
             n = gains["nll"]
             L += [
                 "",
