@@ -127,7 +127,10 @@ def test_the_angle_alone_cannot_tell_shape_from_rolling_friction(confounded):
 def test_with_the_bulk_density_the_cause_is_shape(confounded):
     """With the bulk density added: the cause is shape, its interval covers the hidden aspect ratio and the
     base's mu_s interval the hidden mu_s, rolling friction fails the adequacy test (it cannot pack the bed as
-    densely as rods do), and the held-out error of the bulk density falls by at least half."""
+    densely as rods do), and on held-out sizes the base's bulk-density errors exceed the noise budget (chi-square
+    p below 0.05) where the extended model's do not, with a smaller RMSE. How far the RMSE falls depends on how far
+    the rods move the density against its noise (10 kg/m^3 here), so no fraction of it is a physical bound: at
+    least half held on one machine and read 0.437 on another, from the CPU's floating point alone."""
     res = confounded["both"]
     assert res["verdict"] == "cause", res
     assert res["cause"] == "shape"
@@ -138,4 +141,7 @@ def test_with_the_bulk_density_the_cause_is_shape(confounded):
     assert lo <= MU_S <= hi
     rolling = next(c for c in res["candidates"] if c["candidate"] == "rolling_friction")
     assert not rolling["adequate"]
-    assert res["gain"]["rmse"]["bulk_density_kg_m3"]["reduction"] >= 0.5
+    bulk = res["gain"]["rmse"]["bulk_density_kg_m3"]
+    assert bulk["noise_p"]["base"] < 0.05, bulk
+    assert bulk["noise_p"]["extended"] > 0.05, bulk
+    assert bulk["extended"] < bulk["base"], bulk
