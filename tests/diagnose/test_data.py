@@ -579,29 +579,31 @@ def test_repository_data_files():
     assert dict(spec.fixed) == dict(large.fixed) and spec.parameters == large.parameters
 
 
-def test_cli_prints_a_reach_verdict(monkeypatch, capsys):
-    """A reach diagnosis (one measured value) prints its own verdict line, each reaching candidate's misfit on the
-    data fitted, and the measurement that separates them; no held-out line, since there is none."""
+def _cli_prints(monkeypatch, capsys, **res) -> str:
+    """What ``warpdem diagnose`` prints for a diagnosis that returns ``res`` (with a run's bookkeeping added)."""
     from warpdem.cli import main
     from warpdem.diagnose import pipeline
 
-    res = {
-        "mode": "reach",
-        "verdict": "not_identifiable",
-        "verdict_words": "NOT IDENTIFIABLE: out of reach of the base model; cohesion, plasticity each reach the data",
-        "gain": {
-            n: {"z_rms": {"base": 10.4, "extended": z}, "rmse": {}} for n, z in (("cohesion", 1.4), ("plasticity", 1.1))
-        },
-        "separating_measurement": "bulk_density_kg_m3",
-        "stopped": None,
-        "worlds": 42,
-        "launches": 6,
-        "wall_s": 12.0,
-        "out": "o",
-    }
+    res = {"stopped": None, "worlds": 42, "launches": 6, "wall_s": 12.0, "out": "o", **res}
     monkeypatch.setattr(pipeline, "diagnose", lambda *a, **k: res)
     assert main(["diagnose", "any.toml", "--no-progress"]) == 0
-    out = capsys.readouterr().out
+    return capsys.readouterr().out
+
+
+def test_cli_prints_a_reach_verdict(monkeypatch, capsys):
+    """A reach diagnosis (one measured value) prints its own verdict line, each reaching candidate's misfit on the
+    data fitted, and the measurement that separates them; no held-out line, since there is none."""
+    out = _cli_prints(
+        monkeypatch,
+        capsys,
+        mode="reach",
+        verdict="not_identifiable",
+        verdict_words="NOT IDENTIFIABLE: out of reach of the base model; cohesion, plasticity each reach the data",
+        gain={
+            n: {"z_rms": {"base": 10.4, "extended": z}, "rmse": {}} for n, z in (("cohesion", 1.4), ("plasticity", 1.1))
+        },
+        separating_measurement="bulk_density_kg_m3",
+    )
     assert out.startswith("NOT IDENTIFIABLE: out of reach of the base model; cohesion, plasticity")
     assert "base -> base + cohesion: 10.4 -> 1.4 SD" in out and "measure bulk_density_kg_m3" in out
     assert "held-out" not in out
@@ -610,9 +612,6 @@ def test_cli_prints_a_reach_verdict(monkeypatch, capsys):
 def test_cli_prints_the_rolling_models_tried(monkeypatch, capsys):
     """An OVERDISPERSED reach diagnosis prints, per rolling model tried, its runs' SD, the base's variance over its
     own and whether it repeats."""
-    from warpdem.cli import main
-    from warpdem.diagnose import pipeline
-
     law = {
         "model": "standard",
         "reaches": True,
@@ -620,20 +619,14 @@ def test_cli_prints_the_rolling_models_tried(monkeypatch, capsys):
         "scatter": {"aor_deg": {"simulated_sd": 0.99}},
         "gain": {"aor_deg": {"F": 28.9, "p_holm": 0.033}},
     }
-    res = {
-        "mode": "reach",
-        "verdict": "overdispersed",
-        "verdict_words": "OVERDISPERSED: ...; the rolling model standard reaches the data and repeats (...)",
-        "rolling_models": {"tried": {"rolling_model=standard": law}},
-        "stopped": None,
-        "worlds": 46,
-        "launches": 4,
-        "wall_s": 12.0,
-        "out": "o",
-    }
-    monkeypatch.setattr(pipeline, "diagnose", lambda *a, **k: res)
-    assert main(["diagnose", "any.toml", "--no-progress"]) == 0
-    out = capsys.readouterr().out
+    out = _cli_prints(
+        monkeypatch,
+        capsys,
+        mode="reach",
+        verdict="overdispersed",
+        verdict_words="OVERDISPERSED: ...; the rolling model standard reaches the data and repeats (...)",
+        rolling_models={"tried": {"rolling_model=standard": law}},
+    )
     assert "rolling model standard: aor_deg SD 0.99, base / its variance 28.9 (p 0.033); repeats" in out
 
 
@@ -641,24 +634,15 @@ def test_cli_prints_the_held_out_gain_against_the_noise(monkeypatch, capsys):
     """A CAUSE prints each response's held-out RMSE, base and extended, its fall and both models' chi-square p
     against the noise budget: the gain is confirmed by the base missing beyond the noise and the extended model
     not."""
-    from warpdem.cli import main
-    from warpdem.diagnose import pipeline
-
     x = {"base": 50.73, "extended": 22.80, "reduction": 0.5506, "noise_p": {"base": 1.1e-4, "extended": 0.239}}
-    res = {
-        "verdict": "cause",
-        "cause": "shape",
-        "cause_words": "particle shape (elongation)",
-        "gain": {"rmse": {"bulk_density_kg_m3": x}},
-        "stopped": None,
-        "worlds": 180,
-        "launches": 4,
-        "wall_s": 12.0,
-        "out": "o",
-    }
-    monkeypatch.setattr(pipeline, "diagnose", lambda *a, **k: res)
-    assert main(["diagnose", "any.toml", "--no-progress"]) == 0
-    out = capsys.readouterr().out
+    out = _cli_prints(
+        monkeypatch,
+        capsys,
+        verdict="cause",
+        cause="shape",
+        cause_words="particle shape (elongation)",
+        gain={"rmse": {"bulk_density_kg_m3": x}},
+    )
     assert out.startswith("CAUSE: shape (particle shape (elongation))")
     assert (
         "held-out RMSE of bulk_density_kg_m3: base 50.73, extended 22.8 (55 % lower; chi-square p against the "
