@@ -644,8 +644,6 @@ class Evaluator:
         with its aspect ratio) or a narrow valley by more than its own predictive variance says, and the MAP
         then sits where the surrogate, not the model, fits the data. Returns statistic, df, p, refine and the
         largest |z|."""
-        from scipy import stats
-
         u = fitted["u_map"]
         sim_var = self.prob.sim_var
         zs = []
@@ -658,7 +656,7 @@ class Evaluator:
                 zs.append((x.mean() - m[0]) / math.sqrt(sd[0] ** 2 + sim_var.get(r, 0.0) / len(x)))
         zs = np.asarray(zs, dtype=float)
         stat = float(np.sum(zs**2))
-        p = float(stats.chi2.sf(stat, len(zs))) if len(zs) else 1.0
+        p = _noise_p(zs**2)
         return {
             "statistic": stat,
             "df": int(len(zs)),
@@ -908,11 +906,12 @@ def _rms(base_sq: np.ndarray, ext_sq: np.ndarray, seed: int) -> dict:
 
 
 def _noise_p(sq: np.ndarray) -> float:
-    """Chi-square p of held-out standardised squared errors ``sq`` (n,) against the noise budget: n degrees of
-    freedom, as no held-out row was fitted. Small: the errors are more than the noise explains."""
+    """Chi-square p of standardised squared errors ``sq`` (n,) against the noise budget, on n degrees of freedom:
+    for errors of rows nothing was fitted to (held-out experiments, confirming runs against their surrogates).
+    Small: the errors are more than the noise explains; 1 with no rows (no evidence of a misfit)."""
     from scipy import stats
 
-    return float(stats.chi2.sf(float(np.sum(sq)), len(sq)))
+    return float(stats.chi2.sf(float(np.sum(sq)), len(sq))) if len(sq) else 1.0
 
 
 def gain(prob: Problem, base: dict, ext: dict, seed: int) -> dict:
