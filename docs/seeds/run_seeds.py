@@ -21,7 +21,9 @@ diagnoses of seeds 000 and 001's one angle each (seed000_reach, seed001_reach: `
 studies/diagnose/seed00N_*.toml``); seed 001's press and reach diagnosis with the model the sixteenth stage
 recalibrated (die_press_standard_scaled, with a fuller die die_press_standard_scaled_80, seed001_reach_standard_scaled),
 and the press, with the fuller die, at the set that landed with the seed's 25,000 grains (die_press_seed_size_80), its
-further fills (die_press_seed_size_80_s2 to _s6) and with a stiffer feed (die_press_seed_size_80_stiff), and the
+further fills (die_press_seed_size_80_s2 to _s6), with a stiffer feed (die_press_seed_size_80_stiff) and with the
+sixteenth stage's surface energy (die_press_seed_size_80_gamma; the funnel at that set with the seed's 25,000 grains
+is the study wetfeed_verify_large_press_gamma), and the
 rolling-model check at that size (seed001_reach_large_confirm6, docs/seeds/001/reach_large/ copied into its folder).
 A lane runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
 side by side and may share a device, but two processes on one GPU time-slice it: on one H200 (2026-12-01) a
@@ -148,6 +150,12 @@ STIFF_FEED = ("material.feed.shear_modulus", 1.0e8)
 """The feed's shear modulus [Pa] for the stiff press: ten times the seed's 10 MPa, so that the contacts at 300 N
 stay within Hertz's small overlaps (the seed's modulus gives a mean of 31-33 % of a radius)."""
 
+SIXTEENTH_GAMMA = ("interaction.feed.feed.surface_energy", dict(SCALED_SET)["interaction.feed.feed.surface_energy"])
+"""The sixteenth stage's surface energy [J/m^2] (0.1052) in place of the final set's 0.0909: the two sets differ
+in X1 (0.2752, 0.2470) and X3, and their presses from the rig's fill seed 1 read compression ratios of 0.625 and
+0.592. At the seed's pile size the funnel moves 38.9 deg per J/m^2 of X3 and 67.6 deg per unit of X1 (eighteenth,
+nineteenth stages), so if X3 is what moved the press, this set can land both."""
+
 SEED_SIZE_STUDY = "wetfeed_verify_large_standard_scaled_friction"
 """The study whose point landed within 1 deg of seed 001's angle with the seed's 25,000 grains (nineteenth stage):
 the press's calibrated set is read from its design, so that the two cannot drift apart."""
@@ -164,6 +172,14 @@ def seed_size_set() -> tuple:
         raise SystemExit(f"{path}: [design] points hold {len(points)} settings; one point (its replicates) expected")
     (point,) = points
     return tuple((PRESS_KEYS[f], float(v)) for f, v in point) + STANDARD_ROLLING
+
+
+def replaced(sets: tuple, override: tuple) -> tuple:
+    """``sets`` (KEY, VALUE pairs) with ``override``'s key given its value, in place; the key must be there."""
+    key, value = override
+    if key not in dict(sets):
+        raise KeyError(f"{key} is not among the overrides {[k for k, _ in sets]}")
+    return tuple((k, value if k == key else v) for k, v in sets)
 
 
 STEPS = {
@@ -201,6 +217,13 @@ STEPS = {
         dev.split(",")[-1],
         root / "die_press_seed_size_80_stiff",
         (*seed_size_set(), FULLER_FILL, STIFF_FEED),
+    ),
+    # the same press with the sixteenth stage's surface energy: did X3 or X1 lower the final set's press?
+    "die_press_seed_size_80_gamma": lambda dev, root: rig(
+        "die_press",
+        dev.split(",")[-1],
+        root / "die_press_seed_size_80_gamma",
+        (*replaced(seed_size_set(), SIXTEENTH_GAMMA), FULLER_FILL),
     ),
     # the rolling-model check at the seed's 25,000 grains; copy docs/seeds/001/reach_large/ into its folder first
     "seed001_reach_large_confirm6": lambda dev, root: diagnosis("seed001_wetfeed_large_confirm6", dev, root),

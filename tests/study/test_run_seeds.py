@@ -112,3 +112,33 @@ def test_the_further_fills_and_the_stiff_press_add_one_override_each(run_seeds, 
     assert extra == ["die_press.material.feed.shear_modulus=1e+08"] and float(extra[0].split("=")[1]) == 10 * 1.0e7
     ((_, diag),) = run_seeds.parse_lane("cuda:0=seed001_reach_large_confirm6", tmp_path)
     assert diag[diag.index("diagnose") + 1] == "studies/diagnose/seed001_wetfeed_large_confirm6.toml"
+
+
+def test_the_gamma_press_and_funnel_change_only_the_surface_energy(run_seeds, tmp_path):
+    """The press with the sixteenth stage's surface energy is die_press_seed_size_80 with X3 replaced in place (no
+    second X3 override), and its funnel study is the landed funnel study with only X3 changed, to the same value."""
+    import tomllib
+
+    def sets(step):
+        ((_, cmd),) = run_seeds.parse_lane(f"cuda:0={step}", tmp_path)
+        return [cmd[i + 1] for i, a in enumerate(cmd) if a == "--set"]
+
+    base, gamma = sets("die_press_seed_size_80"), sets("die_press_seed_size_80_gamma")
+    changed = [(a, b) for a, b in zip(base, gamma, strict=True) if a != b]
+    assert changed == [
+        (
+            "die_press.interaction.feed.feed.surface_energy=0.0909",
+            "die_press.interaction.feed.feed.surface_energy=0.1052",
+        )
+    ]
+    landed, funnel = (
+        tomllib.loads((ROOT / "studies" / f"{name}.toml").read_text())
+        for name in (run_seeds.SEED_SIZE_STUDY, "wetfeed_verify_large_press_gamma")
+    )
+    assert {p["X3"] for p in funnel["design"]["points"]} == {run_seeds.SIXTEENTH_GAMMA[1]}
+    for point in landed["design"]["points"]:
+        point["X3"] = run_seeds.SIXTEENTH_GAMMA[1]
+    funnel["study"]["name"], funnel["study"]["title"] = landed["study"]["name"], landed["study"]["title"]
+    assert funnel == landed
+    with pytest.raises(KeyError, match="material.feed.shear_modulus"):
+        run_seeds.replaced(run_seeds.seed_size_set(), run_seeds.STIFF_FEED)
