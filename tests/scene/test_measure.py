@@ -30,6 +30,7 @@ from warpdem.scene.measure import (
     plot_impacts,
     plot_press,
     press_curve,
+    press_loading,
     press_summary,
     press_unload,
     silhouette,
@@ -281,6 +282,32 @@ def test_press_summary_force_limit_and_backstop():
     assert s["compression_ratio"] == pytest.approx(0.5, abs=3e-4)
     assert s["final_height_m"] == pytest.approx(0.04, abs=2e-5)
     assert s["max_force_n"] == limit
+
+
+def test_press_loading_reads_the_fill_before_the_first_push_and_stops_at_the_turn():
+    """press_loading reads the fill at the sample before the force first passes 5 % of the limit (the bed's top
+    there, above the backstop), ends the stroke where the force reaches the limit, and ignores the samples after
+    the bar turned back; a bar that never pressed gives None."""
+    z, f = _stroke(z_end=0.035, n=1101)
+    # the bed's top sinks as it settles (a percentile of its particles, not the bar's height)
+    top = np.linspace(0.0815, 0.0795, len(z))
+    limit = 2.0e7 * 0.04**2  # reached at 40 mm of travel below the 80 mm fill
+    turn = int(np.argmax(f >= limit)) + 3
+    back = np.linspace(z[turn], z[turn] + 0.01, 50)[1:]
+    zz, ff = np.concatenate([z[: turn + 1] + 0.5, back + 0.5]), np.concatenate([f[: turn + 1], np.zeros(49)])
+    tt = np.concatenate([top[: turn + 1] + 0.5, np.full(49, top[turn] + 0.5)])
+    s = press_loading(zz, ff, tt, force_limit=limit, backstop_z=0.5, unload_index=turn)
+    first = int(np.argmax(f > 0.05 * limit))
+    assert s["fill_height_m"] == pytest.approx(top[first - 1], abs=1e-12)
+    assert top[first] < s["fill_height_m"] < top[first - 2]
+    fill = s["fill_height_m"]
+    assert s["limit_reached"] is True and s["max_force_n"] == limit
+    # F = k (0.08 - z)^2 reaches the limit at z = 0.04; the travel counts from the fill read
+    assert s["max_displacement_m"] == pytest.approx(fill - 0.04, abs=2e-5)
+    assert s["compression_ratio"] == pytest.approx((fill - 0.04) / fill, abs=3e-4)
+    assert len(s["load_z"]) == turn + 1 and np.all(np.diff(s["load_z"]) <= 0)
+    assert s["displacement_m"][0] == pytest.approx(0.0, abs=z[0] - z[1])
+    assert press_loading(zz, np.zeros_like(ff), tt, force_limit=limit) is None
 
 
 def test_press_curve_from_contact():

@@ -10,7 +10,7 @@ import re
 import numpy as np
 import pytest
 
-from tests.conftest import RunKilled, kill_past
+from tests.conftest import RunKilled, kill_past, load_seed_script
 from warpdem.engine import geometry
 from warpdem.scene import measure, rigs, runner
 from warpdem.scene.stage import StageError, apply_overrides, build, read_stage, write_stage
@@ -1393,6 +1393,11 @@ def test_press_resumed_while_unloading_ends_bit_identical(tmp_path):
             checkpoint_every=1e-9,
             progress=kill_past(t_kill / spec.run.duration),
         )
+    # the checkpoint taken while unloading holds the whole loading branch: docs/seeds/press_checkpoint.py reads
+    # from it what the finished run reports
+    loading = load_seed_script("press_checkpoint.py").read(tmp_path / "b" / "checkpoint.npz", spec.measure.force_limit)
+    for key in ("fill_height_m", "max_displacement_m", "compression_ratio", "limit_reached"):
+        assert loading[key] == a.metrics[0][key], key
     b = runner.run_scene(spec, out_dir=tmp_path / "b", frames=False, checkpoint_every=1e-9)
     assert b.info["resumed_from_s"] > a.metrics[0]["unload_start_s"]
     assert b.metrics[0]["stop"] == "unloaded"

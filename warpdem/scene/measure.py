@@ -1276,6 +1276,57 @@ def press_summary(
     }
 
 
+PRESS_FILL_FRACTION = 0.05
+"""The fraction of the force limit that marks the bar's first push: the fill is the bed's top at the sample before
+(a settling particle that grazes the approaching bar stays below it)."""
+
+
+def press_loading(
+    piston_z, piston_force, bed_top, force_limit: float = 0.0, backstop_z: float = 0.0, unload_index=None
+):
+    """The loading branch of a die-press run from its output series: the fill, the stroke's key numbers and the
+    force-displacement curve, read the same way from a finished run and from a checkpoint taken once it unloads.
+
+    Args:
+        piston_z: bar face height [m] at each output sample, shape (k,).
+        piston_force: axial force on the bar [N], shape (k,).
+        bed_top: the bed's top [m] at each sample, shape (k,) (its particles' 99th-percentile height).
+        force_limit: force [N] at which the stroke ends, or 0 (none: the fill is read at 5 % of the largest force).
+        backstop_z: the backstop's height [m].
+        unload_index: the sample at which the bar turned back (the series' ``unload_index``), or None.
+
+    Returns:
+        None when the bar never pressed the bed; else :func:`press_summary`'s dict with ``fill_height_m`` (the
+        bed's top above the backstop at the sample before the force first passed :data:`PRESS_FILL_FRACTION` of
+        the limit [m]), ``displacement_m`` and ``force_n`` (the curve from the loose bed's top, shape (m,)) and
+        ``load_z`` and ``load_force`` (the series up to ``unload_index``, shape (n,)).
+    """
+    z, f = _press_arrays_unchecked(piston_z, piston_force, unload_index)
+    top = np.asarray(bed_top, dtype=float)
+    limit = force_limit if force_limit > 0 else float(f.max())
+    pressing = np.flatnonzero(f > PRESS_FILL_FRACTION * limit)
+    if len(pressing) == 0:
+        return None
+    fill = float(top[max(int(pressing[0]) - 1, 0)] - backstop_z)
+    out = press_summary(z - backstop_z, f, fill_height=fill, force_limit=force_limit or None)
+    curve = press_curve(z - backstop_z, f, contact_z=fill)
+    out.update(
+        fill_height_m=fill,
+        displacement_m=curve["displacement_m"],
+        force_n=curve["force_n"],
+        load_z=z,
+        load_force=f,
+    )
+    return out
+
+
+def _press_arrays_unchecked(piston_z, piston_force, unload_index) -> tuple[np.ndarray, np.ndarray]:
+    z, f = np.asarray(piston_z, dtype=float), np.asarray(piston_force, dtype=float)
+    if unload_index is not None:
+        z, f = z[: unload_index + 1], f[: unload_index + 1]
+    return z, f
+
+
 # --------------------------------------------------------------------------------------------------
 # impacts on wall faces
 # --------------------------------------------------------------------------------------------------

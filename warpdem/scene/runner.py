@@ -1126,19 +1126,12 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
     m = spec.measure
     z_all, f_all = z, f
     stop = series.get("unload_index")
-    if stop is not None:
-        z, f = z[: stop + 1], f[: stop + 1]
-    # the bed top just before the bar first pushes with 5 % of the force limit (a settling particle that
-    # grazes the approaching bar stays below that); its own particles' 99th-percentile top
-    limit = m.force_limit if m.force_limit > 0 else f.max()
-    pressing = np.flatnonzero(f > 0.05 * limit)
-    if len(pressing) == 0:
+    load = ms.press_loading(z, f, series["bed_top"], m.force_limit, m.backstop_height, stop)
+    if load is None:
         return {"press_error": "the bar never pressed the bed"}
-    k = max(int(pressing[0]) - 1, 0)
-    fill = float(series["bed_top"][k] - m.backstop_height)
-    summ = ms.press_summary(z - m.backstop_height, f, fill_height=fill, force_limit=m.force_limit or None)
-    # the curve starts where the summary's displacement does: the piston at the loose bed's top
-    curve = ms.press_curve(z - m.backstop_height, f, contact_z=fill)
+    z, f, fill = load.pop("load_z"), load.pop("load_force"), load["fill_height_m"]
+    curve = {k: load.pop(k) for k in ("displacement_m", "force_n")}
+    summ = {k: v for k, v in load.items() if k != "fill_height_m"}
     mat = model.materials[int(h["material"][h["world"] == w][0])]
     d = _mean_diameter(h, w)
     area = math.pi * _piston_radius(model, m.piston) ** 2
