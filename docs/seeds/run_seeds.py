@@ -22,8 +22,7 @@ studies/diagnose/seed00N_*.toml``); seed 001's press and reach diagnosis with th
 recalibrated (die_press_standard_scaled, with a fuller die die_press_standard_scaled_80, seed001_reach_standard_scaled),
 and the press, with the fuller die, at the set that landed with the seed's 25,000 grains (die_press_seed_size_80), its
 further fills (die_press_seed_size_80_s2 to _s6), with a stiffer feed (die_press_seed_size_80_stiff) and with the
-sixteenth stage's surface energy (die_press_seed_size_80_gamma; the funnel at that set with the seed's 25,000 grains
-is the study wetfeed_verify_large_press_gamma), and the
+sixteenth stage's surface energy (die_press_seed_size_80_gamma), and the
 rolling-model check at that size (seed001_reach_large_confirm6, docs/seeds/001/reach_large/ copied into its folder).
 A lane runs its steps in order on its devices (a study on several goes through the distributed executor); lanes run
 side by side and may share a device, but two processes on one GPU time-slice it: on one H200 (2026-12-01) a
@@ -154,7 +153,8 @@ SIXTEENTH_GAMMA = ("interaction.feed.feed.surface_energy", dict(SCALED_SET)["int
 """The sixteenth stage's surface energy [J/m^2] (0.1052) in place of the final set's 0.0909: the two sets differ
 in X1 (0.2752, 0.2470) and X3, and their presses from the rig's fill seed 1 read compression ratios of 0.625 and
 0.592. At the seed's pile size the funnel moves 38.9 deg per J/m^2 of X3 and 67.6 deg per unit of X1 (eighteenth,
-nineteenth stages), so if X3 is what moved the press, this set can land both."""
+nineteenth stages), so had X3 moved the press, this set could have landed both. It read 0.602 (twenty-seventh
+stage): within the fills' scatter of the final set's, as was the sixteenth stage's set."""
 
 SEED_SIZE_STUDY = "wetfeed_verify_large_standard_scaled_friction"
 """The study whose point landed within 1 deg of seed 001's angle with the seed's 25,000 grains (nineteenth stage):

@@ -61,7 +61,6 @@ COUNTS = {
     "wetfeed_verify_large_standard_scaled": 5,
     "wetfeed_verify_large_standard_scaled_step": 5,
     "wetfeed_verify_large_standard_scaled_friction": 5,
-    "wetfeed_verify_large_press_gamma": 5,
     "wetfeed_press_seed_size": 5,
 }
 
