@@ -16,10 +16,9 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from warpdem.scene.measure import plot_press, press_loading
 from warpdem.scene.rigs import DiePress
+from warpdem.scene.runner import checkpoint_meta
 
 MEASURED = {"max_displacement_m": 0.05081, "compression_ratio": 0.635}
 """Seed 001's single pellet press, measured (its EDEM run: 50.30 mm, 0.629)."""
@@ -31,10 +30,9 @@ def read(path: Path, force_limit: float = DiePress.force_limit, backstop_z: floa
     the loading ``curve`` (displacement [m] and force [N] from the loose bed's top, shape (m,) each).
     ``force_limit`` [N] and ``backstop_z`` [m] are the press's (the die press rig's by default). Raises SystemExit
     naming the file when it holds no series or the bar has not turned back yet."""
-    with np.load(path) as z:
-        if "meta" not in z.files:
-            raise SystemExit(f"{path}: no 'meta' array; expected a checkpoint of a scene run")
-        meta = json.loads(bytes(z["meta"]).decode())
+    meta = checkpoint_meta(path)
+    if meta is None:
+        raise SystemExit(f"{path}: no 'meta' array; expected a checkpoint of a scene run")
     series = meta.get("series", {})
     turn = series.get("unload_index")
     if turn is None or "piston_z" not in series:

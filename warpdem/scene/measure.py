@@ -1301,7 +1301,9 @@ def press_loading(
         the limit [m]), ``displacement_m`` and ``force_n`` (the curve from the loose bed's top, shape (m,)) and
         ``load_z`` and ``load_force`` (the series up to ``unload_index``, shape (n,)).
     """
-    z, f = _press_arrays_unchecked(piston_z, piston_force, unload_index)
+    z, f = np.asarray(piston_z, dtype=float), np.asarray(piston_force, dtype=float)
+    if unload_index is not None:
+        z, f = z[: unload_index + 1], f[: unload_index + 1]
     top = np.asarray(bed_top, dtype=float)
     limit = force_limit if force_limit > 0 else float(f.max())
     pressing = np.flatnonzero(f > PRESS_FILL_FRACTION * limit)
@@ -1318,13 +1320,6 @@ def press_loading(
         load_force=f,
     )
     return out
-
-
-def _press_arrays_unchecked(piston_z, piston_force, unload_index) -> tuple[np.ndarray, np.ndarray]:
-    z, f = np.asarray(piston_z, dtype=float), np.asarray(piston_force, dtype=float)
-    if unload_index is not None:
-        z, f = z[: unload_index + 1], f[: unload_index + 1]
-    return z, f
 
 
 # --------------------------------------------------------------------------------------------------

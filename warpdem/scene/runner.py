@@ -967,10 +967,21 @@ def _save_checkpoint(path: Path, fingerprint: str, state, contacts, book: dict) 
     tmp.replace(path)
 
 
+def checkpoint_meta(path: Path) -> dict | None:
+    """A scene run's checkpoint's bookkeeping (simulated ``time``, ``step``, the output ``series`` so far, ...), as
+    :func:`_save_checkpoint` wrote it; None when the file holds none."""
+    with np.load(path) as z:
+        return _meta(z) if "meta" in z.files else None
+
+
+def _meta(z) -> dict:
+    return json.loads(bytes(z["meta"]).decode())
+
+
 def _load_checkpoint(path: Path, fingerprint: str, state, contacts) -> dict | None:
     """Restore a checkpoint into a fresh ``state`` and ``contacts``; None when it belongs to another run."""
     with np.load(path) as z:
-        meta = json.loads(bytes(z["meta"]).decode())
+        meta = _meta(z)
         if meta["fingerprint"] != fingerprint or meta.get("format") != _checkpoint_format(contacts):
             return None
         arrays = [
@@ -1131,7 +1142,6 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
         return {"press_error": "the bar never pressed the bed"}
     z, f, fill = load.pop("load_z"), load.pop("load_force"), load["fill_height_m"]
     curve = {k: load.pop(k) for k in ("displacement_m", "force_n")}
-    summ = {k: v for k, v in load.items() if k != "fill_height_m"}
     mat = model.materials[int(h["material"][h["world"] == w][0])]
     d = _mean_diameter(h, w)
     area = math.pi * _piston_radius(model, m.piston) ** 2
@@ -1141,12 +1151,11 @@ def _press_metrics(spec, model, state, h, w, z, f, series) -> dict:
     p = np.maximum(f, 0) / area
     pressing = p > 0.01 * p.max()
     inertial = speed[pressing] / height[pressing] * d / np.sqrt(p[pressing] / mat.density)
-    out = {k: (float(v) if np.isscalar(v) else v) for k, v in summ.items()}
+    out = {k: (float(v) if np.isscalar(v) else v) for k, v in load.items()}
     # the bed at the force limit (a run that never reached it: at its end)
     peak = series.get("peak_overlap") or _overlaps(model, state, h)
     escaped = series.get("escaped") or _escaped(model, state, h, list(model.wall_names).index(m.piston)).tolist()
     out.update(
-        fill_height_m=fill,
         peak_overlap_max=float(peak["deepest"][w]),
         peak_overlap_mean=float(peak["mean"][w]),
         escaped=int(escaped[w]),
